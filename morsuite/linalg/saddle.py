@@ -1,0 +1,260 @@
+r"""Sparse LU factorizations of the shifted saddle-point matrix.
+
+For a constrained second-order system the matrix
+
+.. math::
+
+    S(s) = \begin{bmatrix} s^2 M + s D + K & G^T \\ G & 0 \end{bmatrix}
+
+is nonsingular wherever :math:`s` is not a finite pole of the system, and its
+solves replace every application of the hidden-manifold projector
+:math:`\Pi` (the paper's Lemma 1): the first block :math:`x` of
+:math:`S(s)[x; \lambda] = [F b; 0]` equals
+:math:`(\Pi(s^2M+sD+K)\Pi^T)^{+}\,\Pi F b` on the hidden manifold.
+The transposed matrix gives the left (observability) solves, so one LU serves
+both. For real data :math:`S(\bar s) = \overline{S(s)}`, so a conjugate shift
+reuses the factorization of its partner.
+
+The sparsity pattern (union of those of M, D, K, G^T and G) is built once;
+assembling :math:`S(s)` afterwards is one AXPY over the stored entries.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import OrderedDict
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ..errors import InputError, SingularShiftError
+
+__all__ = ["SaddlePointSolver", "SaddleLU", "SolverStats"]
+
+
+@dataclass
+class SolverStats:
+    """Counters of one :class:`SaddlePointSolver` (plain data)."""
+
+    factorizations: int = 0
+    reused: int = 0
+    solves: int = 0  # right-hand-side columns solved
+    factor_time_s: float = 0.0
+    solve_time_s: float = 0.0
+    assemble_time_s: float = 0.0
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+    def copy(self) -> "SolverStats":
+        return SolverStats(**self.__dict__)
+
+    def since(self, earlier: "SolverStats") -> dict:
+        """Counters accumulated since the snapshot ``earlier``."""
+        return {k: v - getattr(earlier, k) for k, v in self.__dict__.items()}
+
+
+@dataclass
+class SaddleLU:
+    """A factorization of :math:`a M + b D + c K` bordered by G and G^T.
+
+    ``conjugate`` is True when this object stands for the conjugate of the
+    factorized matrix (real data: :math:`S(\\bar s) = \\overline{S(s)}`).
+    """
+
+    coeffs: tuple
+    lu: object = field(repr=False)
+    n1: int
+    n2: int
+    conjugate: bool
+    stats: SolverStats = field(repr=False)
+    min_pivot_ratio: float
+    complex_lu: bool
+
+    def solve(self, rhs, *, trans: bool = False, full: bool = False):
+        """Solve :math:`S x = b` (``trans=False``) or :math:`S^T x = b`.
+
+        Parameters
+        ----------
+        rhs : array_like, shape (n1,) or (n1, k), or (n1 + n2,) or (n1 + n2, k)
+            Right-hand side. With n1 rows the constraint block is zero, as in
+            every transfer-function and interpolation solve.
+        trans : bool
+            Solve with the plain (not conjugate) transpose.
+        full : bool
+            Return the whole solution including the Lagrange multipliers.
+        """
+        b = np.asarray(rhs)
+        vector = b.ndim == 1
+        if vector:
+            b = b[:, None]
+        n = self.n1 + self.n2
+        if b.shape[0] == self.n1 and self.n2:
+            b = np.vstack([b, np.zeros((self.n2, b.shape[1]), dtype=b.dtype)])
+        elif b.shape[0] != n:
+            raise InputError(
+                f"rhs has {b.shape[0]} rows; expected n1 = {self.n1} or n1 + n2 = {n}"
+            )
+        tr = "T" if trans else "N"
+        t0 = time.perf_counter()
+        if self.conjugate:
+            x = np.conj(self.lu.solve(np.ascontiguousarray(np.conj(b), dtype=complex), trans=tr))
+        elif not self.complex_lu and np.iscomplexobj(b):
+            # a real LU: solve real and imaginary parts together as 2k real columns
+            k = b.shape[1]
+            y = self.lu.solve(np.ascontiguousarray(np.hstack([b.real, b.imag]), dtype=float), trans=tr)
+            x = y[:, :k] + 1j * y[:, k:]
+        else:
+            x = self.lu.solve(np.ascontiguousarray(b, dtype=complex if self.complex_lu else float), trans=tr)
+        self.stats.solve_time_s += time.perf_counter() - t0
+        self.stats.solves += b.shape[1]
+        if not np.all(np.isfinite(x)):
+            raise SingularShiftError(
+                f"saddle-point solve at s-coefficients {self.coeffs} produced non-finite values: "
+                "the shift is (numerically) a pole of the system"
+            )
+        if not full:
+            x = x[: self.n1]
+        return x[:, 0] if vector else x
+
+
+class SaddlePointSolver:
+    r"""Factory of factorizations of the bordered matrix of a constrained system.
+
+    Parameters
+    ----------
+    M, D, K : sparse (n1, n1)
+    G : sparse (n2, n1)
+    cache_size : int
+        Number of factorizations kept (least recently used dropped). A conjugate
+        shift of a cached one is served from the cache.
+    pivot_tol : float
+        A factorization whose smallest pivot of U is below ``pivot_tol`` times
+        its largest raises :class:`SingularShiftError` (the shift is at, or next
+        to, a pole). ``0`` turns the check off.
+    permc_spec : str
+        Column ordering passed to SuperLU.
+
+    Notes
+    -----
+    ``stats.factorizations`` counts every LU made; it is the floor against which
+    the run time of a reducer is judged.
+    """
+
+    def __init__(self, M, D, K, G, *, cache_size: int = 2, pivot_tol: float = 1e-15,
+                 permc_spec: str = "MMD_AT_PLUS_A"):
+        self.n1 = M.shape[0]
+        self.n2 = G.shape[0]
+        self.cache_size = int(cache_size)
+        self.pivot_tol = float(pivot_tol)
+        self.permc_spec = permc_spec
+        self.stats = SolverStats()
+        self.real = all(not np.iscomplexobj(X.data) for X in (M, D, K, G))
+        self._cache: OrderedDict = OrderedDict()
+        self._build_pattern(M, D, K, G)
+
+    # -- pattern ---------------------------------------------------------
+    def _build_pattern(self, M, D, K, G):
+        n1, n2 = self.n1, self.n2
+        N = n1 + n2
+        parts = []
+        for X, roff, coff in ((M, 0, 0), (D, 0, 0), (K, 0, 0), (G.T, 0, n1), (G, n1, 0)):
+            C = sp.coo_matrix(X)
+            parts.append((C.row.astype(np.int64) + roff, C.col.astype(np.int64) + coff, C.data))
+        rows = np.concatenate([p[0] for p in parts])
+        cols = np.concatenate([p[1] for p in parts])
+        key = cols * N + rows
+        uniq, inv = np.unique(key, return_inverse=True)
+        nnz = uniq.size
+        self._indices = (uniq % N).astype(np.int32)
+        colnum = uniq // N
+        self._indptr = np.concatenate([[0], np.cumsum(np.bincount(colnum, minlength=N))]).astype(np.int32)
+        vals = []
+        start = 0
+        for r, _, d in parts:
+            v = np.zeros(nnz)
+            np.add.at(v, inv[start:start + r.size], d)
+            vals.append(v)
+            start += r.size
+        self._m, self._d, self._k = vals[0], vals[1], vals[2]
+        self._g = vals[3] + vals[4]
+        self.N = N
+
+    def matrix(self, s=None, *, coeffs=None) -> sp.csc_matrix:
+        """The assembled bordered matrix for shift ``s`` (or ``coeffs=(a, b, c)``)."""
+        a, b, c = self._coeffs(s, coeffs)
+        data = a * self._m + b * self._d + c * self._k + self._g
+        return sp.csc_matrix((data, self._indices, self._indptr), shape=(self.N, self.N))
+
+    @staticmethod
+    def _coeffs(s, coeffs):
+        if coeffs is None:
+            if s is None:
+                raise InputError("give either s or coeffs")
+            s = complex(s) if np.iscomplexobj(s) and complex(s).imag != 0 else float(np.real(s))
+            if not np.isfinite(s):
+                raise InputError(f"shift s must be finite; got {s}")
+            return (s * s, s, 1.0)
+        a, b, c = coeffs
+        return (a, b, c)
+
+    # -- factorizations -------------------------------------------------
+    def factor(self, s=None, *, coeffs=None) -> SaddleLU:
+        """LU of :math:`S(s)` (or of ``a M + b D + c K`` bordered), cached.
+
+        For a real model the factorization of :math:`\\bar s` is returned as a
+        conjugated view of that of :math:`s` (no new LU).
+        """
+        a, b, c = self._coeffs(s, coeffs)
+        key = (complex(a), complex(b), complex(c))
+        conj_key = tuple(np.conj(k) for k in key)
+        if key in self._cache:
+            self._cache.move_to_end(key)
+            self.stats.reused += 1
+            return self._cache[key]
+        if self.real and conj_key in self._cache:
+            base = self._cache[conj_key]
+            self._cache.move_to_end(conj_key)
+            self.stats.reused += 1
+            return SaddleLU(key, base.lu, self.n1, self.n2, not base.conjugate, self.stats,
+                            base.min_pivot_ratio, base.complex_lu)
+        t0 = time.perf_counter()
+        A = self.matrix(coeffs=(a, b, c))
+        t1 = time.perf_counter()
+        try:
+            lu = spla.splu(A, permc_spec=self.permc_spec)
+        except RuntimeError as exc:  # "Factor is exactly singular"
+            raise SingularShiftError(
+                f"saddle-point matrix at s-coefficients {(a, b, c)} is exactly singular: "
+                "the shift is a pole of the system (or G is rank deficient)"
+            ) from exc
+        ratio = float("nan")
+        if self.pivot_tol > 0:
+            u = np.abs(lu.U.diagonal())
+            ratio = float(u.min() / u.max()) if u.size else 1.0
+            if not ratio > self.pivot_tol:
+                raise SingularShiftError(
+                    f"saddle-point matrix at s-coefficients {(a, b, c)} is singular to working "
+                    f"precision (smallest/largest pivot {ratio:.2e} <= pivot_tol {self.pivot_tol:.1e}): "
+                    "the shift is at or next to a pole of the system"
+                )
+        t2 = time.perf_counter()
+        self.stats.factorizations += 1
+        self.stats.assemble_time_s += t1 - t0
+        self.stats.factor_time_s += t2 - t1
+        f = SaddleLU(key, lu, self.n1, self.n2, False, self.stats, ratio, np.iscomplexobj(A.data))
+        if self.cache_size > 0:
+            self._cache[key] = f
+            while len(self._cache) > self.cache_size:
+                self._cache.popitem(last=False)
+        return f
+
+    def solve(self, s, rhs, *, trans: bool = False):
+        """Convenience: ``factor(s).solve(rhs, trans=trans)``."""
+        return self.factor(s).solve(rhs, trans=trans)
+
+    def clear(self):
+        """Drop cached factorizations (counters are kept)."""
+        self._cache.clear()

@@ -1,0 +1,9 @@
+"""The full-order world: :class:`Index3Model`, generators, loaders, catalog."""
+
+from .index3 import Index3Model
+from .generators import dsms, tcom
+from .io import load, load_mat, load_npz, save_npz
+from .catalog import available, get, parse, register
+
+__all__ = ["Index3Model", "dsms", "tcom", "load", "load_mat", "load_npz", "save_npz",
+           "available", "get", "parse", "register"]

@@ -1,0 +1,95 @@
+"""The model catalog: names, parameters and the ``model:key=value`` form.
+
+``get("dsms", g=6000)``, ``parse("dsms:g=6000")``, or a path to a .mat/.npz
+file. Every catalog model has a default frequency band (``model.band``).
+"""
+
+from __future__ import annotations
+
+import inspect
+from pathlib import Path
+
+from ..errors import InputError
+from .generators import dsms, tcom
+from .index3 import Index3Model
+
+__all__ = ["CATALOG", "get", "parse", "available"]
+
+CATALOG = {"dsms": dsms, "tcom": tcom}
+
+
+def available() -> list[str]:
+    """Names of the catalog models (random_constrained included when present)."""
+    return sorted(CATALOG)
+
+
+def register(name: str, factory):
+    """Add a model factory to the catalog (used by extensions and tests)."""
+    CATALOG[name] = factory
+
+
+def _params(factory):
+    return [p for p in inspect.signature(factory).parameters.values()
+            if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+
+
+def get(name: str, **params) -> Index3Model:
+    """Build catalog model ``name`` with keyword parameters.
+
+    Unknown names and unknown parameters raise :class:`InputError` listing the
+    valid choices.
+    """
+    if name not in CATALOG:
+        raise InputError(f"unknown model {name!r}; available: {', '.join(available())}")
+    factory = CATALOG[name]
+    valid = [p.name for p in _params(factory)]
+    bad = [k for k in params if k not in valid]
+    if bad:
+        raise InputError(f"model {name!r} has no parameter {', '.join(map(repr, bad))}; valid: {', '.join(valid)}")
+    return factory(**params)
+
+
+def _value(text: str):
+    low = text.lower()
+    if low in ("true", "false"):
+        return low == "true"
+    for conv in (int, float):
+        try:
+            return conv(text)
+        except ValueError:
+            pass
+    if ";" in text:
+        return tuple(_value(t) for t in text.split(";"))
+    return text
+
+
+def parse(spec: str) -> Index3Model:
+    """Model from ``"name"``, ``"name:key=value,key=value"`` or a .mat/.npz path.
+
+    Parameter values are parsed as int, float, bool, or a ``;``-separated tuple.
+    """
+    if not isinstance(spec, str) or not spec:
+        raise InputError(f"model spec must be a non-empty string; got {spec!r}")
+    if spec.endswith((".mat", ".npz")):
+        from .io import load
+        return load(Path(spec))
+    name, _, rest = spec.partition(":")
+    params = {}
+    if rest:
+        for item in rest.split(","):
+            if not item:
+                continue
+            key, eq, val = item.partition("=")
+            if not eq or not key:
+                raise InputError(f"model spec {spec!r}: expected key=value, got {item!r}")
+            params[key.strip()] = _value(val.strip())
+    return get(name, **params)
+
+
+def canonical(spec: str) -> str:
+    """Canonical text of a catalog spec (sorted keys), used in cache keys."""
+    if spec.endswith((".mat", ".npz")):
+        return str(Path(spec))
+    name, _, rest = spec.partition(":")
+    items = sorted(i for i in rest.split(",") if i)
+    return name + (":" + ",".join(items) if items else "")

@@ -1,0 +1,300 @@
+r"""The full-order model: a second-order index-3 descriptor system.
+
+.. math::
+
+    M \ddot x + D \dot x + K x + G^T z = F u, \qquad G x = 0, \qquad y = L x.
+
+Its transfer function is evaluated without the hidden-manifold projector:
+
+.. math::
+
+    T(s) = \begin{bmatrix} L & 0 \end{bmatrix} S(s)^{-1}
+           \begin{bmatrix} F \\ 0 \end{bmatrix},\qquad
+    S(s) = \begin{bmatrix} s^2 M + s D + K & G^T \\ G & 0 \end{bmatrix}.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ..errors import DtypeWarning, ModelError, ShapeError, InputError
+from ..linalg.saddle import SaddlePointSolver
+
+__all__ = ["Index3Model", "as_real_matrix"]
+
+#: G M^-1 G^T (row-equilibrated) with a condition number above this is rank deficient.
+GRAM_COND_MAX = 1e12
+
+
+def as_real_matrix(name: str, X, *, sparse: bool):
+    """Return ``X`` as real float64 (sparse CSR or dense 2-D), refusing bad content.
+
+    Integer and boolean input is converted exactly. Complex input with a zero
+    imaginary part is converted with a :class:`DtypeWarning`; complex input
+    with a nonzero imaginary part is refused: the suite is for real systems.
+    """
+    if X is None:
+        raise InputError(f"matrix {name} is missing (got None)")
+    if sp.issparse(X):
+        X = sp.csr_matrix(X)
+        data = X.data
+    else:
+        X = np.asarray(X)
+        if X.dtype == object:
+            raise InputError(f"matrix {name} has dtype object; expected a numeric array")
+        data = X
+    if np.iscomplexobj(data):
+        if np.any(np.imag(data) != 0):
+            raise InputError(
+                f"matrix {name} is complex with a nonzero imaginary part; morsuite models are real"
+            )
+        warnings.warn(f"matrix {name} is complex with zero imaginary part; converted to real",
+                      DtypeWarning, stacklevel=3)
+        X = X.real
+    elif not (np.issubdtype(data.dtype, np.number) or data.dtype == bool):
+        raise InputError(f"matrix {name} has non-numeric dtype {data.dtype}")
+    if sp.issparse(X):
+        X = sp.csr_matrix(X, dtype=np.float64)
+        X.sum_duplicates()
+        vals = X.data
+    else:
+        X = np.asarray(X, dtype=np.float64)
+        if sparse:
+            X = sp.csr_matrix(X)
+        vals = X.data if sp.issparse(X) else X
+    if not np.all(np.isfinite(vals)):
+        raise InputError(f"matrix {name} has non-finite entries (NaN or inf)")
+    return X
+
+
+def _dense(name, X, shape_hint):
+    X = as_real_matrix(name, X, sparse=False)
+    if sp.issparse(X):
+        X = X.toarray()
+    if X.ndim == 1:
+        X = X.reshape(shape_hint(X.size))
+    if X.ndim != 2:
+        raise ShapeError(f"matrix {name} must be 2-D; got {X.ndim}-D")
+    return np.ascontiguousarray(X)
+
+
+class Index3Model:
+    r"""A constrained second-order system :math:`(M, D, K, G, F, L)`.
+
+    Parameters
+    ----------
+    M, D, K : sparse or dense, (n1, n1)
+        Mass, damping and stiffness in the physical sign convention.
+    G : sparse or dense, (n2, n1)
+        Constraint matrix, full row rank, n2 < n1 (n2 = 0 allowed: no constraints).
+    F : dense, (n1, m)
+        Input matrix (a 1-D array is one input).
+    L : dense, (p, n1)
+        Output matrix (a 1-D array is one output).
+    name : str
+        Label used in reports.
+    band : (float, float)
+        Default frequency band in rad/s for error reports.
+    check_constraints : bool
+        Check that G has full row rank through the condition of the
+        row-equilibrated :math:`G M^{-1} G^T` (n2 x n2, one sparse LU of M).
+
+    Raises
+    ------
+    ShapeError, InputError, ModelError
+        For every inconsistent input; the message names the matrix.
+    """
+
+    def __init__(self, M, D, K, G, F, L, *, name: str = "model", band=(1e-2, 1.0),
+                 check_constraints: bool = True):
+        M = as_real_matrix("M", M, sparse=True)
+        n1 = M.shape[0]
+        if M.ndim != 2 or M.shape[0] != M.shape[1]:
+            raise ShapeError(f"matrix M must be square; got shape {M.shape}")
+        if n1 == 0:
+            raise ShapeError("matrix M is empty (n1 = 0)")
+        D = as_real_matrix("D", D, sparse=True)
+        K = as_real_matrix("K", K, sparse=True)
+        for nm, X in (("D", D), ("K", K)):
+            if X.shape != (n1, n1):
+                raise ShapeError(f"matrix {nm} has shape {X.shape}; expected ({n1}, {n1}) like M")
+        if G is None:
+            G = sp.csr_matrix((0, n1))
+        G = as_real_matrix("G", G, sparse=True)
+        if G.shape[1] != n1:
+            raise ShapeError(f"matrix G has {G.shape[1]} columns; expected n1 = {n1}")
+        n2 = G.shape[0]
+        if n2 >= n1:
+            raise ShapeError(f"matrix G has n2 = {n2} rows; expected n2 < n1 = {n1}")
+        F = _dense("F", F, lambda k: (k, 1))
+        L = _dense("L", L, lambda k: (1, k))
+        if F.shape[0] != n1:
+            raise ShapeError(f"matrix F has {F.shape[0]} rows; expected n1 = {n1}")
+        if L.shape[1] != n1:
+            raise ShapeError(f"matrix L has {L.shape[1]} columns; expected n1 = {n1}")
+        if F.shape[1] == 0 or L.shape[0] == 0:
+            raise ShapeError(f"the model needs at least one input and one output; got F {F.shape}, L {L.shape}")
+        self.M, self.D, self.K, self.G = M, D, K, G
+        self.F, self.L = F, L
+        self.name = str(name)
+        lo, hi = (float(b) for b in band)
+        if not (0 < lo < hi < np.inf):
+            raise InputError(f"band must satisfy 0 < lo < hi < inf; got {band}")
+        self.band = (lo, hi)
+        if n2:
+            rownnz = np.diff(G.indptr)
+            zero_rows = np.flatnonzero((abs(G).sum(axis=1).A1 == 0))
+            if zero_rows.size:
+                raise ModelError(f"matrix G has zero rows {zero_rows[:10].tolist()}: every constraint must involve a coordinate")
+            del rownnz
+            if check_constraints:
+                self._check_constraint_rank()
+        self._solver = None
+
+    # -- sizes -----------------------------------------------------------
+    @property
+    def n1(self) -> int:
+        return self.M.shape[0]
+
+    @property
+    def n2(self) -> int:
+        return self.G.shape[0]
+
+    @property
+    def m(self) -> int:
+        return self.F.shape[1]
+
+    @property
+    def p(self) -> int:
+        return self.L.shape[0]
+
+    @property
+    def order(self) -> int:
+        """Dimension of the hidden manifold, n1 - n2 (order of the projected model)."""
+        return self.n1 - self.n2
+
+    def __repr__(self):
+        return (f"Index3Model(name={self.name!r}, n1={self.n1}, n2={self.n2}, m={self.m}, "
+                f"p={self.p}, band={self.band})")
+
+    def summary(self) -> dict:
+        """Sizes, sparsity and band as plain data."""
+        return {"name": self.name, "n1": self.n1, "n2": self.n2, "m": self.m, "p": self.p,
+                "first_order_states": 2 * self.n1 + self.n2,
+                "nnz": {k: int(getattr(self, k).nnz) for k in ("M", "D", "K", "G")},
+                "band": list(self.band)}
+
+    # -- checks ----------------------------------------------------------
+    def _check_constraint_rank(self):
+        try:
+            lu = spla.splu(sp.csc_matrix(self.M))
+        except RuntimeError as exc:
+            raise ModelError("matrix M is singular; the constraint check needs M^-1") from exc
+        GT = self.G.T.toarray() if self.n2 * self.n1 <= 5e7 else None
+        if GT is None:
+            raise ModelError(f"n2 = {self.n2} too large for the dense constraint check; pass check_constraints=False")
+        S = self.G @ lu.solve(GT)
+        S = 0.5 * (S + S.T)
+        d = np.abs(np.diag(S))
+        if np.any(d == 0) or not np.all(np.isfinite(S)):
+            raise ModelError("G M^-1 G^T has a zero diagonal entry: G is rank deficient")
+        Sn = S / np.sqrt(np.outer(d, d))
+        cond = np.linalg.cond(Sn)
+        if not cond < GRAM_COND_MAX:
+            raise ModelError(
+                f"matrix G is numerically rank deficient: the row-equilibrated G M^-1 G^T has "
+                f"condition number {cond:.2e} >= {GRAM_COND_MAX:.0e}"
+            )
+        self.constraint_gram_cond = float(cond)
+
+    # -- evaluation ------------------------------------------------------
+    @property
+    def solver(self) -> SaddlePointSolver:
+        """The model's saddle-point solver (pattern built on first use)."""
+        if self._solver is None:
+            self._solver = SaddlePointSolver(self.M, self.D, self.K, self.G)
+        return self._solver
+
+    def new_solver(self, **options) -> SaddlePointSolver:
+        """A fresh saddle-point solver (own counters and cache) for a reducer run."""
+        return SaddlePointSolver(self.M, self.D, self.K, self.G, **options)
+
+    def transfer(self, s, *, derivative: bool = False):
+        r"""Transfer function :math:`T(s) = L x`, one sparse LU at ``s``.
+
+        With ``derivative=True`` return :math:`T'(s) = -L_0 S^{-1} S'(s) S^{-1} F_0`,
+        :math:`S'(s) = \mathrm{blkdiag}(2sM + D, 0)`, reusing the same LU.
+        """
+        s = _check_shift(s)
+        f = self.solver.factor(s)
+        X = f.solve(self.F)
+        if not derivative:
+            return self.L @ X
+        Y = f.solve(self.L.T.astype(X.dtype), trans=True)  # left solve
+        return -(Y.T @ ((2 * s) * (self.M @ X) + self.D @ X))
+
+    def freqresp(self, omega, *, progress: bool = False):
+        """Frequency response at ``s = 1j * omega``: complex (len(omega), p, m).
+
+        One LU per frequency, all inputs solved at once; no factorization is
+        kept, so memory is O(nnz) whatever the grid size.
+        """
+        omega = _check_omega(omega)
+        out = np.empty((omega.size, self.p, self.m), dtype=complex)
+        solver = self.new_solver(cache_size=0)
+        it = range(omega.size)
+        if progress:
+            from tqdm.auto import tqdm
+            it = tqdm(it, desc=f"freqresp {self.name}", unit="freq", leave=False)
+        for i in it:
+            out[i] = self.L @ solver.factor(1j * omega[i]).solve(self.F)
+        self.last_freqresp_stats = solver.stats.as_dict()
+        return out
+
+    def first_order(self):
+        """Sparse first-order descriptor realization (E, A, B, C) of size 2 n1 + n2.
+
+        ``E = blkdiag(I, M, 0)``, ``A = [[0, I, 0], [-K, -D, -G^T], [G, 0, 0]]``,
+        ``B = [0; F; 0]``, ``C = [L, 0, 0]``: the M.E.S.S. layout, physical signs.
+        """
+        n1, n2 = self.n1, self.n2
+        I = sp.identity(n1, format="csr")
+        E = sp.block_diag([I, self.M, sp.csr_matrix((n2, n2))], format="csr")
+        A = sp.bmat([[None, I, sp.csr_matrix((n1, n2))], [-self.K, -self.D, -self.G.T],
+                     [self.G, None, sp.csr_matrix((n2, n2))]], format="csr")
+        B = np.vstack([np.zeros((n1, self.m)), self.F, np.zeros((n2, self.m))])
+        C = np.hstack([self.L, np.zeros((self.p, n1 + n2))])
+        return E, A, B, C
+
+    def with_io(self, F=None, L=None, name=None) -> "Index3Model":
+        """Same dynamics, other inputs/outputs (constraint check not repeated)."""
+        return Index3Model(self.M, self.D, self.K, self.G, self.F if F is None else F,
+                           self.L if L is None else L, name=name or self.name, band=self.band,
+                           check_constraints=False)
+
+
+def _check_shift(s):
+    try:
+        s = complex(s)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"s must be a scalar number; got {s!r}") from exc
+    if not np.isfinite(s):
+        raise InputError(f"s must be finite; got {s}")
+    return s if s.imag != 0 else s.real
+
+
+def _check_omega(omega):
+    w = np.atleast_1d(np.asarray(omega))
+    if w.ndim != 1 or w.size == 0:
+        raise InputError(f"omega must be a non-empty 1-D array of frequencies; got shape {w.shape}")
+    if np.iscomplexobj(w) or not np.issubdtype(w.dtype, np.number):
+        raise InputError("omega must be real (rad/s); for complex s use transfer(s)")
+    w = w.astype(float)
+    if not np.all(np.isfinite(w)):
+        raise InputError("omega has non-finite entries")
+    return w
