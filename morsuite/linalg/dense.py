@@ -1,0 +1,121 @@
+r"""Small dense kernels: balanced truncation, orthonormal bases, shift matching.
+
+Used on r x r and 2r x 2r matrices only (the IRKA shift update, the BT of the
+reduced first-order realization).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+from scipy.optimize import linear_sum_assignment
+
+from ..errors import InputError, MorsuiteError
+
+__all__ = ["dense_bt", "orth", "shift_distance", "lyap_factor", "BTResult", "UnstableError"]
+
+
+class UnstableError(MorsuiteError, ArithmeticError):
+    """Balanced truncation of a model with poles in the closed right half-plane."""
+
+
+class BTResult:
+    """Reduced standard realization (A, B, C) with E = I, and the Hankel singular values."""
+
+    def __init__(self, A, B, C, hsv, Tl, Tr):
+        self.A, self.B, self.C, self.hsv, self.Tl, self.Tr = A, B, C, hsv, Tl, Tr
+
+    @property
+    def order(self):
+        return self.A.shape[0]
+
+    def bound(self) -> float:
+        """The a-priori H-infinity error bound 2 * sum of the discarded HSVs."""
+        return 2.0 * float(np.sum(self.hsv[self.order:]))
+
+
+def lyap_factor(X: np.ndarray) -> np.ndarray:
+    """A factor S with S S^T = X for a symmetric positive semidefinite X (eigh, negatives clipped)."""
+    X = 0.5 * (X + X.T)
+    w, U = np.linalg.eigh(X)
+    w = np.clip(w, 0.0, None)
+    keep = w > 0
+    return U[:, keep] * np.sqrt(w[keep])
+
+
+def dense_bt(E, A, B, C, order: int | None = None, *, hsv_tol: float = 0.0) -> BTResult:
+    r"""Square-root balanced truncation of a small stable descriptor system (E nonsingular).
+
+    Solves :math:`A_s P + P A_s^T + B_s B_s^T = 0` and
+    :math:`A_s^T Q + Q A_s + C^T C = 0` for :math:`A_s = E^{-1}A`,
+    :math:`B_s = E^{-1}B` (Bartels-Stewart), factors :math:`P = S S^T`,
+    :math:`Q = R R^T`, and truncates the SVD of :math:`R^T S` (the Hankel
+    singular values).
+
+    Parameters
+    ----------
+    order : int, optional
+        Reduced order; None keeps every HSV above ``hsv_tol * hsv[0]``.
+    hsv_tol : float
+        Relative floor on the kept HSVs: the order is capped so that no kept
+        HSV is below it (tiny HSVs make the balancing transformation blow up).
+
+    Raises
+    ------
+    UnstableError
+        If :math:`(A, E)` has an eigenvalue with nonnegative real part.
+    """
+    E = np.eye(A.shape[0]) if E is None else E
+    As = np.linalg.solve(E, A)
+    Bs = np.linalg.solve(E, B)
+    lam = np.linalg.eigvals(As)
+    if lam.size and np.max(lam.real) >= 0:
+        raise UnstableError(f"dense_bt: the system has an eigenvalue with real part {np.max(lam.real):.3e} >= 0")
+    P = sla.solve_continuous_lyapunov(As, -Bs @ Bs.T)
+    Q = sla.solve_continuous_lyapunov(As.T, -C.T @ C)
+    S, R = lyap_factor(P), lyap_factor(Q)
+    U, hsv, Vt = np.linalg.svd(R.T @ S, full_matrices=False)
+    n_pos = int(np.sum(hsv > max(hsv_tol, np.finfo(float).eps) * (hsv[0] if hsv.size else 0)))
+    k = n_pos if order is None else min(int(order), n_pos)
+    if order is not None and int(order) < 0:
+        raise InputError(f"order must be >= 0; got {order}")
+    sq = np.sqrt(hsv[:k])
+    Tl = R @ U[:, :k] / sq
+    Tr = S @ Vt[:k].T / sq
+    return BTResult(Tl.T @ As @ Tr, Tl.T @ Bs, C @ Tr, hsv, Tl, Tr)
+
+
+def orth(X: np.ndarray, rank_tol: float = 1e-12, max_rank: int | None = None):
+    """Orthonormal basis of the numerical range of X (columns scaled to unit norm first).
+
+    Returns (Q, s): Q has the leading left singular vectors whose singular
+    values exceed ``rank_tol * s[0]`` (at most ``max_rank``), s all singular values.
+    """
+    norms = np.linalg.norm(X, axis=0)
+    norms[norms == 0] = 1.0
+    Xn = X / norms
+    if X.shape[0] > 4 * X.shape[1]:
+        Q0, R0 = np.linalg.qr(Xn)
+        U, s, _ = np.linalg.svd(R0)
+        U = Q0 @ U
+    else:
+        U, s, _ = np.linalg.svd(Xn, full_matrices=False)
+    k = int(np.sum(s > rank_tol * s[0])) if s.size and s[0] > 0 else 0
+    if max_rank is not None:
+        k = min(k, max_rank)
+    return U[:, :k], s
+
+
+def shift_distance(new, old) -> float:
+    """Largest relative distance between two shift sets after optimal matching.
+
+    Sets of different sizes are compared on the best-matched common part, and
+    the distance is then at least 1 (they are not the same set).
+    """
+    new, old = np.asarray(new, dtype=complex), np.asarray(old, dtype=complex)
+    if new.size == 0 or old.size == 0:
+        return np.inf
+    cost = np.abs(new[:, None] - old[None, :]) / np.maximum(np.abs(new)[:, None], np.finfo(float).tiny)
+    i, j = linear_sum_assignment(cost)
+    d = float(cost[i, j].max())
+    return d if new.size == old.size else max(d, 1.0)

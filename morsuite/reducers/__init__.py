@@ -1,0 +1,6 @@
+"""Reducers: one interface, a registry (``make``, ``available``), one module per method."""
+
+from .base import Option, Reducer, Reduction, available, get_class, make, register
+from .irka import IRKA
+
+__all__ = ["Option", "Reducer", "Reduction", "make", "available", "register", "get_class", "IRKA"]

@@ -1,0 +1,248 @@
+"""The reducer interface: one base class, a declared option table, a registry.
+
+A reducer is bound to one full-order model. Its constructor only validates and
+stores options; ``reduce(r)`` returns a :class:`Reduction` (the reduced model and
+a plain-data ``info`` record). Work that does not depend on r (Gramian factors,
+converged shifts) may be kept on the reducer and reused by later calls.
+
+Options are declared once per class in ``OPTIONS`` (name -> :class:`Option`);
+defaults come from there, every value is validated against it with one message
+format, unknown names are refused with the list of valid ones, and the full set
+is copied into ``info["options"]``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+from numbers import Integral, Real
+from typing import Any, Callable, ClassVar
+
+import numpy as np
+
+from ..errors import InputError, OptionError
+
+__all__ = ["Option", "Reducer", "Reduction", "make", "available", "register", "get_class"]
+
+
+@dataclass(frozen=True)
+class Option:
+    """One declared option: default, constraint and a one-line description.
+
+    ``kind`` is one of "int", "float", "bool", "choice", "array", "any".
+    ``low``/``high`` bound numbers (``open_low``/``open_high`` make them strict);
+    ``choices`` lists the admissible values of a "choice"; ``nullable`` admits None.
+    """
+
+    default: Any
+    kind: str
+    doc: str = ""
+    low: float | None = None
+    high: float | None = None
+    open_low: bool = False
+    open_high: bool = False
+    choices: tuple = ()
+    nullable: bool = False
+
+    def describe(self) -> str:
+        if self.kind == "choice":
+            return "one of " + ", ".join(repr(c) for c in self.choices)
+        if self.kind in ("int", "float"):
+            lo = "-inf" if self.low is None else f"{self.low:g}"
+            hi = "inf" if self.high is None else f"{self.high:g}"
+            lb = "(" if self.open_low or self.low is None else "["
+            rb = ")" if self.open_high or self.high is None else "]"
+            return f"{'an int' if self.kind == 'int' else 'a float'} in {lb}{lo}, {hi}{rb}"
+        return {"bool": "a bool", "array": "an array of numbers", "any": "a value"}[self.kind]
+
+    def validate(self, owner: str, name: str, value):
+        def fail():
+            raise OptionError(f"The {name!r} parameter of {owner} must be {self.describe()}"
+                              f"{' or None' if self.nullable else ''}. Got {value!r} instead.")
+        if value is None:
+            if self.nullable:
+                return None
+            fail()
+        if self.kind == "bool":
+            if not isinstance(value, (bool, np.bool_)):
+                fail()
+            return bool(value)
+        if self.kind == "choice":
+            if value not in self.choices:
+                fail()
+            return value
+        if self.kind in ("int", "float"):
+            if isinstance(value, (bool, np.bool_)):
+                fail()
+            if self.kind == "int" and not isinstance(value, Integral):
+                fail()
+            if not isinstance(value, Real) or not math.isfinite(float(value)):
+                fail()
+            v = int(value) if self.kind == "int" else float(value)
+            if self.low is not None and (v < self.low or (self.open_low and v == self.low)):
+                fail()
+            if self.high is not None and (v > self.high or (self.open_high and v == self.high)):
+                fail()
+            return v
+        if self.kind == "array":
+            try:
+                arr = np.asarray(value)
+            except Exception:
+                fail()
+            if arr.dtype == object or not np.issubdtype(arr.dtype, np.number) or not np.all(np.isfinite(arr)):
+                fail()
+            return arr
+        return value
+
+
+@dataclass
+class Reduction:
+    """Result of ``reducer.reduce(r)``: the reduced model and a plain-data record."""
+
+    rom: Any
+    info: dict = field(default_factory=dict)
+
+    @property
+    def converged(self) -> bool:
+        return bool(self.info.get("converged", True))
+
+
+class Reducer:
+    """Base class: shared ``reduce`` (validation, timing, info), method hooks.
+
+    Subclasses set ``name``, ``OPTIONS`` and implement ``_reduce(r) -> (rom, info)``.
+    """
+
+    name: ClassVar[str] = "base"
+    OPTIONS: ClassVar[dict[str, Option]] = {}
+
+    def __init__(self, fom, **options):
+        from ..models.index3 import Index3Model
+
+        if not isinstance(fom, Index3Model):
+            raise InputError(f"fom must be an Index3Model; got {type(fom).__name__}")
+        self.fom = fom
+        unknown = sorted(set(options) - set(self.OPTIONS))
+        if unknown:
+            raise OptionError(f"{type(self).__name__} got unknown option(s) {', '.join(map(repr, unknown))}; "
+                              f"valid options: {', '.join(sorted(self.OPTIONS))}")
+        self.options = {}
+        for key, opt in self.OPTIONS.items():
+            self.options[key] = opt.validate(type(self).__name__, key, options.get(key, opt.default))
+        self._check_options()
+        self._warnings: list[str] = []
+
+    def _check_options(self):
+        """Hook: cross-option checks."""
+
+    def get_params(self) -> dict:
+        """Options as plain data (arrays as lists), as recorded in ``info``."""
+        return {k: _plain(v) for k, v in self.options.items()}
+
+    def max_order(self) -> int:
+        """Largest admissible r (the dimension of the hidden manifold by default)."""
+        return self.fom.order
+
+    def _validate_r(self, r) -> int:
+        if isinstance(r, (bool, np.bool_)) or not isinstance(r, Integral):
+            raise InputError(f"r must be a positive integer; got {r!r}")
+        r = int(r)
+        if r < 1:
+            raise InputError(f"r must be a positive integer; got {r}")
+        if r > self.max_order():
+            raise InputError(f"r = {r} exceeds the order of the full model on its hidden manifold "
+                             f"(n1 - n2 = {self.max_order()}) for {self.name}")
+        return r
+
+    def warn(self, message: str, category=UserWarning, stacklevel: int = 3):
+        """Issue a warning and record it in ``info['warnings']``."""
+        self._warnings.append(f"{category.__name__}: {message}")
+        warnings.warn(message, category, stacklevel=stacklevel)
+
+    def reduce(self, r) -> Reduction:
+        """Reduce to order ``r``; see the subclass for what r means (always also in info)."""
+        r = self._validate_r(r)
+        self._warnings = []
+        t0 = time.perf_counter()
+        rom, info = self._reduce(r)
+        elapsed = time.perf_counter() - t0
+        base = {"method": self.name, "model": self.fom.name, "r_requested": r,
+                "r": int(rom.order), "kind": rom.kind, "states": int(rom.states),
+                "time_s": elapsed}
+        base.update(info)
+        base.setdefault("converged", True)
+        base.setdefault("iterations", 0)
+        if "stable" not in base:
+            base["stable"] = bool(rom.is_stable())
+        base["warnings"] = list(self._warnings)
+        base["options"] = self.get_params()
+        return Reduction(rom=rom, info=_plain(base))
+
+    def _reduce(self, r):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+def _plain(x):
+    """Convert numpy scalars/arrays (also complex) into JSON-friendly data."""
+    if isinstance(x, dict):
+        return {str(k): _plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _plain(x.tolist())
+    if isinstance(x, (np.bool_,)):
+        return bool(x)
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.floating):
+        return float(x)
+    if isinstance(x, (complex, np.complexfloating)):
+        return {"re": float(x.real), "im": float(x.imag)}
+    return x
+
+
+# -- registry -------------------------------------------------------------
+_REGISTRY: dict[str, Callable] = {}
+_ENTRY_POINTS_LOADED = False
+
+
+def register(name: str, cls):
+    """Register a reducer class under ``name`` (third parties: entry-point group
+    ``morsuite.reducers``)."""
+    _REGISTRY[name] = cls
+    return cls
+
+
+def _load_entry_points():
+    global _ENTRY_POINTS_LOADED
+    if _ENTRY_POINTS_LOADED:
+        return
+    _ENTRY_POINTS_LOADED = True
+    from importlib.metadata import entry_points
+
+    for ep in entry_points(group="morsuite.reducers"):
+        if ep.name not in _REGISTRY:
+            try:
+                _REGISTRY[ep.name] = ep.load()
+            except Exception as exc:  # a broken plug-in must not break the suite
+                warnings.warn(f"reducer entry point {ep.name!r} failed to load: {exc}")
+
+
+def available() -> list[str]:
+    """Names of the registered reducers."""
+    _load_entry_points()
+    return sorted(_REGISTRY)
+
+
+def get_class(name: str):
+    _load_entry_points()
+    if name not in _REGISTRY:
+        raise OptionError(f"unknown reducer {name!r}; available: {', '.join(available())}")
+    return _REGISTRY[name]
+
+
+def make(name: str, fom, **options) -> Reducer:
+    """Construct reducer ``name`` bound to ``fom`` with ``options``."""
+    return get_class(name)(fom, **options)

@@ -1,0 +1,253 @@
+r"""Reduced models: second-order :math:`(\hat M, \hat D, \hat K, \hat F, \hat L)` and
+first-order descriptor :math:`(E, A, B, C, D)`.
+
+Orders: a :class:`SecondOrderROM` of order ``r`` has ``r x r`` matrices and
+``2 r`` first-order states; ``rom.order`` is r, ``rom.states`` the number of
+first-order states. Tables and plots always say which one they use.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import scipy.linalg as sla
+
+from .errors import FileFormatError, InputError, ShapeError
+from .utils import atomic_path
+
+__all__ = ["SecondOrderROM", "FirstOrderROM", "load_rom"]
+
+
+def _mat(name, X, shape=None):
+    X = np.asarray(X)
+    if X.ndim == 1 and shape is not None:
+        X = X.reshape(shape)
+    if X.ndim != 2:
+        raise ShapeError(f"matrix {name} must be 2-D; got shape {X.shape}")
+    if np.iscomplexobj(X):
+        if np.any(X.imag != 0):
+            raise InputError(f"matrix {name} is complex; reduced models are real")
+        X = X.real
+    X = np.array(X, dtype=float)
+    if not np.all(np.isfinite(X)):
+        raise InputError(f"matrix {name} has non-finite entries")
+    return X
+
+
+def _omega(omega):
+    w = np.atleast_1d(np.asarray(omega, dtype=float))
+    if w.ndim != 1:
+        raise InputError(f"omega must be 1-D; got shape {w.shape}")
+    return w
+
+
+def _finite_eigs(A, E):
+    lam = sla.eigvals(A, E)
+    return lam[np.isfinite(lam)]
+
+
+class _ROMBase:
+    kind = "base"
+
+    def freqresp(self, omega) -> np.ndarray:
+        """Response at ``s = 1j * omega``: complex (len(omega), p, m)."""
+        return self.transfer_many(1j * _omega(omega))
+
+    def transfer(self, s) -> np.ndarray:
+        """Transfer function at one complex ``s``: (p, m)."""
+        return self.transfer_many(np.array([complex(s)]))[0]
+
+    def is_stable(self, tol: float = 0.0) -> bool:
+        """True if every finite pole has real part < -tol * max(1, |pole|)."""
+        lam = self.poles()
+        return bool(np.all(lam.real < -tol * np.maximum(1.0, np.abs(lam))))
+
+    def to_control(self):
+        """python-control ``StateSpace`` (E^-1 applied to A and B)."""
+        import control
+
+        E, A, B, C, D = self._first_order_arrays()
+        return control.ss(np.linalg.solve(E, A), np.linalg.solve(E, B), C, D)
+
+    def save(self, path) -> Path:
+        """Write to ``.npz`` or ``.mat`` (chosen by extension), atomically."""
+        path = Path(path)
+        arrays = {k: getattr(self, k) for k in self._fields}
+        arrays["kind"] = np.array(self.kind)
+        if path.suffix == ".npz":
+            with atomic_path(path, suffix=".npz") as tmp:
+                with open(tmp, "wb") as fh:
+                    np.savez(fh, **arrays)
+        elif path.suffix == ".mat":
+            import scipy.io as sio
+            with atomic_path(path, suffix=".mat") as tmp:
+                sio.savemat(tmp, arrays)
+        else:
+            raise InputError(f"path {str(path)!r}: extension must be .npz or .mat")
+        return path
+
+
+class SecondOrderROM(_ROMBase):
+    r"""Dense second-order model :math:`\hat M \ddot x + \hat D \dot x + \hat K x = \hat F u`, :math:`y = \hat L x`."""
+
+    kind = "second-order"
+    _fields = ("M", "D", "K", "F", "L")
+
+    def __init__(self, M, D, K, F, L):
+        self.M = _mat("M", M)
+        r = self.M.shape[0]
+        if self.M.shape != (r, r):
+            raise ShapeError(f"matrix M must be square; got {self.M.shape}")
+        self.D, self.K = _mat("D", D), _mat("K", K)
+        for nm, X in (("D", self.D), ("K", self.K)):
+            if X.shape != (r, r):
+                raise ShapeError(f"matrix {nm} has shape {X.shape}; expected ({r}, {r})")
+        self.F = _mat("F", F, (r, 1))
+        self.L = _mat("L", L, (1, r))
+        if self.F.shape[0] != r:
+            raise ShapeError(f"matrix F has {self.F.shape[0]} rows; expected {r}")
+        if self.L.shape[1] != r:
+            raise ShapeError(f"matrix L has {self.L.shape[1]} columns; expected {r}")
+
+    @property
+    def order(self) -> int:
+        return self.M.shape[0]
+
+    @property
+    def states(self) -> int:
+        return 2 * self.order
+
+    @property
+    def m(self):
+        return self.F.shape[1]
+
+    @property
+    def p(self):
+        return self.L.shape[0]
+
+    def __repr__(self):
+        return f"SecondOrderROM(r={self.order}, states={self.states}, m={self.m}, p={self.p})"
+
+    def transfer_many(self, s) -> np.ndarray:
+        s = np.asarray(s, dtype=complex).reshape(-1)
+        P = s[:, None, None] ** 2 * self.M + s[:, None, None] * self.D + self.K
+        X = np.linalg.solve(P, np.broadcast_to(self.F, (s.size,) + self.F.shape))
+        return self.L @ X
+
+    def transfer_derivative(self, s) -> np.ndarray:
+        """:math:`T_r'(s) = -\\hat L P^{-1} (2 s \\hat M + \\hat D) P^{-1} \\hat F`."""
+        s = complex(s)
+        P = s * s * self.M + s * self.D + self.K
+        X = np.linalg.solve(P, self.F)
+        return -self.L @ np.linalg.solve(P, (2 * s * self.M + self.D) @ X)
+
+    def first_order(self):
+        """(E, A, B, C) with E = blkdiag(I, M), A = [[0, I], [-K, -D]], B = [0; F], C = [L, 0]."""
+        r = self.order
+        I, Z = np.eye(r), np.zeros((r, r))
+        E = np.block([[I, Z], [Z, self.M]])
+        A = np.block([[Z, I], [-self.K, -self.D]])
+        B = np.vstack([np.zeros((r, self.m)), self.F])
+        C = np.hstack([self.L, np.zeros((self.p, r))])
+        return E, A, B, C
+
+    def _first_order_arrays(self):
+        E, A, B, C = self.first_order()
+        return E, A, B, C, np.zeros((self.p, self.m))
+
+    def to_first_order(self) -> "FirstOrderROM":
+        E, A, B, C = self.first_order()
+        return FirstOrderROM(E, A, B, C)
+
+    def poles(self) -> np.ndarray:
+        """The 2r eigenvalues of the quadratic pencil :math:`\\lambda^2 \\hat M + \\lambda \\hat D + \\hat K`."""
+        E, A, _, _ = self.first_order()
+        return _finite_eigs(A, E)
+
+
+class FirstOrderROM(_ROMBase):
+    r"""Dense descriptor model :math:`E \dot x = A x + B u`, :math:`y = C x + D u`."""
+
+    kind = "first-order"
+    _fields = ("E", "A", "B", "C", "D")
+
+    def __init__(self, E, A, B, C, D=None):
+        self.A = _mat("A", A)
+        n = self.A.shape[0]
+        if self.A.shape != (n, n):
+            raise ShapeError(f"matrix A must be square; got {self.A.shape}")
+        self.E = np.eye(n) if E is None else _mat("E", E)
+        if self.E.shape != (n, n):
+            raise ShapeError(f"matrix E has shape {self.E.shape}; expected ({n}, {n})")
+        self.B = _mat("B", B, (n, 1))
+        self.C = _mat("C", C, (1, n))
+        if self.B.shape[0] != n:
+            raise ShapeError(f"matrix B has {self.B.shape[0]} rows; expected {n}")
+        if self.C.shape[1] != n:
+            raise ShapeError(f"matrix C has {self.C.shape[1]} columns; expected {n}")
+        self.D = np.zeros((self.C.shape[0], self.B.shape[1])) if D is None else _mat("D", D)
+        if self.D.shape != (self.C.shape[0], self.B.shape[1]):
+            raise ShapeError(f"matrix D has shape {self.D.shape}; expected {(self.C.shape[0], self.B.shape[1])}")
+
+    @property
+    def order(self) -> int:
+        return self.A.shape[0]
+
+    @property
+    def states(self) -> int:
+        return self.order
+
+    @property
+    def m(self):
+        return self.B.shape[1]
+
+    @property
+    def p(self):
+        return self.C.shape[0]
+
+    def __repr__(self):
+        return f"FirstOrderROM(states={self.states}, m={self.m}, p={self.p})"
+
+    def transfer_many(self, s) -> np.ndarray:
+        s = np.asarray(s, dtype=complex).reshape(-1)
+        P = s[:, None, None] * self.E - self.A
+        X = np.linalg.solve(P, np.broadcast_to(self.B, (s.size,) + self.B.shape))
+        return self.C @ X + self.D
+
+    def transfer_derivative(self, s) -> np.ndarray:
+        s = complex(s)
+        P = s * self.E - self.A
+        return -self.C @ np.linalg.solve(P, self.E @ np.linalg.solve(P, self.B))
+
+    def _first_order_arrays(self):
+        return self.E, self.A, self.B, self.C, self.D
+
+    def to_first_order(self) -> "FirstOrderROM":
+        return self
+
+    def poles(self) -> np.ndarray:
+        return _finite_eigs(self.A, self.E)
+
+
+def load_rom(path):
+    """Read a reduced model written by ``rom.save`` (.npz or .mat)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileFormatError(f"ROM file {str(path)!r} does not exist")
+    if path.suffix == ".npz":
+        with np.load(path, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
+    elif path.suffix == ".mat":
+        import scipy.io as sio
+        data = sio.loadmat(str(path))
+    else:
+        raise FileFormatError(f"ROM file {str(path)!r}: extension must be .npz or .mat")
+    kind = str(np.asarray(data.get("kind", "")).ravel()[0]) if "kind" in data else ""
+    cls = {"second-order": SecondOrderROM, "first-order": FirstOrderROM}.get(kind)
+    if cls is None:
+        raise FileFormatError(f"ROM file {str(path)!r}: entry 'kind' missing or unknown ({kind!r})")
+    missing = [k for k in cls._fields if k not in data]
+    if missing:
+        raise FileFormatError(f"ROM file {str(path)!r}: missing key {', '.join(missing)}")
+    return cls(*(data[k] for k in cls._fields))
