@@ -68,6 +68,58 @@ def cmd_list(args) -> int:
     return 0
 
 
+def _add_bench_parser(sub):
+    """``morsuite bench [NAME ...] [--out DIR] [--quick] [--list]`` (see morsuite.bench)."""
+
+    def cmd_bench(args) -> int:
+        from . import bench
+        if args.list:
+            for name in bench.available():
+                print(f"{name:<16} {bench.describe(name)}")
+            return 0
+        bench.run(args.names, out_dir=args.out, quick=args.quick)
+        return 0
+
+    p = sub.add_parser("bench", help="run benchmarks against their measured floor")
+    p.add_argument("names", nargs="*", metavar="NAME", help="benchmarks to run (default: all)")
+    p.add_argument("--out", default="results/bench", metavar="DIR",
+                   help="output directory for NAME.json and manifest.json (default: results/bench)")
+    p.add_argument("--quick", action="store_true", help="smaller grids, for a smoke test")
+    p.add_argument("--list", action="store_true", help="list the benchmarks and exit")
+    p.set_defaults(func=cmd_bench)
+    return p
+
+
+def _add_run_parser(sub):
+    """``morsuite run SPEC [SPEC ...] [--out DIR] [--jobs N | --scheduler ADDR] [--cache DIR]
+    [--no-cache] [--quiet] [--dry-run]`` (see morsuite.studies)."""
+
+    def cmd_run(args) -> int:
+        from .studies import build_plan, load_spec, run
+        studies = [load_spec(path) for path in args.specs]  # every spec is valid before anything runs
+        for study in studies:
+            if args.dry_run:
+                print(f"{study.name} ({study.path}): {len(study.scenes)} scenes; would compute")
+                print("  " + "\n  ".join(build_plan(study).describe()))
+                continue
+            run(study, out=args.out, cache_dir=args.cache, use_cache=not args.no_cache, jobs=args.jobs,
+                scheduler=args.scheduler, quiet=args.quiet)
+        return 0
+
+    p = sub.add_parser("run", help="run study specs (TOML): figures, tables, manifest in OUT/NAME/")
+    p.add_argument("specs", nargs="+", metavar="SPEC", help="study spec files, e.g. studies/paper_*.toml")
+    p.add_argument("--out", default="results", metavar="DIR", help="results root (default: results)")
+    p.add_argument("--jobs", type=int, default=1, metavar="N",
+                   help="local worker processes (default 1: Dask's synchronous scheduler, cleanest timings)")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="dask.distributed scheduler, e.g. tcp://HOST:8786")
+    p.add_argument("--cache", metavar="DIR", help="artifact cache (default: OUT/.cache)")
+    p.add_argument("--no-cache", action="store_true", help="recompute everything (fresh entries replace the cache)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars or log lines")
+    p.add_argument("--dry-run", action="store_true", help="validate the specs and print what would be computed")
+    p.set_defaults(func=cmd_run)
+    return p
+
+
 def build_parser():
     parser = argparse.ArgumentParser(prog="morsuite", description="Model reduction of second-order index-3 systems.")
     sub = parser.add_subparsers(dest="cmd", required=True)
@@ -84,6 +136,8 @@ def build_parser():
     p.add_argument("--option", action="append", metavar="KEY=VALUE", help="reducer option (repeatable)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_reduce)
+    _add_bench_parser(sub)
+    _add_run_parser(sub)
     return parser, sub
 
 

@@ -32,7 +32,10 @@ def sigma_max(H) -> np.ndarray:
 
 def freq_grid(band, n: int = 200) -> np.ndarray:
     """``n`` log-spaced frequencies (rad/s) over ``band = (lo, hi)``."""
-    lo, hi = (float(b) for b in band)
+    try:
+        lo, hi = (float(b) for b in band)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"band must be a pair (lo, hi) of numbers; got {band!r}") from exc
     if not (0 < lo < hi) or int(n) < 1:
         raise InputError(f"band must satisfy 0 < lo < hi and n >= 1; got band={band}, n={n}")
     return np.logspace(np.log10(lo), np.log10(hi), int(n))

@@ -133,9 +133,22 @@ class SaddlePointSolver:
     pivot_tol : float
         A factorization whose smallest pivot of U is below ``pivot_tol`` times
         its largest raises :class:`SingularShiftError` (the shift is at, or next
-        to, a pole). ``0`` turns the check off.
+        to, a pole). ``0`` (default) turns the check off: the ratio depends on
+        the scaling of the blocks (at s = 1e7j on the DSMS it is 1e-16 although
+        the solve is accurate to 4e-16), and reading U copies the factors
+        (10% of an LU). Exactly singular matrices and non-finite solutions
+        always raise :class:`SingularShiftError`.
+    rcond_tol : float
+        If positive, estimate the reciprocal 1-norm condition number of each
+        factorized matrix (Hager-Higham estimator, a few extra solves) and raise
+        :class:`SingularShiftError` below ``rcond_tol``. Scale-aware, unlike the
+        pivot ratio; costs about 10-20% of an LU, hence off by default.
     permc_spec : str
-        Column ordering passed to SuperLU.
+        Column ordering passed to SuperLU. MMD_AT_PLUS_A (the symmetric
+        ordering, right for a symmetric-structured saddle-point matrix) is the
+        default: COLAMD is 20% faster on the DSMS but on tcom(nc=2000) at
+        s = 1j its factorization left a relative residual of 2.5e-3 (a wrong
+        transfer function in the 5th digit); every other ordering gave 5e-15.
 
     Notes
     -----
@@ -143,12 +156,13 @@ class SaddlePointSolver:
     the run time of a reducer is judged.
     """
 
-    def __init__(self, M, D, K, G, *, cache_size: int = 2, pivot_tol: float = 1e-15,
-                 permc_spec: str = "MMD_AT_PLUS_A"):
+    def __init__(self, M, D, K, G, *, cache_size: int = 2, pivot_tol: float = 0.0,
+                 rcond_tol: float = 0.0, permc_spec: str = "MMD_AT_PLUS_A"):
         self.n1 = M.shape[0]
         self.n2 = G.shape[0]
         self.cache_size = int(cache_size)
         self.pivot_tol = float(pivot_tol)
+        self.rcond_tol = float(rcond_tol)
         self.permc_spec = permc_spec
         self.stats = SolverStats()
         self.real = all(not np.iscomplexobj(X.data) for X in (M, D, K, G))
@@ -198,6 +212,8 @@ class SaddlePointSolver:
                 raise InputError(f"shift s must be finite; got {s}")
             return (s * s, s, 1.0)
         a, b, c = coeffs
+        if not all(np.isfinite(complex(x)) for x in (a, b, c)):
+            raise InputError(f"coeffs must be finite; got {coeffs}")
         return (a, b, c)
 
     # -- factorizations -------------------------------------------------
@@ -240,6 +256,17 @@ class SaddlePointSolver:
                     f"precision (smallest/largest pivot {ratio:.2e} <= pivot_tol {self.pivot_tol:.1e}): "
                     "the shift is at or next to a pole of the system"
                 )
+        if self.rcond_tol > 0:
+            mag = sp.csc_matrix((abs(a) * np.abs(self._m) + abs(b) * np.abs(self._d) + abs(c) * np.abs(self._k)
+                                 + np.abs(self._g), self._indices, self._indptr), shape=A.shape)
+            rcond = _rcond_estimate(A, lu, self.n1, mag)
+            if not rcond > self.rcond_tol:
+                raise SingularShiftError(
+                    f"saddle-point matrix at s-coefficients {(a, b, c)} is singular to working "
+                    f"precision (estimated reciprocal condition {rcond:.2e} <= rcond_tol {self.rcond_tol:.1e}): "
+                    "the shift is at or next to a pole of the system"
+                )
+            ratio = rcond
         t2 = time.perf_counter()
         self.stats.factorizations += 1
         self.stats.assemble_time_s += t1 - t0
@@ -258,3 +285,43 @@ class SaddlePointSolver:
     def clear(self):
         """Drop cached factorizations (counters are kept)."""
         self._cache.clear()
+
+
+def _rcond_estimate(A, lu, n1: int, mag) -> float:
+    """Reciprocal 1-norm condition estimate of the equilibrated matrix D S D, through the LU.
+
+    D = blkdiag(D1, D2): D1 scales the rows and columns of the magnitudes
+    ``mag`` = |a||M| + |b||D| + |c||K| of the (1,1) block to unit row maxima
+    (magnitudes of the terms, not of their sum, so that the cancellation
+    that makes s a pole is not scaled away), D2 then scales G D1 likewise. The
+    condition of S itself mixes the scales |s|^2 M and G (1e31 at s = 1e7j on
+    the DSMS, whose solve is accurate to 4e-16): only the equilibrated one says
+    whether s is near a pole.
+    """
+    N = A.shape[0]
+    absA = mag.tocsr()
+    rowmax = np.asarray(absA[:n1, :n1].max(axis=1).todense()).ravel()
+    d = np.ones(N)
+    d[:n1] = 1.0 / np.sqrt(np.where(rowmax > 0, rowmax, 1.0))
+    if N > n1:
+        Gs = absA[n1:, :n1] @ sp.diags(d[:n1])
+        gmax = np.asarray(Gs.max(axis=1).todense()).ravel()
+        d[n1:] = 1.0 / np.where(gmax > 0, gmax, 1.0)
+    Dm = sp.diags(d)
+    As = Dm @ A @ Dm
+    dtype = A.dtype
+    di = (1.0 / d)
+
+    def inv(X, trans=False):
+        X = np.asarray(X, dtype=dtype)
+        Y = (X.T * di).T
+        Y = np.conj(lu.solve(np.conj(Y), trans="T")) if trans else lu.solve(Y)
+        return (Y.T * di).T
+
+    op = spla.LinearOperator((N, N), dtype=dtype, matvec=inv, matmat=inv,
+                             rmatvec=lambda x: inv(x, True), rmatmat=lambda X: inv(X, True))
+    norm_inv = spla.onenormest(op, t=2)
+    norm_a = abs(As).sum(axis=0).max()
+    if not np.isfinite(norm_inv) or norm_inv == 0:
+        return 0.0
+    return float(1.0 / (norm_a * norm_inv))

@@ -7,3 +7,4 @@ from .catalog import available, get, parse, register
 
 __all__ = ["Index3Model", "dsms", "tcom", "load", "load_mat", "load_npz", "save_npz",
            "available", "get", "parse", "register"]
+from .random import random_constrained; __all__.append("random_constrained")  # noqa: E402,E702

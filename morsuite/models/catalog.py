@@ -53,11 +53,16 @@ def _value(text: str):
     low = text.lower()
     if low in ("true", "false"):
         return low == "true"
-    for conv in (int, float):
-        try:
-            return conv(text)
-        except ValueError:
-            pass
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        v = float(text)
+        # "6e3" means the integer 6000 (sizes are written that way on command lines)
+        return int(v) if ("e" in low and v.is_integer() and abs(v) < 2**53) else v
+    except ValueError:
+        pass
     if ";" in text:
         return tuple(_value(t) for t in text.split(";"))
     return text
@@ -93,3 +98,5 @@ def canonical(spec: str) -> str:
     name, _, rest = spec.partition(":")
     items = sorted(i for i in rest.split(",") if i)
     return name + (":" + ",".join(items) if items else "")
+
+from .random import random_constrained; register("random", random_constrained)  # noqa: E402,E702

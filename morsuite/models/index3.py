@@ -41,12 +41,19 @@ def as_real_matrix(name: str, X, *, sparse: bool):
     if X is None:
         raise InputError(f"matrix {name} is missing (got None)")
     if sp.issparse(X):
-        X = sp.csr_matrix(X)
+        # own copy: sum_duplicates() below sorts indices in place, and a model must
+        # not change when the caller later edits the matrix it passed
+        X = sp.csr_matrix(X, copy=True)
         data = X.data
     else:
-        X = np.asarray(X)
+        try:
+            X = np.asarray(X)
+        except (ValueError, TypeError) as exc:  # ragged nested lists
+            raise InputError(f"matrix {name} is not a rectangular array ({exc})") from exc
         if X.dtype == object:
             raise InputError(f"matrix {name} has dtype object; expected a numeric array")
+        if X.ndim > 2:
+            raise ShapeError(f"matrix {name} must be 2-D; got {X.ndim}-D")
         data = X
     if np.iscomplexobj(data):
         if np.any(np.imag(data) != 0):
@@ -63,7 +70,7 @@ def as_real_matrix(name: str, X, *, sparse: bool):
         X.sum_duplicates()
         vals = X.data
     else:
-        X = np.asarray(X, dtype=np.float64)
+        X = np.array(X, dtype=np.float64)  # a copy, as for sparse input
         if sparse:
             X = sp.csr_matrix(X)
         vals = X.data if sp.issparse(X) else X
@@ -142,7 +149,10 @@ class Index3Model:
         self.M, self.D, self.K, self.G = M, D, K, G
         self.F, self.L = F, L
         self.name = str(name)
-        lo, hi = (float(b) for b in band)
+        try:
+            lo, hi = (float(b) for b in band)
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"band must be a pair (lo, hi) of numbers; got {band!r}") from exc
         if not (0 < lo < hi < np.inf):
             raise InputError(f"band must satisfy 0 < lo < hi < inf; got {band}")
         self.band = (lo, hi)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -83,10 +84,13 @@ def load_mat(path, *, sign: str = "mess", name: str | None = None, band=(1e-2, 1
         F, L = B[n1:2 * n1], C[:, :n1]
         if np.any(B[:n1] != 0):
             raise FileFormatError(f"{p}: B has nonzeros in its position block; not the M.E.S.S. second-order layout")
-    if check_realization and "A" in data and sign == "mess":
+    if check_realization and "A" in data:
+        # the realization fixes the sign: A[n1:2n1, :n1] is K_file (M.E.S.S.) or -K (physical)
         A = sp.csr_matrix(data["A"])
-        if A.shape[0] >= 2 * n1 and abs(A[n1:2 * n1, :n1] - sp.csr_matrix(Kf)).max() != 0:
-            raise FileFormatError(f"{p}: block A[n1:2n1, :n1] differs from K: the file does not follow the M.E.S.S. sign convention (try sign='physical')")
+        expected = sp.csr_matrix(Kf) if sign == "mess" else -sp.csr_matrix(Kf)
+        if A.shape[0] >= 2 * n1 and abs(A[n1:2 * n1, :n1] - expected).max() != 0:
+            other = "physical" if sign == "mess" else "mess"
+            raise FileFormatError(f"{p}: block A[n1:2n1, :n1] differs from {'K' if sign == 'mess' else '-K'}: the file does not follow the sign={sign!r} convention (try sign={other!r})")
     if sign == "mess":
         Df, Kf = -Df, -Kf
     return Index3Model(M, Df, Kf, G, F, L, name=name or p.stem, band=band)
@@ -117,7 +121,7 @@ def load_npz(path, *, check_constraints: bool = True) -> Index3Model:
     try:
         with np.load(p, allow_pickle=False) as z:
             content = {k: z[k] for k in z.files}
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
+    except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError) as exc:
         raise FileFormatError(f"{p}: not a readable npz file ({type(exc).__name__}: {exc})") from exc
     if str(content.get("format", "")) != NPZ_FORMAT:
         raise FileFormatError(f"{p}: entry 'format' is missing or not {NPZ_FORMAT!r}")

@@ -94,9 +94,12 @@ class IRKABase(Reducer):
                             "bases have full rank, response once they lose rank)",
                             choices=("auto", "shifts", "response")),
         "n_check": Option(64, "int", "frequencies on the band used by the response criterion", low=4),
+        "cycle_tol": Option(1e-3, "float", "a shift set within this relative distance of one of the last "
+                            "cycle_window sets, while 100 times farther from the current one, is a cycle",
+                            low=0, high=1, open_low=True, open_high=True),
         "cycle_window": Option(6, "int", "number of earlier shift sets checked for a cycle", low=0),
-        "pivot_tol": Option(1e-15, "float", "smallest relative LU pivot before a shift counts as a pole",
-                            low=0, high=1),
+        "pivot_tol": Option(0.0, "float", "smallest relative LU pivot before a shift counts as a pole "
+                            "(0: only exact singularity and non-finite solves count)", low=0, high=1),
         "shift_perturbation": Option(1e-6, "float", "relative perturbation applied to a shift whose "
                                      "saddle matrix is singular", low=0, high=1, open_low=True),
     }
@@ -216,6 +219,7 @@ class IRKABase(Reducer):
                 W, sw = orth(Wraw, o["rank_tol"])
                 k = min(V.shape[1], W.shape[1])
                 V, W = V[:, :k], W[:, :k]
+                k_rank = k
                 if o["oblique_tol"] > 0:
                     # drop directions in which the oblique projection V (W^T V)^-1 W^T
                     # is ill-conditioned: they give a near-singular reduced mass matrix
@@ -225,15 +229,16 @@ class IRKABase(Reducer):
                     V, W = V @ Zt_[:k].T, W @ U_[:, :k]
             else:
                 W, k = V, V.shape[1]
+                k_rank = k
             rom = self._project(V, W)
             poles = rom.poles()
             stable = bool(np.all(poles.real < 0))
             t1 = time.perf_counter()
-            if it > 1 and k < alpha.size:
+            if it > 1 and k_rank < alpha.size:
                 # the shifts of this iteration ask for more than the model holds:
                 # shrink the shift count for good (it never grows back, so the
                 # iteration cannot cycle between orders)
-                cap = min(cap, k)
+                cap = min(cap, k_rank)
             target = min(cap, 2 * k)
             new_alpha, new_b, new_c, uinfo = self._update(rom, target, how)
             t2 = time.perf_counter()
@@ -244,7 +249,7 @@ class IRKABase(Reducer):
             d_resp = (float(np.max(sigma_max(H - H_prev)) / max(np.max(sigma_max(H)), np.finfo(float).tiny))
                       if H_prev is not None else np.inf)
             H_prev = H
-            lost_rank = lost_rank or (it > 1 and k < alpha.size)
+            lost_rank = lost_rank or (it > 1 and k_rank < alpha.size)
             crit = o["criterion"]
             if crit == "auto":
                 crit = "response" if lost_rank else "shifts"
@@ -260,8 +265,8 @@ class IRKABase(Reducer):
                 converged = True
                 best = (key, it, rom, alpha.copy(), bdir.copy(), cdir.copy())
                 break
-            if crit == "shifts" and o["cycle_window"] and d_shift > 100 * o["tol"] and any(
-                    new_alpha.size == a.size and shift_distance(new_alpha, a) < o["tol"] for a in recent):
+            if crit == "shifts" and o["cycle_window"] and d_shift > 100 * o["cycle_tol"] and any(
+                    new_alpha.size == a.size and shift_distance(new_alpha, a) < o["cycle_tol"] for a in recent):
                 # back to an earlier set while still far from the current one: a
                 # cycle (slow oscillating convergence has d_shift near tol instead)
                 if o["update"] == "auto" and how == "bt":
