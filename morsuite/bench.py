@@ -226,7 +226,7 @@ def _floor_samples(solver, omega, rhs, orderings):
         specs = list(orderings) if i % 2 == 0 else list(orderings)[::-1]
         for spec in specs:
             t0 = pc()
-            lu = spla.splu(A, permc_spec=spec)
+            lu = spla.splu(A, permc_spec=spec, diag_pivot_thresh=solver.diag_pivot_thresh)
             lu.solve(rhs)
             out[spec].append(pc() - t0)
             out["nnz"][spec].append(int(lu.nnz))

@@ -2,5 +2,6 @@
 
 from .base import Option, Reducer, Reduction, available, get_class, make, register
 from .irka import IRKA
+from .irka_projected import IRKAProjected  # noqa: F401  (registers "irka-projected")
 
 __all__ = ["Option", "Reducer", "Reduction", "make", "available", "register", "get_class", "IRKA"]

@@ -1,0 +1,13 @@
+"""Reports: figures (matplotlib and pgfplots) and tables from plain data; never solves.
+
+:mod:`~morsuite.report.figures` draws :class:`FigureData` and writes pgfplots;
+:mod:`~morsuite.report.tables` writes CSV and Markdown tables;
+:mod:`~morsuite.report.writer` writes one study's outputs (CSV per curve, figures,
+tables) into its results folder.
+"""
+
+from .figures import Curve, FigureData, pgfplots_tex, plot, save
+from .tables import read_markdown, to_markdown, write_table
+
+__all__ = ["Curve", "FigureData", "plot", "save", "pgfplots_tex", "to_markdown", "read_markdown",
+           "write_table"]

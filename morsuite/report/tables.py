@@ -1,0 +1,77 @@
+"""Tables: a DataFrame -> CSV (full precision) and Markdown (6 significant digits).
+
+The Markdown file is the CSV rendered for reading; :func:`read_markdown` parses it
+back so that tests (and users) can check that the two agree.
+"""
+
+from __future__ import annotations
+
+import math
+from numbers import Integral, Real
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..utils import atomic_write_text
+
+__all__ = ["to_markdown", "read_markdown", "write_table", "format_cell"]
+
+
+def format_cell(value, floatfmt: str = ".6g") -> str:
+    if value is None or value is pd.NA or value is pd.NaT or (isinstance(value, float) and math.isnan(value)):
+        return ""
+    if isinstance(value, (bool, np.bool_)):
+        return str(bool(value))
+    if isinstance(value, Integral):
+        return str(int(value))
+    if isinstance(value, Real):
+        return format(float(value), floatfmt)
+    return str(value).replace("|", r"\|").replace("\n", " ")
+
+
+def to_markdown(df: pd.DataFrame, floatfmt: str = ".6g") -> str:
+    """GitHub-flavoured Markdown table of ``df`` (no index)."""
+    cols = list(df.columns)
+    lines = ["| " + " | ".join(cols) + " |",
+             "|" + "|".join("---:" if pd.api.types.is_numeric_dtype(df[c]) and not pd.api.types.is_bool_dtype(df[c])
+                            else ":---" for c in cols) + "|"]
+    for row in df.itertuples(index=False):
+        lines.append("| " + " | ".join(format_cell(v, floatfmt) for v in row) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def read_markdown(path_or_text) -> pd.DataFrame:
+    """Parse a table written by :func:`to_markdown` (all cells as strings)."""
+    text = str(path_or_text)
+    if "\n" not in text and Path(text).is_file():
+        text = Path(text).read_text()
+    rows = [ln.strip() for ln in text.splitlines() if ln.strip().startswith("|")]
+    def cells(ln):
+        body = ln.strip()[1:-1]
+        out, cur, esc = [], "", False
+        for ch in body:
+            if esc:
+                cur += ch
+                esc = False
+            elif ch == "\\":
+                esc = True
+            elif ch == "|":
+                out.append(cur.strip())
+                cur = ""
+            else:
+                cur += ch
+        out.append(cur.strip())
+        return out
+    header = cells(rows[0])
+    data = [cells(r) for r in rows[2:]]
+    return pd.DataFrame(data, columns=header, dtype=str)
+
+
+def write_table(df: pd.DataFrame, stem, *, title: str = "", note: str = "") -> list[Path]:
+    """Write ``stem``.csv and ``stem``.md atomically; return both paths."""
+    csv, md = Path(f"{stem}.csv"), Path(f"{stem}.md")
+    atomic_write_text(csv, df.to_csv(index=False))
+    head = (f"## {title}\n\n" if title else "") + (f"{note}\n\n" if note else "")
+    atomic_write_text(md, head + to_markdown(df))
+    return [csv, md]

@@ -1,0 +1,312 @@
+r"""Scene kinds: what each figure or table needs, and how it is built from results.
+
+A scene names one model, one or more methods (aliases of the study's
+``[methods]``), the reduced orders ``r`` and, for frequency-domain scenes, a grid.
+
+========== ===================================================== ===== =======
+kind       shows                                                 grid  r
+========== ===================================================== ===== =======
+sigma      :math:`\sigma_{\max}(T(j\omega))` of full and reduced yes   one
+error      absolute (``error = "abs"``) or relative error         yes   one
+compare    error of several methods at one r (BT vs IRKA)         yes   one
+error_vs_r max error on the grid or ``h2_error_grid`` against r   yes   many
+time_vs_r  reduction time against r                              no    many
+pareto     time against error, one point per method and r        yes   many
+convergence IRKA's shift change per iteration, one curve per r   no    many
+hsv        Hankel singular values (methods that report ``hsv``)   no    one
+table      summary table of the scene's reductions                yes   many
+========== ===================================================== ===== =======
+
+``needs(scene)`` lists the artifacts a scene uses, so a study computes nothing
+that no scene shows: scenes without a grid never trigger a full-order response,
+and a method appears only when a scene names it.
+
+Curves against r use the x column ``r`` (the order of the reduced model, from
+``info["r"]``) or ``states`` (first-order states: 2r for a second-order ROM), as
+the scene's ``axis`` says; the CSV files carry both and ``r_requested``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from ..report.figures import Curve, FigureData
+
+__all__ = ["KINDS", "COMMON_KEYS", "Kind", "TableData", "needs", "build", "MEASURES", "AXES", "TIMES"]
+
+COMMON_KEYS = ("name", "kind", "title", "model", "methods")
+MEASURES = ("max_abs", "max_rel", "h2_grid")
+AXES = ("r", "states")
+TIMES = ("standalone", "call")
+
+_R = (None, None)          # placeholders: validated by the spec module itself
+_GRID = (None, None)
+_PAPER = (None, None)
+
+
+@dataclass(frozen=True)
+class Kind:
+    doc: str
+    keys: dict                 # kind-specific key -> (default, choices or None for a positive int)
+    uses_grid: bool
+    one_r: bool
+    min_methods: int = 1
+    with_full: bool = False
+
+    def curve_names(self, methods) -> list:
+        return (["full"] if self.with_full else []) + list(methods)
+
+
+KINDS = {
+    "sigma": Kind("sigma_max of the full and the reduced models over frequency",
+                  {"r": _R, "grid": _GRID, "paper_csv": _PAPER}, True, True, with_full=True),
+    "error": Kind("absolute or relative error over frequency",
+                  {"r": _R, "grid": _GRID, "paper_csv": _PAPER, "error": ("abs", ("abs", "rel"))}, True, True),
+    "compare": Kind("method against method at one r: error over frequency",
+                    {"r": _R, "grid": _GRID, "paper_csv": _PAPER, "error": ("abs", ("abs", "rel"))}, True, True,
+                    min_methods=2),
+    "error_vs_r": Kind("max error on the grid (or h2_error_grid) against r",
+                       {"r": _R, "grid": _GRID, "paper_csv": _PAPER, "measure": ("max_abs", MEASURES),
+                        "axis": ("r", AXES)}, True, False),
+    "time_vs_r": Kind("reduction time against r",
+                      {"r": _R, "paper_csv": _PAPER, "axis": ("r", AXES), "time": ("standalone", TIMES)},
+                      False, False),
+    "pareto": Kind("time against error, one point per method and r",
+                   {"r": _R, "grid": _GRID, "measure": ("max_abs", MEASURES), "time": ("standalone", TIMES)},
+                   True, False),
+    "convergence": Kind("IRKA convergence history (shift change per iteration)", {"r": _R}, False, False),
+    "hsv": Kind("Hankel singular value decay", {"r": _R, "count": (None, None)}, False, True),
+    "table": Kind("summary table of the scene's reductions", {"r": _R, "grid": _GRID}, True, False),
+}
+
+OMEGA = r"$\omega$ (rad/s)"
+YLABEL = {
+    "sigma": r"$\sigma_{\max}(T(j\omega))$",
+    "abs": r"$\sigma_{\max}(T(j\omega) - T_r(j\omega))$",
+    "rel": r"$\sigma_{\max}(T - T_r) \,/\, \sigma_{\max}(T)$",
+    "max_abs": r"$\max_\omega \sigma_{\max}(T - T_r)$ on the grid",
+    "max_rel": r"$\max_\omega \sigma_{\max}(T - T_r)/\sigma_{\max}(T)$ on the grid",
+    "h2_grid": r"$\|T - T_r\|_{H_2}$ on the grid band (trapezoidal)",
+}
+MEASURE_COLUMN = {"max_abs": "max_abs_error", "max_rel": "max_rel_error", "h2_grid": "h2_error_grid"}
+XLABEL = {"r": r"reduced order $r$", "states": r"first-order states of the ROM ($2r$ for second order)"}
+TIME_LABEL = {"standalone": "time (s), reduction at this r alone",
+              "call": "time (s) of reduce(r), shared work reused"}
+
+
+@dataclass
+class TableData:
+    name: str
+    title: str
+    df: pd.DataFrame
+    notes: list
+
+
+def needs(scene):
+    """Artifacts the scene reads: ("metrics", model, grid, method, r) or ("reduce", model, method, r)."""
+    kind = KINDS[scene.kind]
+    for m in scene.methods:
+        for r in scene.rs:
+            if kind.uses_grid:
+                yield ("metrics", scene.model, scene.grid, m, r)
+            else:
+                yield ("reduce", scene.model, m, r)
+
+
+# -- building --------------------------------------------------------------
+def _paper_curves(scene, study, x, notes):
+    out = []
+    for curve, path in scene.paper.items():
+        if not path.is_file():
+            notes.append(f"scene {scene.name!r}: paper curve {str(path)!r} not found; overlay skipped")
+            continue
+        try:
+            df = pd.read_csv(path)
+        except (OSError, ValueError) as exc:
+            notes.append(f"scene {scene.name!r}: paper curve {str(path)!r} unreadable ({exc}); overlay skipped")
+            continue
+        if "value" not in df.columns or df.shape[1] < 2:
+            notes.append(f"scene {scene.name!r}: paper curve {str(path)!r} lacks columns (x, value); skipped")
+            continue
+        xcol = [c for c in df.columns if c != "value"][0]
+        df = df.rename(columns={xcol: x})[[x, "value"]]
+        label = "full" if curve == "full" else study.methods[curve].label
+        out.append(Curve(name=f"paper_{curve}", label=f"paper ({label})", data=df, x=x, style="paper"))
+    return out
+
+
+def _title(scene, study, default):
+    return scene.title or default
+
+
+def _missing(notes, scene, method, r, what):
+    notes.append(f"scene {scene.name!r}: {method} at r = {r}: {what}; not shown")
+
+
+def _freq_scene(scene, study, res):
+    notes = []
+    model = study.models[scene.model]
+    r = scene.rs[0]
+    fom = res.fom(scene.model, scene.grid)
+    omega = fom["omega"]
+    curves = []
+    if scene.kind == "sigma":
+        curves.append(Curve("full", f"full ($n_1 = {model.n1}$)", pd.DataFrame({"omega": omega,
+                                                                                "value": fom["sigma_full"]}),
+                            style="full"))
+        ylabel, col = YLABEL["sigma"], "sigma_rom"
+        default = f"{model.name}: full and reduced models at r = {r}"
+    else:
+        err = scene.params["error"]
+        ylabel, col = YLABEL[err], f"{err}_error"
+        default = f"{model.name}: {'absolute' if err == 'abs' else 'relative'} error at r = {r}"
+    for m in scene.methods:
+        met = res.metrics(scene.model, scene.grid, m, r)
+        if met is None or "error" in met:
+            _missing(notes, scene, m, r, met["error"] if met else "not computed")
+            continue
+        red = res.reduction(scene.model, m, r)
+        got = int(red["info"]["r"])
+        label = f"{study.methods[m].label} ($r = {got}$" + (f", {r} requested)" if got != r else ")")
+        curves.append(Curve(m, label, pd.DataFrame({"omega": omega, "value": met[col]})))
+    curves += _paper_curves(scene, study, "omega", notes)
+    return FigureData(scene.name, _title(scene, study, default), OMEGA, ylabel, curves, notes=notes)
+
+
+def _r_rows(scene, study, res, m):
+    """(reduction entry, metrics entry or None) for each r of the scene that succeeded."""
+    rows = []
+    for r in scene.rs:
+        red = res.reduction(scene.model, m, r)
+        if red is None or "error" in red:
+            rows.append((r, None, red["error"] if red else "not computed"))
+            continue
+        met = res.metrics(scene.model, scene.grid, m, r) if scene.grid else None
+        if met is not None and "error" in met:
+            rows.append((r, None, met["error"]))
+            continue
+        rows.append((r, (red, met), None))
+    return rows
+
+
+def _r_frame(red, x_extra):
+    info = red["info"]
+    return {"r": int(info["r"]), "states": int(info["states"]), "r_requested": int(red["r_requested"]),
+            "cached": bool(red.get("cached", False)), **x_extra}
+
+
+def _against_r_scene(scene, study, res):
+    notes = []
+    model = study.models[scene.model]
+    axis = scene.params["axis"]
+    curves = []
+    if scene.kind == "error_vs_r":
+        measure = scene.params["measure"]
+        ylabel = YLABEL[measure]
+        default = f"{model.name}: {MEASURE_COLUMN[measure].replace('_', ' ')} against {axis}"
+    else:
+        tmode = scene.params["time"]
+        ylabel = TIME_LABEL[tmode]
+        default = f"{model.name}: reduction time against {axis}"
+    for m in scene.methods:
+        recs = []
+        for r, pair, err in _r_rows(scene, study, res, m):
+            if pair is None:
+                _missing(notes, scene, m, r, err)
+                continue
+            red, met = pair
+            if scene.kind == "error_vs_r":
+                value = met[MEASURE_COLUMN[measure]]
+            else:
+                value = red["time_standalone_s"] if tmode == "standalone" else red["time_s"]
+            recs.append(_r_frame(red, {"value": value}))
+        if recs:
+            df = pd.DataFrame(recs)
+            df = df[[axis, "value"] + [c for c in df.columns if c not in (axis, "value")]]
+            curves.append(Curve(m, study.methods[m].label, df, x=axis, style="points"))
+    curves += _paper_curves(scene, study, axis, notes)
+    return FigureData(scene.name, _title(scene, study, default), XLABEL[axis], ylabel, curves,
+                      xscale="linear", notes=notes)
+
+
+def _pareto_scene(scene, study, res):
+    notes = []
+    model = study.models[scene.model]
+    measure, tmode = scene.params["measure"], scene.params["time"]
+    col = MEASURE_COLUMN[measure]
+    curves = []
+    for m in scene.methods:
+        recs = []
+        for r, pair, err in _r_rows(scene, study, res, m):
+            if pair is None:
+                _missing(notes, scene, m, r, err)
+                continue
+            red, met = pair
+            t = red["time_standalone_s"] if tmode == "standalone" else red["time_s"]
+            recs.append({col: met[col], "value": t, **_r_frame(red, {})})
+        if recs:
+            curves.append(Curve(m, study.methods[m].label, pd.DataFrame(recs), x=col, style="points",
+                                annotate="r"))
+    return FigureData(scene.name, _title(scene, study, f"{model.name}: time against error, one point per r"),
+                      YLABEL[measure], TIME_LABEL[tmode], curves, notes=notes)
+
+
+def _convergence_scene(scene, study, res):
+    notes = []
+    model = study.models[scene.model]
+    curves = []
+    for m in scene.methods:
+        for r, pair, err in _r_rows(scene, study, res, m):
+            if pair is None:
+                _missing(notes, scene, m, r, err)
+                continue
+            hist = (pair[0]["info"].get("history") or {}).get("measure")
+            if not hist:
+                _missing(notes, scene, m, r, "no convergence history (info['history']['measure'])")
+                continue
+            df = pd.DataFrame({"iteration": np.arange(1, len(hist) + 1), "value": np.asarray(hist, float)})
+            conv = "converged" if pair[0]["info"].get("converged") else "not converged"
+            curves.append(Curve(f"{m}_r{r}", f"{study.methods[m].label}, $r = {r}$ ({conv})", df, x="iteration"))
+    return FigureData(scene.name, _title(scene, study, f"{model.name}: IRKA convergence"), "iteration",
+                      "convergence measure (relative change of shifts or response)", curves, xscale="linear",
+                      notes=notes)
+
+
+def _hsv_scene(scene, study, res):
+    notes = []
+    model = study.models[scene.model]
+    curves = []
+    count = scene.params.get("count")
+    for m in scene.methods:
+        for r, pair, err in _r_rows(scene, study, res, m):
+            if pair is None:
+                _missing(notes, scene, m, r, err)
+                continue
+            hsv = pair[0]["info"].get("hsv")
+            if not hsv:
+                _missing(notes, scene, m, r, "the reducer reports no Hankel singular values (info['hsv'])")
+                continue
+            hsv = np.asarray(hsv, dtype=float).ravel()[:count]
+            df = pd.DataFrame({"index": np.arange(1, hsv.size + 1), "value": hsv})
+            curves.append(Curve(m, study.methods[m].label, df, x="index", style="points"))
+    return FigureData(scene.name, _title(scene, study, f"{model.name}: Hankel singular values"), "index $k$",
+                      r"Hankel singular value $\sigma_k$", curves, xscale="linear", notes=notes)
+
+
+def _table_scene(scene, study, res):
+    rows = [res.summary_row(scene.model, m, r, scene.grid) for m in scene.methods for r in scene.rs]
+    title = _title(scene, study, f"{study.models[scene.model].name}: reductions")
+    return TableData(scene.name, title, pd.DataFrame(rows), [])
+
+
+_BUILDERS = {"sigma": _freq_scene, "error": _freq_scene, "compare": _freq_scene,
+             "error_vs_r": _against_r_scene, "time_vs_r": _against_r_scene, "pareto": _pareto_scene,
+             "convergence": _convergence_scene, "hsv": _hsv_scene, "table": _table_scene}
+
+
+def build(scene, study, res):
+    """The scene's FigureData or TableData from the results ``res`` (no computing)."""
+    return _BUILDERS[scene.kind](scene, study, res)

@@ -1,0 +1,457 @@
+"""Study specifications: a TOML file -> a validated :class:`Study` (plain data).
+
+A study names its models, frequency grids, reducers (with options) and a list of
+scenes (figures and tables). Everything is checked before anything is computed:
+an unknown key, model, reducer, option, grid, scene kind or an r the model cannot
+support raises :class:`~morsuite.errors.SpecError` naming it and listing the valid
+choices. Example::
+
+    name = "demo"                        # output folder results/demo (default: file stem)
+    title = "IRKA on the DSMS"
+    root = ".."                          # base of relative paths, relative to this file
+
+    [models]
+    dsms = "dsms:g=600"                  # catalog string or a .mat/.npz path
+
+    [grids]
+    fig = { band = [1e-2, 1.0], n = 200 }   # log-spaced, rad/s; band defaults to the model's
+
+    [methods.irka]                       # alias; reducer defaults to the alias
+    reducer = "irka"
+    options = { tol = 1e-6 }
+    label = "IRKA"
+
+    [[scenes]]
+    name = "dsms_r30_abs_error_irka"
+    kind = "error"                       # see morsuite.studies.scenes.KINDS
+    model = "dsms"
+    grid = "fig"
+    r = 30                               # int, list, or { from = 2, to = 40, step = 2 }
+    error = "abs"
+    paper_csv = "../shared/paper_figures/dsms_r30_abs_error_irka.csv"
+"""
+
+from __future__ import annotations
+
+import difflib
+import hashlib
+import json
+import tomllib
+from dataclasses import dataclass, field
+from numbers import Integral, Real
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError, SpecError
+
+__all__ = ["Study", "ModelEntry", "GridEntry", "MethodEntry", "SceneEntry", "load_spec",
+           "study_from_dict", "plain"]
+
+TOP_KEYS = ("name", "title", "description", "root", "models", "grids", "methods", "scenes")
+GRID_KEYS = ("band", "n")
+METHOD_KEYS = ("reducer", "options", "label")
+DEFAULT_GRID = "default"
+DEFAULT_GRID_N = 200
+
+
+@dataclass(frozen=True)
+class ModelEntry:
+    """One model of a study: ``spec`` as written, ``source`` as passed to tasks."""
+
+    alias: str
+    spec: str
+    source: str          # catalog string or absolute file path
+    model_id: str        # identity used in cache keys (canonical spec or file hash)
+    name: str
+    n1: int
+    n2: int
+    order: int           # n1 - n2: the largest admissible r
+    band: tuple
+
+
+@dataclass(frozen=True)
+class GridEntry:
+    name: str
+    band: tuple | None   # None: the model's default band
+    n: int
+
+    def omega_for(self, model: ModelEntry) -> np.ndarray:
+        lo, hi = self.band or model.band
+        return np.logspace(np.log10(lo), np.log10(hi), self.n)
+
+    def bounds_for(self, model: ModelEntry) -> tuple:
+        lo, hi = self.band or model.band
+        return float(lo), float(hi), int(self.n)
+
+
+@dataclass(frozen=True)
+class MethodEntry:
+    alias: str
+    reducer: str
+    options: dict        # the options as written (passed to the reducer)
+    full_options: dict   # every declared option, defaults filled in (plain data)
+    label: str
+
+    @property
+    def method_id(self) -> str:
+        return self.reducer + ":" + _digest({"reducer": self.reducer, "options": self.full_options})[:16]
+
+
+@dataclass
+class SceneEntry:
+    name: str
+    kind: str
+    model: str
+    methods: tuple
+    rs: tuple
+    grid: str | None
+    title: str
+    params: dict = field(default_factory=dict)     # kind-specific settings, defaults filled
+    paper: dict = field(default_factory=dict)      # curve name -> Path (may not exist)
+
+
+@dataclass
+class Study:
+    """A validated study. Models were built once to learn their band and order."""
+
+    name: str
+    title: str
+    description: str
+    path: Path | None
+    root: Path
+    models: dict
+    grids: dict
+    methods: dict
+    scenes: list
+    raw: dict
+
+    def canonical(self) -> dict:
+        """Plain-data form of the validated spec (defaults filled in, models identified)."""
+        return plain({
+            "name": self.name, "title": self.title,
+            "models": {a: {"spec": m.spec, "model_id": m.model_id} for a, m in self.models.items()},
+            "grids": {g.name: {"band": g.band, "n": g.n} for g in self.grids.values()},
+            "methods": {a: {"reducer": m.reducer, "options": m.full_options, "label": m.label}
+                        for a, m in self.methods.items()},
+            "scenes": [{"name": s.name, "kind": s.kind, "title": s.title, "model": s.model, "methods": s.methods,
+                        "r": s.rs, "grid": s.grid, "params": s.params,
+                        "paper": {k: str(v) for k, v in s.paper.items()}} for s in self.scenes],
+        })
+
+    @property
+    def config_hash(self) -> str:
+        return _digest(self.canonical())
+
+
+# -- helpers ---------------------------------------------------------------
+def plain(x):
+    """Numpy scalars/arrays, tuples and Paths -> JSON-friendly data."""
+    if isinstance(x, dict):
+        return {str(k): plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [plain(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return plain(x.tolist())
+    if isinstance(x, np.bool_):
+        return bool(x)
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.floating):
+        return float(x)
+    if isinstance(x, (complex, np.complexfloating)):
+        return {"re": float(x.real), "im": float(x.imag)}
+    if isinstance(x, Path):
+        return str(x)
+    return x
+
+
+def _digest(obj) -> str:
+    return hashlib.sha256(json.dumps(plain(obj), sort_keys=True).encode()).hexdigest()
+
+
+def _suggest(word, choices) -> str:
+    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+class _Ctx:
+    def __init__(self, source):
+        self.source = source
+
+    def fail(self, where, msg):
+        raise SpecError(f"study spec {self.source}: {where}: {msg}")
+
+    def keys(self, where, table, allowed):
+        if not isinstance(table, dict):
+            self.fail(where, f"expected a table; got {type(table).__name__}")
+        for key in table:
+            if key not in allowed:
+                self.fail(where, f"unknown key {key!r}{_suggest(key, allowed)}; valid keys: {', '.join(sorted(allowed))}")
+
+    def string(self, where, value, *, empty=False):
+        if not isinstance(value, str) or (not empty and not value):
+            self.fail(where, f"expected a non-empty string; got {value!r}")
+        return value
+
+    def choice(self, where, value, choices):
+        if value not in choices:
+            self.fail(where, f"unknown value {value!r}{_suggest(value, choices)}; valid choices: "
+                             f"{', '.join(map(str, choices))}")
+        return value
+
+    def ref(self, where, value, table, what):
+        self.string(where, value)
+        if value not in table:
+            self.fail(where, f"unknown {what} {value!r}{_suggest(value, table)}; defined {what}s: "
+                             f"{', '.join(sorted(table)) or '(none)'}")
+        return value
+
+
+def _name_ok(text):
+    return bool(text) and all(c.isalnum() or c in "-_." for c in text) and not text.startswith(".")
+
+
+# -- models ----------------------------------------------------------------
+def _model_entry(ctx, alias, spec, root):
+    from ..models import catalog
+
+    where = f"models.{alias}"
+    ctx.string(where, spec)
+    if spec.endswith((".mat", ".npz")):
+        path = Path(spec)
+        path = path if path.is_absolute() else (root / path)
+        path = path.resolve()
+        if not path.is_file():
+            ctx.fail(where, f"model file {str(path)!r} does not exist")
+        source = str(path)
+        model_id = "file:" + path.name + ":" + hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+    else:
+        name = spec.partition(":")[0]
+        if name not in catalog.CATALOG:
+            ctx.fail(where, f"unknown model {name!r}{_suggest(name, catalog.available())}; catalog models: "
+                            f"{', '.join(catalog.available())} (or a .mat/.npz path)")
+        source = spec
+        model_id = "catalog:" + catalog.canonical(spec)
+    try:
+        fom = catalog.parse(source)
+    except InputError as exc:
+        ctx.fail(where, f"model {spec!r} cannot be built: {exc}")
+    return ModelEntry(alias=alias, spec=spec, source=source, model_id=model_id, name=fom.name,
+                      n1=int(fom.n1), n2=int(fom.n2), order=int(fom.order), band=tuple(map(float, fom.band)))
+
+
+# -- methods ---------------------------------------------------------------
+def _method_entry(ctx, alias, table):
+    from .. import reducers
+
+    where = f"methods.{alias}"
+    if table is None:
+        table = {}
+    ctx.keys(where, table, METHOD_KEYS)
+    name = table.get("reducer", alias)
+    ctx.string(f"{where}.reducer", name)
+    avail = reducers.available()
+    if name not in avail:
+        ctx.fail(f"{where}.reducer", f"unknown reducer {name!r}{_suggest(name, avail)}; registered reducers: "
+                                     f"{', '.join(avail)}")
+    cls = reducers.get_class(name)
+    opts = table.get("options", {})
+    ctx.keys(f"{where}.options", opts, tuple(cls.OPTIONS))
+    full = {}
+    from ..errors import OptionError
+    for key, opt in cls.OPTIONS.items():
+        try:
+            full[key] = opt.validate(cls.__name__, key, opts.get(key, opt.default))
+        except OptionError as exc:
+            ctx.fail(f"{where}.options.{key}", str(exc))
+    label = table.get("label", alias)
+    ctx.string(f"{where}.label", label)
+    return MethodEntry(alias=alias, reducer=name, options=dict(opts), full_options=plain(full), label=label)
+
+
+# -- grids and r -----------------------------------------------------------
+def _grid_entry(ctx, name, table):
+    where = f"grids.{name}"
+    ctx.keys(where, table, GRID_KEYS)
+    band = table.get("band")
+    if band is not None:
+        ok = (isinstance(band, list) and len(band) == 2 and all(isinstance(b, Real) and not isinstance(b, bool)
+                                                                 for b in band))
+        if not ok or not (0 < band[0] < band[1] < np.inf):
+            ctx.fail(f"{where}.band", f"expected [lo, hi] with 0 < lo < hi (rad/s); got {band!r}")
+        band = (float(band[0]), float(band[1]))
+    n = table.get("n", DEFAULT_GRID_N)
+    if isinstance(n, bool) or not isinstance(n, Integral) or n < 2:
+        ctx.fail(f"{where}.n", f"expected an integer >= 2; got {n!r}")
+    return GridEntry(name=name, band=band, n=int(n))
+
+
+def _r_values(ctx, where, value):
+    def bad():
+        ctx.fail(where, f"expected a positive integer, a list of them, or {{ from = A, to = B, step = S }}; "
+                        f"got {value!r}")
+    if isinstance(value, bool):
+        bad()
+    if isinstance(value, Integral):
+        rs = [int(value)]
+    elif isinstance(value, list):
+        if not value or any(isinstance(v, bool) or not isinstance(v, Integral) for v in value):
+            bad()
+        rs = [int(v) for v in value]
+    elif isinstance(value, dict):
+        ctx.keys(where, value, ("from", "to", "step"))
+        lo, hi, step = value.get("from"), value.get("to"), value.get("step", 1)
+        if any(isinstance(v, bool) or not isinstance(v, Integral) for v in (lo, hi, step)) or step < 1 or hi < lo:
+            bad()
+        rs = list(range(int(lo), int(hi) + 1, int(step)))
+    else:
+        bad()
+    if any(r < 1 for r in rs):
+        bad()
+    return tuple(sorted(set(rs)))
+
+
+# -- scenes ----------------------------------------------------------------
+def _scene_entry(ctx, i, table, study_models, grids, methods, root):
+    from .scenes import COMMON_KEYS, KINDS
+
+    where = f"scenes[{i}]"
+    if not isinstance(table, dict):
+        ctx.fail(where, "expected a table ([[scenes]])")
+    kind = table.get("kind")
+    if kind is None:
+        ctx.fail(where, f"missing key 'kind'; valid kinds: {', '.join(KINDS)}")
+    ctx.choice(f"{where}.kind", kind, tuple(KINDS))
+    spec = KINDS[kind]
+    name = table.get("name")
+    if name is None:
+        ctx.fail(where, "missing key 'name' (used for the output file names)")
+    ctx.string(f"{where}.name", name)
+    if not _name_ok(name):
+        ctx.fail(f"{where}.name", f"{name!r} is not a file-name-safe string (letters, digits, - _ .)")
+    where = f"scenes[{i}] ({name!r})"
+    ctx.keys(where, table, COMMON_KEYS + tuple(spec.keys))
+    if "model" not in table:
+        ctx.fail(where, f"missing key 'model'; defined models: {', '.join(sorted(study_models))}")
+    model = ctx.ref(f"{where}.model", table["model"], study_models, "model")
+    mlist = table.get("methods", list(methods))
+    if isinstance(mlist, str):
+        mlist = [mlist]
+    if not isinstance(mlist, list) or not mlist:
+        ctx.fail(f"{where}.methods", f"expected a non-empty list of method aliases; got {mlist!r}")
+    for m in mlist:
+        ctx.ref(f"{where}.methods", m, methods, "method")
+    if len(set(mlist)) != len(mlist):
+        ctx.fail(f"{where}.methods", f"duplicate method in {mlist!r}")
+    if len(mlist) < spec.min_methods:
+        ctx.fail(f"{where}.methods", f"a {kind!r} scene needs at least {spec.min_methods} methods; got {mlist!r}")
+    grid = None
+    if spec.uses_grid:
+        grid = table.get("grid", DEFAULT_GRID)
+        ctx.ref(f"{where}.grid", grid, grids, "grid")
+    if "r" not in table:
+        ctx.fail(where, "missing key 'r'")
+    rs = _r_values(ctx, f"{where}.r", table["r"])
+    if spec.one_r and len(rs) != 1:
+        ctx.fail(f"{where}.r", f"a {kind!r} scene shows one reduced order; got r = {list(rs)}")
+    params = {}
+    for key, (default, choices) in spec.keys.items():
+        if key in ("r", "grid", "paper_csv"):
+            continue
+        val = table.get(key, default)
+        if choices is not None:
+            ctx.choice(f"{where}.{key}", val, choices)
+        elif val is not None and (isinstance(val, bool) or not isinstance(val, Integral) or val < 1):
+            ctx.fail(f"{where}.{key}", f"expected a positive integer; got {val!r}")
+        params[key] = val
+    title = table.get("title", "")
+    ctx.string(f"{where}.title", title, empty=True)
+    paper = {}
+    if "paper_csv" in table:
+        pc = table["paper_csv"]
+        curves = spec.curve_names(mlist)
+        if isinstance(pc, str):
+            reduced = [c for c in curves if c != "full"]
+            if len(reduced) != 1:
+                ctx.fail(f"{where}.paper_csv", "a single path needs a scene with one method; give a table "
+                                               f"{{ curve = path }} with curves from: {', '.join(curves)}")
+            pc = {reduced[0]: pc}
+        ctx.keys(f"{where}.paper_csv", pc, tuple(curves))
+        for curve, p in pc.items():
+            ctx.string(f"{where}.paper_csv.{curve}", p)
+            path = Path(p)
+            paper[curve] = path if path.is_absolute() else (root / path)
+    return SceneEntry(name=name, kind=kind, model=model, methods=tuple(mlist), rs=rs, grid=grid,
+                      title=title, params=params, paper=paper)
+
+
+# -- entry points ----------------------------------------------------------
+def study_from_dict(data: dict, *, path=None, source: str | None = None) -> Study:
+    """Validate a parsed TOML table. ``path`` (the spec file) anchors relative paths."""
+    path = Path(path) if path is not None else None
+    ctx = _Ctx(source or (str(path) if path else "<dict>"))
+    ctx.keys("top level", data, TOP_KEYS)
+    base = path.parent if path is not None else Path.cwd()
+    root_rel = data.get("root", ".")
+    ctx.string("root", root_rel)
+    root = (base / root_rel).resolve()
+    if not root.is_dir():
+        ctx.fail("root", f"{str(root)!r} is not a directory")
+    name = data.get("name", path.stem if path is not None else None)
+    if name is None:
+        ctx.fail("top level", "missing key 'name'")
+    ctx.string("name", name)
+    if not _name_ok(name):
+        ctx.fail("name", f"{name!r} is not a file-name-safe string (letters, digits, - _ .)")
+    title = ctx.string("title", data.get("title", name), empty=True)
+    description = ctx.string("description", data.get("description", ""), empty=True)
+
+    for key in ("models", "methods", "scenes"):
+        if key not in data:
+            ctx.fail("top level", f"missing key {key!r}")
+    if not isinstance(data["methods"], dict) or not data["methods"]:
+        ctx.fail("methods", "expected a non-empty table of [methods.ALIAS] tables")
+    methods = {a: _method_entry(ctx, a, t) for a, t in data["methods"].items()}
+    grids_raw = data.get("grids", {})
+    if not isinstance(grids_raw, dict):
+        ctx.fail("grids", "expected a table of NAME = { band = [lo, hi], n = N }")
+    grids = {DEFAULT_GRID: GridEntry(DEFAULT_GRID, None, DEFAULT_GRID_N)}
+    grids.update({g: _grid_entry(ctx, g, t) for g, t in grids_raw.items()})
+    scenes_raw = data["scenes"]
+    if not isinstance(scenes_raw, list) or not scenes_raw:
+        ctx.fail("scenes", "expected a non-empty array of tables ([[scenes]])")
+    if not isinstance(data["models"], dict) or not data["models"]:
+        ctx.fail("models", "expected a non-empty table alias = \"spec\"")
+    # every scene is checked structurally first, so that a typo is reported before any
+    # model is built; then the models the scenes use are built (to learn band and order)
+    aliases = {a: None for a in data["models"]}
+    scenes = [_scene_entry(ctx, i, t, aliases, grids, methods, root) for i, t in enumerate(scenes_raw)]
+    names = [s.name for s in scenes]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        ctx.fail("scenes", f"duplicate scene name(s) {', '.join(map(repr, dup))}")
+    used = {s.model for s in scenes}
+    for alias, spec in data["models"].items():
+        if alias not in used:
+            ctx.string(f"models.{alias}", spec)  # defined but unused: never built
+    models = {a: _model_entry(ctx, a, data["models"][a], root) for a in data["models"] if a in used}
+    for i, s in enumerate(scenes):
+        order = models[s.model].order
+        if s.rs[-1] > order:
+            ctx.fail(f"scenes[{i}] ({s.name!r}).r", f"r = {s.rs[-1]} exceeds the order n1 - n2 = {order} "
+                                                    f"of model {s.model!r} ({models[s.model].name})")
+    return Study(name=name, title=title, description=description, path=path, root=root, models=models,
+                 grids=grids, methods=methods, scenes=scenes, raw=data)
+
+
+def load_spec(path) -> Study:
+    """Read and validate a study TOML file."""
+    path = Path(path)
+    if not path.is_file():
+        raise SpecError(f"study spec {str(path)!r} does not exist")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"study spec {str(path)}: not valid TOML: {exc}") from exc
+    return study_from_dict(data, path=path)

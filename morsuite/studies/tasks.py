@@ -1,0 +1,175 @@
+"""The tasks of a study's graph: pure functions of plain data, run by any Dask scheduler.
+
+Each task builds what it needs from plain arguments (the model from its catalog
+string or file path), measures its own time with ``time.perf_counter`` and returns
+plain data: arrays, numbers, strings, dicts. A reduced model travels as
+``{"kind": ..., "arrays": {name: ndarray}}``, never as a pickled object on disk.
+
+- :func:`fom_response`: the full model's response on one grid (one LU per
+  frequency), shared by every reduced model compared on that grid.
+- :func:`reduce_sweep`: one reducer instance for one (model, method, options),
+  ``reduce(r)`` for every requested r in increasing order, so work that does not
+  depend on r (Gramian factors, a projector) is done once.
+- :func:`metrics`: reduced responses and errors on a grid for the ROMs of one
+  (model, method, options).
+"""
+
+from __future__ import annotations
+
+import datetime
+import functools
+import os
+import platform
+import time
+import warnings
+
+import numpy as np
+
+from ..errors import MorsuiteError
+
+__all__ = ["fom_response", "standalone_time", "reduce_sweep", "metrics", "rom_payload", "rom_from_payload", "CAUGHT"]
+
+#: Failures of one r that are recorded (and reported) instead of aborting the study.
+#: Anything else is a bug and propagates.
+CAUGHT = (MorsuiteError, ArithmeticError, ValueError, RuntimeError, MemoryError, np.linalg.LinAlgError)
+
+
+@functools.lru_cache(maxsize=4)
+def _model(source: str):
+    from ..models import catalog
+    return catalog.parse(source)
+
+
+def _stamp() -> dict:
+    return {"host": platform.node(), "pid": os.getpid(),
+            "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
+
+
+def rom_payload(rom) -> dict:
+    """A reduced model as plain data: its kind and its matrices."""
+    return {"kind": rom.kind, "arrays": {f: np.asarray(getattr(rom, f)) for f in type(rom)._fields}}
+
+
+def rom_from_payload(payload: dict):
+    from ..rom import FirstOrderROM, SecondOrderROM
+    cls = {"second-order": SecondOrderROM, "first-order": FirstOrderROM}[payload["kind"]]
+    return cls(*(payload["arrays"][f] for f in cls._fields))
+
+
+def fom_response(source: str, lo: float, hi: float, n: int, key: str, cache_root=None, progress=False,
+                 run_by: str = "") -> dict:
+    """Full-order response on ``n`` log-spaced frequencies in [lo, hi] (rad/s)."""
+    fom = _model(source)
+    omega = np.logspace(np.log10(lo), np.log10(hi), n)
+    t0 = time.perf_counter()
+    H = fom.freqresp(omega, progress=progress)
+    elapsed = time.perf_counter() - t0
+    stats = getattr(fom, "last_freqresp_stats", {}) or {}
+    out = {"kind": "fom", "key": key, "model": fom.name, "omega": omega, "H": H, "time_s": elapsed,
+           "lu_count": stats.get("factorizations"), "cached": False, "scheduler": run_by, **_stamp()}
+    if cache_root is not None:
+        from .cache import Cache
+        Cache(cache_root, read=False).put("fom", key, {"omega": omega, "H": H},
+                                          {k: v for k, v in out.items() if k not in ("omega", "H", "cached")})
+    return out
+
+
+def standalone_time(info: dict, wall: float) -> float:
+    """Time of ``reduce(r)`` on a fresh reducer: the call's time plus the r-independent
+    work it reused (``info["setup_cost"]`` when ``info["setup_reused"]``, the reducers'
+    convention for Gramians or a projector formed once per instance)."""
+    t = float(info.get("time_s", wall))
+    if info.get("setup_reused"):
+        cost = info.get("setup_cost") or {}
+        t += sum(float(v) for v in cost.values() if isinstance(v, (int, float)) and not isinstance(v, bool))
+    return t
+
+
+def reduce_sweep(source: str, reducer: str, options: dict, rs, keys: dict, cache_root=None,
+                 run_by: str = "") -> dict:
+    """``reduce(r)`` for each r in increasing order on ONE reducer instance.
+
+    Returns ``{r: entry}``; an entry holds the ROM payload, the reducer's ``info``,
+    ``time_s`` (the reducer's own timing of this call), ``time_standalone_s``
+    (see :func:`standalone_time`), ``wall_s`` (this task's timing of the call), ``call_index`` (0 for the call that did the r-independent
+    work) or, for a failed r, ``error``. With ``cache_root`` each entry is stored
+    as soon as it exists, so an interrupted sweep resumes where it stopped.
+    """
+    from .. import reducers
+    from .cache import Cache
+
+    cache = Cache(cache_root, read=False) if cache_root is not None else None
+    fom = _model(source)
+    t0 = time.perf_counter()
+    red = reducers.make(reducer, fom, **options)
+    t_make = time.perf_counter() - t0
+    out = {}
+    for i, r in enumerate(sorted(rs)):
+        base = {"kind": "reduction", "key": keys[r], "r_requested": int(r), "reducer": reducer,
+                "call_index": i, "construct_s": t_make if i == 0 else 0.0, "cached": False, "scheduler": run_by}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # each reducer records its warnings in info["warnings"]
+            t1 = time.perf_counter()
+            try:
+                res = red.reduce(int(r))
+            except CAUGHT as exc:
+                out[r] = {**base, "error": f"{type(exc).__name__}: {exc}",
+                          "wall_s": time.perf_counter() - t1, **_stamp()}
+                continue
+            wall = time.perf_counter() - t1
+        info = res.info
+        entry = {**base, "rom": rom_payload(res.rom), "info": info, "time_s": float(info.get("time_s", wall)),
+                 "time_standalone_s": standalone_time(info, wall), "wall_s": wall, **_stamp()}
+        if cache is not None:
+            cache.put("reduction", keys[r], entry["rom"]["arrays"],
+                      {**{k: v for k, v in entry.items() if k not in ("rom", "cached")},
+                       "rom_kind": entry["rom"]["kind"]})
+        out[r] = entry
+    return out
+
+
+def _trapezoid(y, x):
+    y, x = np.asarray(y, float), np.asarray(x, float)
+    return float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(x)))
+
+
+def metrics(fom_result: dict, rs, *rom_dicts) -> dict:
+    r"""Errors of the ROMs ``rs`` (looked up in ``rom_dicts``) on the full model's grid.
+
+    For each r: ``sigma_rom``, ``abs_error`` (:math:`\sigma_{\max}(T - T_r)`),
+    ``rel_error`` (divided by :math:`\sigma_{\max}(T)`), their maxima, and
+
+    .. math::
+
+        \texttt{h2\_error\_grid} = \Big(\frac{1}{\pi}\int_{\omega_0}^{\omega_1}
+        \|T(j\omega) - T_r(j\omega)\|_F^2\, d\omega\Big)^{1/2}
+
+    by the trapezoidal rule on the grid: the H2 error restricted to the band of
+    the grid (the true H2 norm integrates over all of [0, inf)), an approximation,
+    hence the name. ``h2_rel_error_grid`` divides by the same quantity of T.
+    """
+    from ..analysis import errors
+
+    roms = {}
+    for d in rom_dicts:
+        roms.update(d or {})
+    omega, H = fom_result["omega"], fom_result["H"]
+    full2 = np.sum(np.abs(H) ** 2, axis=(1, 2))
+    h2_full = np.sqrt(_trapezoid(full2, omega) / np.pi)
+    out = {}
+    for r in rs:
+        entry = roms.get(r)
+        if entry is None or "error" in entry:
+            out[r] = {"error": "no reduced model" if entry is None else entry["error"]}
+            continue
+        t0 = time.perf_counter()
+        rom = rom_from_payload(entry["rom"])
+        df = errors(None, rom, omega, H_full=H)
+        Hr = rom.freqresp(omega)
+        h2 = np.sqrt(_trapezoid(np.sum(np.abs(H - Hr) ** 2, axis=(1, 2)), omega) / np.pi)
+        out[r] = {"sigma_rom": df["sigma_rom"].to_numpy(), "abs_error": df["abs_error"].to_numpy(),
+                  "rel_error": df["rel_error"].to_numpy(), "max_abs_error": float(df["abs_error"].max()),
+                  "max_rel_error": float(df["rel_error"].max()), "h2_error_grid": float(h2),
+                  "h2_rel_error_grid": float(h2 / h2_full) if h2_full > 0 else float("nan"),
+                  "time_s": time.perf_counter() - t0}
+    return out

@@ -1,0 +1,79 @@
+"""Report layer: figures as data -> matplotlib / pgfplots, tables -> CSV / Markdown (no solving)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from morsuite.report import Curve, FigureData, pgfplots_tex, plot, read_markdown, to_markdown, write_table
+from morsuite.report.writer import csv_names, write_figure
+
+
+def _fig():
+    w = np.logspace(-2, 0, 20)
+    return FigureData(
+        name="demo", title="demo figure", xlabel=r"$\omega$ (rad/s)", ylabel=r"$\sigma_{\max}(T(j\omega))$",
+        curves=[Curve("full", "full", pd.DataFrame({"omega": w, "value": 1 / (1 + w)})),
+                Curve("irka", "IRKA_1 & co", pd.DataFrame({"omega": w, "value": 1 / (1 + w) + 1e-3})),
+                Curve("paper_irka", "paper (IRKA)", pd.DataFrame({"omega": w, "value": 0.5 / (1 + w)}),
+                      style="paper")])
+
+
+def test_plot_returns_handles_with_log_axes_and_labels():
+    fig, ax = plot(_fig())
+    assert ax.get_xscale() == "log" and ax.get_yscale() == "log"
+    assert [ln.get_label() for ln in ax.get_lines()] == ["full", "IRKA_1 & co", "paper (IRKA)"]
+    assert ax.get_lines()[2].get_linestyle() == "--"
+    assert ax.get_lines()[2].get_color() == ax.get_lines()[1].get_color()   # paper curve: colour of its own
+    assert "rad/s" in ax.get_xlabel()
+    assert ax.get_legend() is not None
+
+
+def test_zero_and_inf_values_are_gaps_on_log_axes():
+    fd = _fig()
+    fd.curves[0].data.loc[3, "value"] = 0.0
+    fd.curves[0].data.loc[4, "value"] = np.inf
+    _, ax = plot(fd)
+    y = ax.get_lines()[0].get_ydata()
+    assert np.isnan(y[3]) and np.isnan(y[4])
+
+
+def test_curve_needs_its_columns():
+    with pytest.raises(ValueError, match="no column 'omega'"):
+        Curve("x", "x", pd.DataFrame({"r": [1], "value": [1.0]}))
+
+
+def test_pgfplots_reads_the_csvs_and_escapes_labels(tmp_path):
+    fd = _fig()
+    names = csv_names(fd)
+    assert names == {"full": "demo__full.csv", "irka": "demo__irka.csv", "paper_irka": "demo__paper_irka.csv"}
+    tex = pgfplots_tex(fd, names)
+    assert r"xmode=log" in tex and r"ymode=log" in tex
+    assert r"table[x=omega, y=value, col sep=comma] {\morsuitedir demo__irka.csv}" in tex
+    assert r"IRKA\_1 \& co" in tex and r"$\sigma_{\max}(T(j\omega))$" in tex
+    files = write_figure(fd, tmp_path)
+    assert {f.name for f in files} == {"demo__full.csv", "demo__irka.csv", "demo__paper_irka.csv", "demo.png",
+                                       "demo.pdf", "demo.tex"}
+    assert list(pd.read_csv(tmp_path / "demo__full.csv").columns) == ["omega", "value"]
+    assert not list(tmp_path.glob(".*"))  # no temporary files left behind
+
+
+def test_single_curve_figure_uses_the_plain_name():
+    fd = _fig()
+    fd.curves = fd.curves[1:]
+    assert csv_names(fd) == {"irka": "demo.csv", "paper_irka": "demo__paper_irka.csv"}
+
+
+def test_markdown_round_trip(tmp_path):
+    df = pd.DataFrame({"model": ["a|b", "c"], "r": pd.array([2, None], dtype="Int64"),
+                       "err": [1.234567891e-7, float("nan")], "ok": [True, False]})
+    md = to_markdown(df)
+    assert md.splitlines()[1] == "|:---|---:|---:|:---|"
+    back = read_markdown(md)
+    assert list(back.columns) == ["model", "r", "err", "ok"]
+    assert back.iloc[0].tolist() == ["a|b", "2", "1.23457e-07", "True"]
+    assert back.iloc[1].tolist() == ["c", "", "", "False"]
+    csv, mdp = write_table(df, tmp_path / "t", title="T")
+    assert mdp.read_text().startswith("## T")
+    assert len(read_markdown(mdp)) == 2 and len(pd.read_csv(csv)) == 2
