@@ -7,7 +7,9 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_path", "atomic_write_text"]
+import numpy as np
+
+__all__ = ["atomic_path", "atomic_write_text", "to_plain"]
 
 
 @contextlib.contextmanager
@@ -38,3 +40,28 @@ def atomic_write_text(path, text: str):
     """Write ``text`` to ``path`` atomically."""
     with atomic_path(path) as tmp:
         Path(tmp).write_text(text)
+
+
+def to_plain(x):
+    """Numpy scalars/arrays, tuples, complex numbers and Paths -> JSON-friendly data.
+
+    Complex numbers become ``{"re": ..., "im": ...}``
+    (:func:`morsuite.reducers.base.as_complex` reverses that).
+    """
+    if isinstance(x, dict):
+        return {str(k): to_plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [to_plain(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return to_plain(x.tolist())
+    if isinstance(x, np.bool_):
+        return bool(x)
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.floating):
+        return float(x)
+    if isinstance(x, (complex, np.complexfloating)):
+        return {"re": float(x.real), "im": float(x.imag)}
+    if isinstance(x, Path):
+        return str(x)
+    return x

@@ -23,6 +23,7 @@ from typing import Any, Callable, ClassVar
 import numpy as np
 
 from ..errors import InputError, OptionError
+from ..utils import to_plain
 
 __all__ = ["Option", "Reducer", "Reduction", "make", "available", "register", "get_class", "as_complex"]
 
@@ -143,7 +144,7 @@ class Reducer:
 
     def get_params(self) -> dict:
         """Options as plain data (arrays as lists), as recorded in ``info``."""
-        return {k: _plain(v) for k, v in self.options.items()}
+        return {k: to_plain(v) for k, v in self.options.items()}
 
     def max_order(self) -> int:
         """Largest admissible r (the dimension of the hidden manifold by default)."""
@@ -189,29 +190,10 @@ class Reducer:
         base["blas_threads"] = BLAS_THREADS
         base["warnings"] = list(self._warnings)
         base["options"] = self.get_params()
-        return Reduction(rom=rom, info=_plain(base))
+        return Reduction(rom=rom, info=to_plain(base))
 
     def _reduce(self, r):  # pragma: no cover - abstract
         raise NotImplementedError
-
-
-def _plain(x):
-    """Convert numpy scalars/arrays (also complex) into JSON-friendly data."""
-    if isinstance(x, dict):
-        return {str(k): _plain(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_plain(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _plain(x.tolist())
-    if isinstance(x, (np.bool_,)):
-        return bool(x)
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.floating):
-        return float(x)
-    if isinstance(x, (complex, np.complexfloating)):
-        return {"re": float(x.real), "im": float(x.imag)}
-    return x
 
 
 def as_complex(value) -> np.ndarray:

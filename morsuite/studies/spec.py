@@ -43,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..utils import to_plain
 from ..errors import InputError, SpecError
 
 __all__ = ["Study", "ModelEntry", "GridEntry", "MethodEntry", "SceneEntry", "load_spec",
@@ -145,25 +146,7 @@ class Study:
 
 
 # -- helpers ---------------------------------------------------------------
-def plain(x):
-    """Numpy scalars/arrays, tuples and Paths -> JSON-friendly data."""
-    if isinstance(x, dict):
-        return {str(k): plain(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [plain(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return plain(x.tolist())
-    if isinstance(x, np.bool_):
-        return bool(x)
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.floating):
-        return float(x)
-    if isinstance(x, (complex, np.complexfloating)):
-        return {"re": float(x.real), "im": float(x.imag)}
-    if isinstance(x, Path):
-        return str(x)
-    return x
+plain = to_plain  # one converter for info, manifests and cache keys
 
 
 def _digest(obj) -> str:
