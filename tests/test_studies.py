@@ -418,9 +418,9 @@ model = "tcom"
 methods = ["bt"]
 r = [2, 4, 6]
 """
-    res = run(_write(tmp_path, text), out=tmp_path / "results", use_cache=False, quiet=True, formats=())
+    res = run(_write(tmp_path, text), out=tmp_path / "results", use_cache=False, quiet=True, formats=("png",))
     assert (res.outdir / "bt_hsv.png").is_file() and (res.outdir / "bt_vs_irka__bt.csv").is_file()
-    bt = [a for a in res.manifest["artifacts"] if a["reducer"] == "bt"]
+    bt = [a for a in res.manifest["artifacts"] if a["kind"] == "reduction" and a["reducer"] == "bt"]
     assert sorted(a["r_requested"] for a in bt) == [2, 4, 6]
     assert len({a["group"] for a in bt}) == 1                 # one instance: one pair of Gramians
 

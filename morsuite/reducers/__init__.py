@@ -3,5 +3,6 @@
 from .base import Option, Reducer, Reduction, available, get_class, make, register
 from .irka import IRKA
 from .irka_projected import IRKAProjected  # noqa: F401  (registers "irka-projected")
+from .bt import BT  # noqa: F401  (registers "bt")
 
 __all__ = ["Option", "Reducer", "Reduction", "make", "available", "register", "get_class", "IRKA"]

@@ -1,0 +1,343 @@
+r"""Balanced truncation of index-3 second-order systems from low-rank ADI Gramian factors.
+
+The Gramians of the system on its hidden manifold (first-order form
+:math:`E = \mathrm{blkdiag}(I, M)`, :math:`A = [[0, I], [-K, -D]]`,
+:math:`B = [0; F]`, :math:`C = [L, 0]`, see :mod:`morsuite.linalg.lradi`) are
+approximated by :math:`P \approx ZZ^T`, :math:`Q \approx YY^T`, with position
+and velocity blocks :math:`Z = [Z_p; Z_v]`, :math:`Y = [Y_p; Y_v]`
+(:math:`Z_p, Z_v, Y_v` in :math:`\ker G`, :math:`Y_p` in
+:math:`\operatorname{range}\Pi`). Both factors come from one lock-step LR-ADI run
+(:func:`~morsuite.linalg.lradi.lradi_pair`: one LU per shift for both equations)
+made on the first ``reduce`` call and kept on the reducer, so a sweep over r
+costs one pair of ADI runs plus small dense work per r.
+
+``form="first-order"`` (default): square-root balanced truncation
+    With the SVD :math:`Y^TEZ = Y_p^TZ_p + Y_v^TMZ_v = U\Sigma V^T` (the Hankel
+    singular values :math:`\sigma_i`), :math:`T_l = YU_r\Sigma_r^{-1/2}`,
+    :math:`T_r = ZV_r\Sigma_r^{-1/2}` and
+
+    .. math::
+
+        \hat E = I,\quad \hat A = T_l^TAT_r,\quad \hat B = T_l^TB,\quad \hat C = CT_r,
+
+    a :class:`~morsuite.rom.FirstOrderROM` with r first-order states. It is
+    stable and :math:`\|T - \hat T\|_{\mathcal H_\infty} \le 2\sum_{i>r}\sigma_i`
+    (``info["error_bound"]``) when the Gramians are exact. It is the default
+    because it is the only level with both guarantees and because it is the
+    reference method of ``models.md``.
+
+``form="pp" | "pv" | "vp" | "vv" | "fv"``: structure-preserving second-order BT
+    (Reis and Stykel 2008 for the position/velocity levels, Meyer and Srinivasan
+    1996 for free velocity), with r the second-order dimension (2r states).
+    The level's SVD picks the right basis :math:`V` and the left basis :math:`W`:
+
+    ===== ==================================== ===================================
+    form  V from (right singular vectors)       W from (left singular vectors)
+    ===== ==================================== ===================================
+    pp    :math:`Z_p`, SVD of :math:`Y_p^TZ_p`   :math:`Y_v`, SVD of :math:`Y_v^TMZ_v`
+    pv    :math:`Z_p`, SVD of :math:`Y_v^TMZ_p`  :math:`Y_v`, same SVD
+    vp    :math:`Z_v`, SVD of :math:`Y_p^TZ_v`   :math:`Y_v`, SVD of :math:`Y_v^TMZ_v`
+    vv    :math:`Z_v`, SVD of :math:`Y_v^TMZ_v`  :math:`Y_v`, same SVD
+    fv    :math:`Z_p`, SVD of :math:`Y_p^TZ_p`   :math:`W = V`
+    ===== ==================================== ===================================
+
+    (pyMOR's ``SOBT*Reductor`` conventions). V and W are orthonormalised
+    (balancing-free square root) and
+    :math:`\hat M = W^TMV`, :math:`\hat D = W^TDV`, :math:`\hat K = W^TKV`,
+    :math:`\hat F = W^TF`, :math:`\hat L = LV`, a
+    :class:`~morsuite.rom.SecondOrderROM`. Every basis used lies in
+    :math:`\ker G`, so this is a projection of the :math:`\Pi`-projected system
+    and :math:`\Pi` is never needed. Only ``fv`` is stable by construction (a
+    congruence, for symmetric positive definite M, K and semidefinite D); the
+    others can return unstable models, which is then said by a
+    :class:`StabilityWarning` and ``info["stable"] = False``. The paper
+    compares its IRKA with ``vv``.
+
+Accuracy: the ADI tolerance ``tol`` (default 1e-10, the reference setting of
+``models.md``) resolves the Hankel singular values to about 1e-7 relative down
+to 1e-5 of the largest (measured on the DSMS). Truncating where the discarded
+values are near 1e-11 of the largest (the DSMS at r = 20) needs ``tol=1e-12``:
+with 1e-10 the tail values come out 10-20% low, and the error (2.2e-12) then
+exceeds the computed bound (2.0e-12); with 1e-12 it is 1.8e-12 against a bound
+of 3.7e-12, for 10 more ADI iterations.
+
+Truncation: r is capped at the number of singular values above ``hsv_tol``
+times the largest (tiny ones carry noise of the ADI residual, and the square
+root method divides by them); a :class:`RankWarning` and ``info["r"] <
+info["r_requested"]`` say so.
+
+``info`` holds ``adi`` (per equation: iterations, converged, residual history,
+shifts, rank), ``adi_iterations``, ``residual_history``, ``factor_ranks``,
+``lu_count``, ``time_breakdown`` (adi, of which lu, solves, shifts; svd;
+projection), ``hsv`` (first-order Hankel singular values), ``error_bound``
+(first-order form; None otherwise), ``level_singular_values`` (second-order
+forms), ``converged`` (both ADIs converged), ``iterations`` (ADI steps of the
+lock-step run), ``setup_reused`` and ``setup_cost`` (the Gramian and SVD work
+paid once per reducer).
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from numbers import Integral
+
+import numpy as np
+
+from ..errors import ConvergenceWarning, InputError, OptionError, RankWarning, StabilityWarning
+from ..linalg.lradi import lradi_pair
+from ..rom import FirstOrderROM, SecondOrderROM
+from .base import Option, Reducer, register
+
+__all__ = ["BT", "FORMS"]
+
+FORMS = ("first-order", "pp", "pv", "vp", "vv", "fv")
+
+#: options that change the Gramian factors (reducers agreeing on them can share factors)
+ADI_OPTIONS = ("tol", "maxiter", "shifts", "num_shifts", "selection")
+
+#: which products Y_a^T (M) Z_b give the right (V) and left (W) bases of each level
+_LEVELS = {  # form: (svd for V, factor block of V, svd for W)
+    "pp": ("pp", "p", "vv"),
+    "pv": ("pv", "p", "pv"),
+    "vp": ("vp", "v", "vv"),
+    "vv": ("vv", "v", "vv"),
+    "fv": ("pp", "p", None),
+}
+
+
+class BT(Reducer):
+    """Balanced truncation from LR-ADI Gramian factors (see the module docstring).
+
+    ``reduce(r)``: with ``form="first-order"`` r is the number of first-order
+    states of the :class:`~morsuite.rom.FirstOrderROM`; otherwise r is the
+    dimension of the :class:`~morsuite.rom.SecondOrderROM` (2r states). Both are
+    in ``info`` (``r``, ``states``).
+    """
+
+    name = "bt"
+
+    OPTIONS = {
+        "form": Option("first-order", "choice", "first-order square-root BT (stable, error bound) or a "
+                       "second-order balancing level: position-position, position-velocity, "
+                       "velocity-position, velocity-velocity (the paper's), free-velocity", choices=FORMS),
+        "tol": Option(1e-10, "float", "relative residual norm ||W^T W|| / ||W0^T W0|| at which LR-ADI stops",
+                      low=0, high=1, open_low=True, open_high=True),
+        "maxiter": Option(2000, "int", "largest number of LR-ADI iterations per equation (a complex pair "
+                          "counts two); the TCOM (nc = 2000) needs about 950", low=1),
+        "shifts": Option("projection", "choice", "shift strategy: adaptive projection (Ritz) shifts or "
+                         "Penzl's heuristic", choices=("projection", "penzl")),
+        "num_shifts": Option(16, "int", "shifts (a complex pair counted once) taken from each shift "
+                             "computation", low=1),
+        "selection": Option("residual", "choice", "projection shifts chosen by their share of the current "
+                            "residual or by Penzl's greedy rule on the ADI rational function",
+                            choices=("residual", "gain")),
+        "hsv_tol": Option(1e-13, "float", "singular values below hsv_tol times the largest are never kept "
+                          "(caps r)", low=0, high=1, open_high=True),
+    }
+
+    def __init__(self, fom, **options):
+        super().__init__(fom, **options)
+        self._gram = None  # shared by reducers that agree on ADI_OPTIONS (use_gramians_of)
+
+    # -- orders ------------------------------------------------------------
+    def max_order(self) -> int:
+        order = self.fom.order
+        return 2 * order if self.options["form"] == "first-order" else order
+
+    def _validate_r(self, r):
+        if self.options["form"] == "first-order" and isinstance(r, Integral) and not isinstance(r, bool) \
+                and r > self.max_order():
+            raise InputError(f"r = {r} exceeds the number of first-order states on the hidden manifold "
+                             f"(2 (n1 - n2) = {self.max_order()}) for bt with form='first-order'")
+        return super()._validate_r(r)
+
+    # -- Gramians (once per reducer) --------------------------------------
+    def use_gramians_of(self, other: "BT") -> "BT":
+        """Share the Gramian factors (and SVDs) of ``other``, a ``bt`` reducer of the same
+        model with the same ADI options (``form`` and ``hsv_tol`` may differ). Returns self."""
+        if not isinstance(other, BT):
+            raise InputError(f"other must be a BT reducer; got {type(other).__name__}")
+        if other.fom is not self.fom:
+            raise InputError("other is bound to a different model object; Gramians cannot be shared")
+        diff = [k for k in ADI_OPTIONS if self.options[k] != other.options[k]]
+        if diff:
+            raise OptionError(f"other has different ADI options ({', '.join(diff)}); Gramians cannot be shared")
+        if other._gram is None:
+            other._gramians()
+        self._gram = other._gram
+        return self
+
+    def _gramians(self) -> dict:
+        """The LR-ADI factors and their timing, computed on first use."""
+        if self._gram is not None:
+            return self._gram
+        o = self.options
+        t0 = time.perf_counter()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", ConvergenceWarning)
+            c, ob = lradi_pair(self.fom, tol=o["tol"], maxiter=o["maxiter"], shifts=o["shifts"],
+                               num_shifts=o["num_shifts"], selection=o["selection"])
+        for w in caught:  # re-issued by reduce() (recorded in info) on every call
+            if not issubclass(w.category, ConvergenceWarning):
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        t1 = time.perf_counter()
+        fom = self.fom
+        # the two products every form needs: Y_p^T Z_p and Y_v^T M Z_v (their sum is Y^T E Z)
+        # Y_p enters only through products with Z_p, Z_v in ker G: its unprojected form will do
+        prods = {"pp": ob.position_unprojected.T @ c.position, "vv": ob.velocity.T @ (fom.M @ c.velocity)}
+        t2 = time.perf_counter()
+        self._gram = {"c": c, "o": ob, "prods": prods, "svd": {}, "svd_times": {}, "projected": {},
+                      "times": {"adi": t1 - t0, "products": t2 - t1}}
+        return self._gram
+
+    def _svd(self, key):
+        """Cached SVD of Y_a^T (M) Z_b for key in pp, pv, vp, vv, or 'fo' (Y^T E Z)."""
+        g = self._gram
+        if key not in g["svd"]:
+            t0 = time.perf_counter()
+            c, ob, fom = g["c"], g["o"], self.fom
+            if key not in g["prods"] and key != "fo":
+                g["prods"][key] = (ob.velocity.T @ (fom.M @ c.position) if key == "pv"
+                                   else ob.position_unprojected.T @ c.velocity)
+            X = g["prods"]["pp"] + g["prods"]["vv"] if key == "fo" else g["prods"][key]
+            g["svd"][key] = np.linalg.svd(X, full_matrices=False) if X.size else \
+                (np.zeros((X.shape[0], 0)), np.zeros(0), np.zeros((0, X.shape[1])))
+            g["svd_times"][key] = time.perf_counter() - t0
+        return g["svd"][key]
+
+    # -- reduction ----------------------------------------------------------
+    def _cap(self, r, s, what):
+        """Largest usable order <= r given singular values s; warns when capped (unless what is None)."""
+        tol = self.options["hsv_tol"]
+        n_ok = int(np.sum(s > tol * s[0])) if s.size and s[0] > 0 else 0
+        if n_ok < r and what is not None:
+            self.warn(f"bt: only {n_ok} {what} exceed hsv_tol = {tol:g} times the largest (factor ranks "
+                      f"{self._gram['c'].rank} and {self._gram['o'].rank}); r capped from {r} to {n_ok}",
+                      RankWarning)
+        if n_ok == 0:
+            raise InputError(f"bt: no singular value above hsv_tol = {tol:g} of the largest; nothing to keep")
+        return min(r, n_ok)
+
+    def _reduce(self, r):
+        fresh = self._gram is None
+        g = self._gramians()
+        c, ob = g["c"], g["o"]
+        form = self.options["form"]
+        for res in (c, ob):
+            if not res.converged:
+                self.warn(f"bt: LR-ADI ({res.equation}) stopped at maxiter = {res.maxiter} with relative "
+                          f"residual {res.residual:.2e} > tol = {res.tol:.1e}; the Gramians (and the Hankel "
+                          f"singular values and bound) are not accurate to tol", ConvergenceWarning)
+        svd_before = set(g["svd_times"])
+        t0 = time.perf_counter()
+        U, hsv, Vt = self._svd("fo")
+        extra = {}
+        if form == "first-order":
+            rom, r_used = self._first_order(r, U, hsv, Vt)
+            extra["error_bound"] = 2.0 * float(np.sum(hsv[r_used:]))
+        else:
+            rom, level_sv = self._second_order(r, form)
+            extra["error_bound"] = None
+            extra["level_singular_values"] = level_sv
+        t1 = time.perf_counter()
+        stable = bool(rom.is_stable())
+        if not stable:
+            lam = rom.poles()
+            extra["unstable_poles"] = int(np.sum(lam.real >= 0))
+            self.warn(f"bt: the {form} reduced model at r = {rom.order} has {extra['unstable_poles']} poles in "
+                      f"the closed right half-plane (max real part {lam.real.max():.3e})"
+                      + ("; second-order balancing levels other than 'fv' do not preserve stability"
+                         if form not in ("first-order", "fv") else "; the Gramians are not accurate enough"),
+                      StabilityWarning)
+        times = g["times"]
+        st_c = c.times
+        svd_new = sum(v for k, v in g["svd_times"].items() if k not in svd_before)
+        svd_keys = {"fo"} | ({_LEVELS[form][0], _LEVELS[form][2]} - {None} if form != "first-order" else set())
+        info = {
+            "form": form, "converged": bool(c.converged and ob.converged),
+            "iterations": max(c.iterations, ob.iterations),
+            "adi_iterations": {"controllability": c.iterations, "observability": ob.iterations},
+            "residual_history": {"controllability": c.residuals, "observability": ob.residuals},
+            "adi": {"controllability": c.summary(history=False), "observability": ob.summary(history=False)},
+            "factor_ranks": {"controllability": c.rank, "observability": ob.rank},
+            "lu_count": c.lu_count if fresh else 0,
+            "lu_count_gramians": c.lu_count,
+            "hsv": hsv, "stable": stable, **extra,
+            "time_breakdown": {"adi": times["adi"] if fresh else 0.0,
+                               "lu": st_c["factor"] if fresh else 0.0,
+                               "solves": (c.times["solve"] + ob.times["solve"]) if fresh else 0.0,
+                               "shifts": st_c["shifts"] if fresh else 0.0,
+                               "products": times["products"] if fresh else 0.0,
+                               "svd": svd_new, "projection": t1 - t0 - svd_new},
+            # r-independent work paid once per reducer (studies add it back for 'standalone' times)
+            "setup_reused": not fresh,
+            "setup_cost": {"adi": times["adi"], "products": times["products"],
+                           "svd": sum(g["svd_times"].get(k, 0.0) for k in svd_keys)},
+        }
+        return rom, info
+
+    def _projected(self, form, r, n_max, build):
+        """Leading r x r blocks of the projected matrices, built for R >= r columns and cached.
+
+        The balancing bases of order r are the first r columns of those of any
+        order R >= r (the square-root scaling is per column; Householder QR of the
+        first r columns gives the first r columns of Q, up to sign), so one
+        projection at R serves every r <= R, and a sweep over r costs a few
+        projections (R doubles) plus slicing.
+        """
+        cache = self._gram["projected"].get(form)
+        if cache is None or cache["R"] < r:
+            R = min(n_max, max(r, 2 * (cache["R"] if cache else 8)))
+            cache = {"R": R, "mats": build(R)}
+            self._gram["projected"][form] = cache
+        *square, rows, cols = cache["mats"]  # build() returns the r x r ones, then W^T F, then L V
+        return [X[:r, :r] for X in square] + [rows[:r], cols[:, :r]]
+
+    def _first_order(self, r, U, hsv, Vt):
+        n_ok = self._cap(len(hsv), hsv, None)
+        r = self._cap(r, hsv, "Hankel singular values")
+        c, ob, fom = self._gram["c"], self._gram["o"], self.fom
+
+        def build(R):
+            w = 1.0 / np.sqrt(hsv[:R])
+            Ul, Vr = U[:, :R] * w, Vt[:R].T * w
+            Tl1, Tl2 = ob.position_unprojected @ Ul, ob.velocity @ Ul  # T_l1 meets only T_r2 in ker G
+            Tr1, Tr2 = c.position @ Vr, c.velocity @ Vr
+            # A T_r = [T_r2; -K T_r1 - D T_r2]; the G^T z part is annihilated by T_l2 in ker G
+            return [Tl1.T @ Tr2 - Tl2.T @ (fom.K @ Tr1 + fom.D @ Tr2), Tl2.T @ fom.F, fom.L @ Tr1]
+
+        A, B, C = self._projected("first-order", r, n_ok, build)
+        return FirstOrderROM(None, A, B, C), r
+
+    def _second_order(self, r, form):
+        c, ob, fom = self._gram["c"], self._gram["o"], self.fom
+        key_v, block, key_w = _LEVELS[form]
+        _, sv, Vt = self._svd(key_v)
+        n_ok = self._cap(len(sv), sv, None)
+        r = self._cap(r, sv, f"singular values of the {form} level")
+        level_sv = sv
+        if key_w is not None:
+            Uw, sw, _ = self._svd(key_w)
+            n_ok = min(n_ok, self._cap(len(sw), sw, None))
+            r = self._cap(r, sw, f"singular values of the {key_w} level (left basis)")
+            if key_w != key_v:
+                level_sv = {"right": sv, "left": sw}
+        Zb = c.position if block == "p" else c.velocity
+
+        def build(R):
+            V = _orthonormal(Zb @ Vt[:R].T)
+            W = V if key_w is None else _orthonormal(ob.velocity @ Uw[:, :R])
+            return [W.T @ (fom.M @ V), W.T @ (fom.D @ V), W.T @ (fom.K @ V), W.T @ fom.F, fom.L @ V]
+
+        Mr, Dr, Kr, Fr, Lr = self._projected(form, r, n_ok, build)
+        return SecondOrderROM(Mr, Dr, Kr, Fr, Lr), level_sv
+
+
+def _orthonormal(X):
+    """Orthonormal basis of the columns of X (thin QR; X has full column rank here)."""
+    Q, _ = np.linalg.qr(X)
+    return Q
+
+
+register("bt", BT)
