@@ -162,8 +162,28 @@ class SecondOrderROM(_ROMBase):
 
     def poles(self) -> np.ndarray:
         """The 2r eigenvalues of the quadratic pencil :math:`\\lambda^2 \\hat M + \\lambda \\hat D + \\hat K`."""
-        E, A, _, _ = self.first_order()
-        return _finite_eigs(A, E)
+        return self.eig(vectors=False)
+
+    def eig(self, vectors: bool = True):
+        r"""Eigenvalues (and right eigenvectors of the first-order pencil (A, E)).
+
+        :math:`\lambda = g\mu` with :math:`g = \sqrt{\|K\|/\|M\|}`: QZ runs on the
+        balanced pencil :math:`(g^2 M, g D, K)`; with M ~ 1e-7 and K ~ 1e9 the
+        raw pencil made LAPACK's ggev fail (stress suite, K6). Eigenvectors are
+        returned in the coordinates of :meth:`first_order` (``[x; lambda x]``),
+        infinite eigenvalues dropped.
+        """
+        nm, nk = np.linalg.norm(self.M, 1), np.linalg.norm(self.K, 1)
+        g = np.sqrt(nk / nm) if nm > 0 and nk > 0 else 1.0
+        scaled = SecondOrderROM(g * g * self.M, g * self.D, self.K, self.F, self.L)
+        E, A, _, _ = scaled.first_order()
+        if not vectors:
+            return g * _finite_eigs(A, E)
+        mu, Z = sla.eig(A, E)
+        ok = np.isfinite(mu)
+        Z = Z[:, ok]
+        Z[self.order:] *= g  # [x; mu x] -> [x; lambda x]
+        return g * mu[ok], Z
 
 
 class FirstOrderROM(_ROMBase):

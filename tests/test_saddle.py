@@ -234,7 +234,7 @@ def test_near_pole_checks():
                                 [[1.0], [1.0]], [[1.0, 1.0]])
     s = 1j * (1 + 2.2e-16)
     with pytest.raises(ms.SingularShiftError, match="pivot"):
-        fom.new_solver(pivot_tol=1e-15).factor(s)
+        fom.new_solver(pivot_tol=1e-15, ruiz_sweeps=0).factor(s)  # on equilibrated factors it cannot see this
     with pytest.raises(ms.SingularShiftError, match="reciprocal condition"):
         fom.new_solver(rcond_tol=1e-14).factor(s)
     # with the checks off (the default) the (meaningless) huge number comes back

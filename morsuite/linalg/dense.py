@@ -115,7 +115,10 @@ def shift_distance(new, old) -> float:
     new, old = np.asarray(new, dtype=complex), np.asarray(old, dtype=complex)
     if new.size == 0 or old.size == 0:
         return np.inf
-    cost = np.abs(new[:, None] - old[None, :]) / np.maximum(np.abs(new)[:, None], np.finfo(float).tiny)
+    if not (np.all(np.isfinite(new)) and np.all(np.isfinite(old))):
+        return np.inf
+    scale = np.maximum(np.maximum(np.abs(new)[:, None], np.abs(old)[None, :]), np.finfo(float).tiny)
+    cost = np.abs(new[:, None] - old[None, :]) / scale
     i, j = linear_sum_assignment(cost)
     d = float(cost[i, j].max())
     return d if new.size == old.size else max(d, 1.0)

@@ -266,7 +266,7 @@ class ManifoldProjector:
                 buf[:n1, :k], buf[:n1, k:] = b.real, b.imag
             else:
                 buf[:n1] = b
-            y = self._raw.solve(buf)[:n1]
+            y = self.lu._raw_solve(buf, False)[:n1]  # unchecked, but with the equilibration
             x = y[:, :k] + 1j * y[:, k:] if cplx else y
         return self.fom.M @ x, x
 
@@ -527,15 +527,22 @@ def projection_shifts(fom, basis, num, *, residuals=(), selection="residual", us
     Mk, Dk, Kk = (XT.T @ (Y @ XT) for Y in (fom.M, fom.D, fom.K))
     I, Z0 = np.eye(k), np.zeros((k, k))
     Eh = np.block([[I, Z0], [Z0, Mk]])
-    Ah = np.block([[Z0, I], [-Kk, -Dk]])
+    # QZ on the balanced pencil lambda = g mu, g = sqrt(|K| / |M|) (physical units,
+    # M ~ 1e-6 and K ~ 1e9, made ggev fail on the raw one); vectors mapped back
+    nm, nk = np.linalg.norm(Mk, 1), np.linalg.norm(Kk, 1)
+    g = np.sqrt(nk / nm) if nm > 0 and nk > 0 else 1.0
+    Ehs = np.block([[I, Z0], [Z0, g * g * Mk]])
+    Ahs = np.block([[Z0, I], [-Kk, -g * Dk]])
     if selection == "gain" or not residuals:
-        lam = sla.eigvals(Ah, Eh)
+        lam = g * sla.eigvals(Ahs, Ehs)
         lam = lam[np.isfinite(lam)]
         shifts = np.where(lam.real > 0, -lam.real + 1j * lam.imag, lam)
         return select_shifts(shifts[shifts.real < 0], num, used)
-    lam, yl, xr = sla.eig(Ah, Eh, left=True, right=True)
-    ok = np.isfinite(lam)
-    lam, yl, xr = lam[ok], yl[:, ok], xr[:, ok]
+    mu, yl, xr = sla.eig(Ahs, Ehs, left=True, right=True)
+    ok = np.isfinite(mu)
+    lam, yl, xr = g * mu[ok], yl[:, ok], xr[:, ok]
+    xr[k:] *= g        # right vectors [u; mu u] -> [u; lambda u]
+    yl[:k] /= g        # left vectors of (Ah, Eh): diag(I / g, I) times those of the scaled pencil
     den = np.abs(np.einsum("ij,ij->j", yl.conj(), Eh @ xr))
     den[den == 0] = np.inf
     score = np.zeros(lam.size)

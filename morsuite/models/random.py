@@ -134,8 +134,10 @@ def eigenfrequency_range(M, K, *, lumped: bool | None = None) -> tuple[float, fl
         lam = sla.eigh(K.toarray(), M.toarray(), eigvals_only=True)
         return float(np.sqrt(max(lam[0], 0.0))), float(np.sqrt(lam[-1]))
     try:
+        # a fixed start vector: ARPACK's default is random, and the band (hence D) must
+        # be a deterministic function of the arguments
         lam0 = spla.eigsh(sp.csc_matrix(K), k=1, M=sp.csc_matrix(M), sigma=0.0, which="LM", tol=1e-3,
-                          maxiter=200, return_eigenvectors=False)[0]
+                          maxiter=200, v0=np.ones(n), return_eigenvectors=False)[0]
         lo = float(np.sqrt(max(lam0, 0.0)))
     except (spla.ArpackNoConvergence, spla.ArpackError, RuntimeError):
         lo = 0.0

@@ -67,7 +67,7 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.optimize import linear_sum_assignment
 
-from ..errors import ConvergenceWarning, InputError, RankWarning, SingularShiftError, StabilityWarning
+from ..errors import ConvergenceWarning, InputError, ModelError, RankWarning, SingularShiftError, StabilityWarning
 from ..analysis.response import sigma_max
 from ..linalg.dense import UnstableError, dense_bt, orth, shift_distance
 from ..rom import SecondOrderROM
@@ -76,6 +76,8 @@ from .base import Option, Reducer, register
 __all__ = ["IRKA", "IRKABase"]
 
 _COMPLEX_TOL = 1e-12
+_ZERO_MSG = ("{name}: {what}: the transfer function vanishes in the tangential directions (a zero input or "
+             "output matrix, or inputs acting only on constrained coordinates); nothing to reduce")
 
 
 class IRKABase(Reducer):
@@ -180,25 +182,31 @@ class IRKABase(Reducer):
             try:
                 bt = dense_bt(E, A, B, C, order=k, hsv_tol=self.options["hsv_tol"])
                 hsv = bt.hsv
+                if bt.order == 0:
+                    raise ValueError("balanced truncation kept no state")
                 lam, Z = np.linalg.eig(bt.A)
                 bdir = np.linalg.solve(Z, bt.B)
                 cdir = (bt.C @ Z).T
             except (UnstableError, np.linalg.LinAlgError, ValueError):
                 how = "residue-fallback"
         if lam is None:
-            lam, Z = sla.eig(A, E)
-            ok = np.isfinite(lam)
-            lam, Z = lam[ok], Z[:, ok]
+            lam, Z = rom.eig()
             bres = np.linalg.solve(E @ Z, B) if Z.shape[1] == E.shape[0] else np.linalg.lstsq(E @ Z, B, rcond=None)[0]
             cres = (C @ Z).T
             sel = _select_by_residue(lam, bres, cres, k)
             lam, bdir, cdir = _fill_odd_slot(lam, bres, cres, sel, k)
+        if lam.size == 0:
+            raise ModelError(_ZERO_MSG.format(name=self.name, what="the reduced model has no finite pole"))
         alpha = -lam
+        # K5 of the stress suite: zero or non-finite poles give no usable shift
+        lo, hi = self.fom.band
+        alpha[~np.isfinite(alpha)] = hi
+        alpha[np.abs(alpha) == 0] = lo
         bad = alpha.real <= 0
         mirrored = int(np.sum(bad))
         alpha[bad] = -alpha[bad].real + 1j * alpha[bad].imag
         tiny = alpha.real <= 0
-        alpha[tiny] = np.abs(alpha[tiny]) * 1e-8 + 1j * alpha[tiny].imag  # undamped pole: nudge into the RHP
+        alpha[tiny] = np.maximum(np.abs(alpha[tiny]) * 1e-8, lo * 1e-8) + 1j * alpha[tiny].imag  # undamped: nudge
         bdir = _normalize_rows(np.asarray(bdir, dtype=complex))
         cdir = _normalize_rows(np.asarray(cdir, dtype=complex))
         order = np.lexsort((alpha.imag, alpha.real))
@@ -234,6 +242,8 @@ class IRKABase(Reducer):
             if left:
                 W, sw = orth(Wraw, o["rank_tol"])
                 k = min(V.shape[1], W.shape[1])
+                if k == 0:
+                    raise ModelError(_ZERO_MSG.format(name=self.name, what="the projection bases have rank 0"))
                 V, W = V[:, :k], W[:, :k]
                 k_rank = k
                 if o["oblique_tol"] > 0:
@@ -241,14 +251,19 @@ class IRKABase(Reducer):
                     # is ill-conditioned: they give a near-singular reduced mass matrix
                     # and spurious (often unstable) poles of negligible residue
                     U_, s_, Zt_ = np.linalg.svd(W.T @ V)
-                    k = int(np.sum(s_ > o["oblique_tol"] * s_[0]))
+                    k = int(np.sum(s_ > o["oblique_tol"] * s_[0])) if s_.size and s_[0] > 0 else 0
+                    if k == 0:
+                        raise ModelError(_ZERO_MSG.format(name=self.name, what="W^T V = 0"))
                     V, W = V @ Zt_[:k].T, W @ U_[:, :k]
             else:
                 W, k = V, V.shape[1]
                 k_rank = k
+                if k == 0:
+                    raise ModelError(_ZERO_MSG.format(name=self.name, what="the projection basis has rank 0"))
             rom = self._project(V, W)
             poles = rom.poles()
             stable = bool(np.all(poles.real < 0))
+            max_pole_real = float(poles.real.max()) if poles.size else -np.inf
             t1 = time.perf_counter()
             if it > 1 and k_rank < alpha.size:
                 # the shifts of this iteration ask for more than the model holds:
@@ -271,7 +286,7 @@ class IRKABase(Reducer):
                 crit = "response" if lost_rank else "shifts"
             measure = d_resp if crit == "response" else d_shift
             rec = {"iteration": it, "shifts": alpha.copy(), "n_shifts": int(alpha.size), "rank": int(k),
-                   "measure": measure, "shift_change": d_shift, "response_change": d_resp, "criterion": crit, "stable": stable, "max_pole_real": float(poles.real.max()),
+                   "measure": measure, "shift_change": d_shift, "response_change": d_resp, "criterion": crit, "stable": stable, "max_pole_real": max_pole_real,
                    "update": uinfo["update"], "mirrored": uinfo["mirrored"]}
             history.append(rec)
             key = (not stable, measure)

@@ -1,0 +1,36 @@
+"""The "peers" benchmark: runs against pyMOR when it is installed; otherwise records why not."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from morsuite import bench, bench_peers
+
+
+def test_peers_without_pymor_records_the_reason(tmp_path, monkeypatch):
+    monkeypatch.setattr(bench_peers, "pymor_available", lambda: (False, "ImportError: no module named pymor"))
+    res = bench_peers.bench_peers(True, tmp_path, echo=None)
+    assert res["pymor"] == {"available": False, "reason": "ImportError: no module named pymor"}
+    assert res["rows"] == [] and res["ratios"] == {}
+    assert "not run" in (tmp_path / "peers.md").read_text()
+    assert (tmp_path / "peers.png").stat().st_size > 0
+    json.dumps(res, default=bench._json_default)
+
+
+def test_peers_quick_against_pymor(tmp_path):
+    pytest.importorskip("pymor")
+    res = bench_peers.bench_peers(True, tmp_path, echo=None)
+    for name in ("peers.csv", "peers.md", "peers.png"):
+        assert (tmp_path / name).stat().st_size > 0, name
+    df = pd.read_csv(tmp_path / "peers.csv")
+    assert set(df["peer"]) == {"pymor-irka-fo", "pymor-sor-irka", "pymor-sobt-v"}
+    assert np.all(np.isfinite(df["ours_time_s"])) and np.all(np.isfinite(df["ours_error"]))
+    ran = df[df["peer_time_s"].notna()]
+    assert len(ran) == 3 and np.all(np.isfinite(ran["time_ratio"]))
+    assert all(np.isfinite(r["value"]) for r in res["ratios"].values())
+    # same transfer function: the dense projected model the peers use matches the full one
+    assert res["models"]["dsms:g=60"]["projected_model_rel_difference"] < 1e-10
