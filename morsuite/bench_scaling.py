@@ -288,7 +288,7 @@ def run_case(case: dict) -> dict:
                 row.update(nfreq=nfreq, nfreq_measured=int(sub.size), time_per_freq_s=elapsed / sub.size,
                            time_s=elapsed * nfreq / sub.size, time_measured_s=elapsed,
                            cpu_s=cpu * nfreq / sub.size,
-                           scaled=bool(sub.size < nfreq), lu_count=int(sub.size),
+                           scaled=bool(sub.size < nfreq), lu_count=int(nfreq),  # LUs that time_s stands for
                            finite=bool(np.all(np.isfinite(H))))
             else:
                 red = reducers.make(task, fom, **opts)  # irka-projected's guard may refuse here
@@ -310,14 +310,26 @@ def run_case(case: dict) -> dict:
     row["status"] = status
     if status == "ok":
         row.update(probe.as_dict())
-        peak = np.nanmax([row["tracemalloc_peak_mb"], row["rss_delta_mb"]])
-        row["peak_over_dense_square"] = float(peak / row["dense_square_mb"])
-        if row.get("lu_count"):
-            row["time_per_lu_s"] = row["time_s"] / row["lu_count"]
+    _derive_row(row)
     if task == "irka-projected":
         from .reducers.irka_projected import memory_estimate
 
         row["memory_estimate_gib"] = memory_estimate(fom.n1, fom.n2)["peak_gib"]
+    return row
+
+
+def _derive_row(row: dict) -> dict:
+    """Quantities computed from a case's measurements (also re-derived by :func:`rewrite`)."""
+    if row.get("status") != "ok":
+        return row
+    peak = np.nanmax([row.get("tracemalloc_peak_mb", np.nan), row.get("rss_delta_mb", np.nan)])
+    row["peak_over_dense_square"] = float(peak / row["dense_square_mb"]) if row.get("dense_square_mb") else None
+    lus = row.get("nfreq") if row.get("task") == "freqresp" else row.get("lu_count")
+    if lus:
+        row["lu_count"] = int(lus)
+        row["time_per_lu_s"] = row["time_s"] / lus
+        if row.get("cpu_s") is not None:
+            row["cpu_per_lu_s"] = row["cpu_s"] / lus
     return row
 
 
@@ -419,16 +431,50 @@ def _fits(rows) -> list[dict]:
         g = g.sort_values("n1")
         rec = {"model": model, "task": task, "sizes": int(len(g)), "n1_max": int(g["n1"].max())}
         for key, col in (("time", "time_s"), ("cpu", "cpu_s"), ("time_per_lu", "time_per_lu_s"),
+                         ("cpu_per_lu", "cpu_per_lu_s"),
                          ("tracemalloc", "tracemalloc_peak_mb"), ("rss_delta", "rss_delta_mb")):
             if col in g:
                 f = fit_exponent(g["n1"], g[col])
                 rec[f"{key}_exponent"] = f["exponent"]
                 rec[f"{key}_local_exponent"] = f["local_exponent"]
         big = g.iloc[-1]
-        rec.update(time_at_max_s=float(big["time_s"]), tracemalloc_at_max_mb=float(big["tracemalloc_peak_mb"]),
+        rec.update(time_at_max_s=float(big["time_s"]), cpu_at_max_s=float(big.get("cpu_s", np.nan)),
+                   tracemalloc_at_max_mb=float(big["tracemalloc_peak_mb"]),
                    rss_delta_at_max_mb=float(big["rss_delta_mb"]))
         fits.append(rec)
     return fits
+
+
+def _ratios(fits) -> dict:
+    ratios = {}
+    for f in fits:
+        target = None if f["task"] == "irka-projected" else 1.15
+        for kind, label in (("time", "wall time"), ("cpu", "CPU time")):
+            v = f.get(f"{kind}_exponent")
+            if v is None or not np.isfinite(v):
+                continue
+            ratios[f"exponent {f['model']} {f['task']} ({'wall' if kind == 'time' else 'cpu'})"] = {
+                "value": v, "target": target,
+                "what": f"least-squares exponent of {label} ~ n1^p over {f['sizes']} sizes up to n1 = "
+                        f"{f['n1_max']} (slope between the two largest sizes {f[f'{kind}_local_exponent']:.2f}; "
+                        f"per LU {f.get(f'{kind}_per_lu_exponent', float('nan')):.2f})"}
+    return ratios
+
+
+def rewrite(out_dir="results/bench") -> list[Path]:
+    """Re-derive rows, fits and ratios of ``out_dir``/scaling.json with this code and rewrite it and
+    the CSV, Markdown and PNG files (the measurements are not repeated)."""
+    from .bench import _write_json
+
+    out = Path(out_dir)
+    res = json.loads((out / "scaling.json").read_text())
+    res["rows"] = [_derive_row(dict(r)) for r in res["rows"]]
+    res["fits"] = _fits(res["rows"])
+    res["ratios"] = _ratios(res["fits"])
+    files = write_outputs(res, out)
+    res["files"] = [str(p) for p in files]
+    _write_json(out / "scaling.json", res)
+    return files
 
 
 def _figure(rows, fits, path):
@@ -438,15 +484,17 @@ def _figure(rows, fits, path):
     markers = {"irka": "o", "bt": "s", "freqresp": "^", "irka-projected": "D"}
     colors = {"dsms": "C0", "tcom": "C3"}
     for (model, task) in sorted({(r["model"], r["task"]) for r in ok}):
-        pts = sorted((r["n1"], r["time_s"], r["tracemalloc_peak_mb"], r["rss_delta_mb"])
+        pts = sorted((r["n1"], r["time_s"], r["tracemalloc_peak_mb"], r["rss_delta_mb"], r.get("cpu_s", np.nan))
                      for r in ok if r["model"] == model and r["task"] == task)
         n = np.array([p[0] for p in pts], float)
         f = fitd.get((model, task), {})
         ls = "--" if task == "irka-projected" else "-"
         lab = f"{model} {task}"
-        if np.isfinite(f.get("time_exponent", np.nan)):
-            lab += f" (p = {f['time_exponent']:.2f})"
-        ax_t.plot(n, [p[1] for p in pts], ls, marker=markers.get(task, "x"), color=colors.get(model), label=lab)
+        if np.isfinite(f.get("cpu_exponent", np.nan)):
+            lab += f" (p = {f['cpu_exponent']:.2f} CPU, {f['time_exponent']:.2f} wall)"
+        ax_t.plot(n, [p[4] for p in pts], ls, marker=markers.get(task, "x"), color=colors.get(model), label=lab)
+        ax_t.plot(n, [p[1] for p in pts], ":", marker=markers.get(task, "x"), color=colors.get(model), alpha=0.5,
+                  markerfacecolor="none")
         lab_m = f"{model} {task}"
         if np.isfinite(f.get("tracemalloc_exponent", np.nan)):
             lab_m += f" (p = {f['tracemalloc_exponent']:.2f})"
@@ -455,7 +503,7 @@ def _figure(rows, fits, path):
                   alpha=0.5, markerfacecolor="none")
     if ok:
         n_all = np.array(sorted({r["n1"] for r in ok}), float)
-        for ax, ref in ((ax_t, min(r["time_s"] for r in ok)),
+        for ax, ref in ((ax_t, np.nanmin([r.get("cpu_s", np.nan) for r in ok])),
                         (ax_m, min(max(r["tracemalloc_peak_mb"], 1e-3) for r in ok))):
             ax.plot(n_all, ref * n_all / n_all[0], color="0.6", lw=0.8, label="slope 1")
         sq = 8.0 * n_all ** 2 / _MIB
@@ -466,15 +514,15 @@ def _figure(rows, fits, path):
         ax.set_xlabel(r"$n_1$")
         ax.grid(True, which="major", alpha=0.3)
         ax.legend(fontsize=6.5)
-    ax_t.set_ylabel("wall time [s] (freqresp: 200 frequencies)")
+    ax_t.set_ylabel("time [s] (freqresp: 200 frequencies)")
     ax_m.set_ylabel("peak memory [MiB]")
-    ax_t.set_title("wall time against size (legend: fitted exponent p)", fontsize=10)
+    ax_t.set_title("CPU time (solid, p) and wall time (dotted) against size", fontsize=10)
     ax_m.set_title("peak memory: tracemalloc (solid, p), RSS delta (dotted)", fontsize=10)
     return save_png(fig, path)
 
 
 _TABLE_COLS = ["model", "task", "size", "n1", "status", "r", "r_used", "states", "converged", "iterations",
-               "lu_count", "time_s", "cpu_s", "time_per_lu_s", "nfreq_measured", "scaled", "tracemalloc_peak_mb",
+               "lu_count", "time_s", "cpu_s", "time_per_lu_s", "cpu_per_lu_s", "nfreq_measured", "scaled", "tracemalloc_peak_mb",
                "rss_delta_mb", "peak_over_dense_square", "model_build_s"]
 
 
@@ -524,14 +572,7 @@ def bench_scaling(quick: bool = False, out_dir=None, *, plan: dict | None = None
         # partial results survive an interrupted run
         atomic_write_text(out / "scaling.partial.json", json.dumps(rows, indent=1, default=str) + "\n")
     fits = _fits(rows)
-    ratios = {}
-    for f in fits:
-        target = None if f["task"] == "irka-projected" else 1.15
-        ratios[f"exponent {f['model']} {f['task']}"] = {
-            "value": f["time_exponent"], "target": target,
-            "what": f"least-squares exponent of wall time ~ n1^p over {f['sizes']} sizes up to n1 = "
-                    f"{f['n1_max']} (slope between the two largest sizes {f['time_local_exponent']:.2f}; "
-                    f"of the time per LU {f.get('time_per_lu_exponent', float('nan')):.2f})"}
+    ratios = _ratios(fits)
     note = ("time_s: wall time of reduce(r) (reducers) or of the response on nfreq frequencies (freqresp: "
             "measured on nfreq_measured of them, every k-th of the grid, and scaled when 'scaled'); memory "
             "from the same run: tracemalloc peak (NumPy/Python; SuperLU is invisible to it) and peak RSS "
@@ -613,12 +654,15 @@ def _section_pareto(res) -> str:
 
 def _section_scaling(res) -> str:
     fits = res.get("fits") or []
-    out = [_md(("model", "task", "sizes", "largest n1", "time exponent", "top slope", "per-LU exponent",
-                "tracemalloc exponent", "time at largest [s]", "tracemalloc at largest [MiB]",
-                "RSS delta at largest [MiB]"),
-               [(f["model"], f["task"], f["sizes"], f["n1_max"], f.get("time_exponent"),
-                 f.get("time_local_exponent"), f.get("time_per_lu_exponent"), f.get("tracemalloc_exponent"),
-                 f.get("time_at_max_s"), f.get("tracemalloc_at_max_mb"), f.get("rss_delta_at_max_mb"))
+    out = ["Exponents p of t ~ n1^p (least squares over all sizes; 'top' = slope between the two largest "
+           "sizes); CPU time is the robust one on a shared machine:\n\n",
+           _md(("model", "task", "sizes", "largest n1", "p wall", "p CPU", "top p CPU", "p CPU per LU",
+                "p tracemalloc", "p RSS delta", "wall at largest [s]", "CPU at largest [s]",
+                "tracemalloc at largest [MiB]", "RSS delta at largest [MiB]"),
+               [(f["model"], f["task"], f["sizes"], f["n1_max"], f.get("time_exponent"), f.get("cpu_exponent"),
+                 f.get("cpu_local_exponent"), f.get("cpu_per_lu_exponent"), f.get("tracemalloc_exponent"),
+                 f.get("rss_delta_exponent"), f.get("time_at_max_s"), f.get("cpu_at_max_s"),
+                 f.get("tracemalloc_at_max_mb"), f.get("rss_delta_at_max_mb"))
                 for f in fits])]
     bad = [r for r in res.get("rows", []) if r.get("status") != "ok"]
     if bad:
