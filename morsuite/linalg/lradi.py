@@ -112,7 +112,7 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
-from ..errors import ConvergenceWarning, InputError
+from ..errors import ModelError, ConvergenceWarning, InputError
 
 __all__ = ["LRADIResult", "lradi", "lradi_pair", "projection_shifts", "penzl_shifts", "select_shifts",
            "ManifoldProjector"]
@@ -552,7 +552,7 @@ def projection_shifts(fom, basis, num, *, residuals=(), selection="residual", us
             s = np.linalg.norm(yl.conj().T @ w, axis=1) * np.linalg.norm(xr, axis=0) / den
         else:
             s = np.linalg.norm(xr.T @ w, axis=1) * np.linalg.norm(yl, axis=0) / den
-        if s.max() > 0:
+        if s.size and s.max() > 0:  # no finite Ritz value: nothing to score (stress suite)
             score = np.maximum(score, s / s.max())
     shifts = np.where(lam.real > 0, -lam.real + 1j * lam.imag, lam)
     real = np.abs(shifts.imag) <= _IMAG_TOL * np.abs(shifts)
@@ -731,6 +731,10 @@ def _iterate(fom, equations, tol, maxiter, strategy, num_shifts, selection, solv
                                              selection=selection, used=used))
                 if not new:  # no usable Ritz value (cannot happen for SPD M, K): recycle
                     new = used[-max(batches[-1], 1):]
+            if not new:
+                raise ModelError("lradi: no usable shift: the projected pencil has no finite stable Ritz value "
+                                 "(seen on models whose M and K scales differ by 1e15 or more); try "
+                                 "shifts='penzl'")
             queue.extend(new)
             batches.append(len(new))
             t_shift += time.perf_counter() - t0

@@ -185,3 +185,20 @@ def test_k6_scaling_the_pencil_gives_the_poles():
     A = np.block([[Z, I], [-np.linalg.solve(K6_M, K6_K), -np.linalg.solve(K6_M, K6_D)]])
     ref = np.sort_complex(np.linalg.eigvals(A))
     assert np.all(np.abs(lam - ref) <= 1e-6 * np.abs(ref))  # eigenvalues of a nonnormal pencil: ~1e-7
+
+
+# -- K7: LR-ADI with no usable shift --------------------------------------------------------
+#: found by the 2000-case run: masses in grams and stiffnesses in kN/mm, both spread over many
+#: decades; the projected pencil of the first ADI block has no finite stable Ritz value, and
+#: lradi popped from an empty shift queue (IndexError) or took max() of an empty score array
+K7_MODEL = dict(n1=38, n2=5, m=3, p=3, seed=544491153, zeta=0.00789689195080825, damping="rayleigh",
+                mass="consistent", mass_spread=3.0, stiffness_spread=12.0, constraints="ties", io="points",
+                mass_unit=1e-6, stiffness_unit=1e9)
+
+
+def test_k7_lradi_without_usable_shift_is_a_documented_error():
+    fom = ms.models.random_constrained(**K7_MODEL)
+    with pytest.raises(ms.ModelError, match="no usable shift"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ms.reducers.make("bt", fom, maxiter=150).reduce(12)
