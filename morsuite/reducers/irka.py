@@ -127,12 +127,45 @@ class IRKABase(Reducer):
         """Work done once per reducer (timings dict)."""
         return {}
 
-    def _bases(self, alpha, bdir, cdir, left: bool):
-        """Raw real bases (n x k) from shifts and directions; see IRKA._bases."""
+    def _system(self):
+        """(M, D, K, F, L) of the model the bases are built for (sparse or dense)."""
         raise NotImplementedError  # pragma: no cover
 
-    def _project(self, V, W) -> SecondOrderROM:
+    def _factor(self, a):
+        """A factorization of a^2 M + a D + K (bordered by G for the index-3 model)."""
         raise NotImplementedError  # pragma: no cover
+
+    def _solve(self, lu, rhs, trans, a):
+        return lu.solve(rhs, trans=trans)
+
+    def _begin_bases(self):
+        """Hook: called once per iteration before the solves."""
+
+    def _bases(self, alpha, bdir, cdir, left: bool):
+        """Raw real bases: per real shift or conjugate pair one factorization, its solve
+        with F b_i and (two-sided) its transposed solve with L^T c_i; complex solutions
+        give their real and imaginary parts."""
+        _, _, _, F, L = self._system()
+        self._begin_bases()
+        Vcols, Wcols = [], []
+        for a, b, c in zip(alpha, bdir, cdir):
+            cplx = abs(a.imag) > _COMPLEX_TOL * abs(a)
+            if cplx and a.imag < 0:
+                continue  # its conjugate partner's LU and solve give both columns
+            lu = self._factor(a if cplx else a.real)
+            v = self._solve(lu, F @ (b if cplx else b.real), False, a)
+            Vcols += [v.real, v.imag] if cplx else [np.real(v)]
+            if left:
+                w = self._solve(lu, L.T @ (c if cplx else c.real), True, a)
+                Wcols += [w.real, w.imag] if cplx else [np.real(w)]
+            del lu  # a dense LU of the projected baseline is n1 x n1: free it before the next
+        V = np.column_stack(Vcols)
+        W = np.column_stack(Wcols) if left else None
+        return V, W
+
+    def _project(self, V, W) -> SecondOrderROM:
+        M, D, K, F, L = self._system()
+        return SecondOrderROM(W.T @ (M @ V), W.T @ (D @ V), W.T @ (K @ V), W.T @ F, L @ V)
 
     def _lu_count(self) -> int:
         return 0
@@ -474,31 +507,16 @@ class IRKA(IRKABase):
         st = self._solver.stats
         return {"factorizations": st.factor_time_s + st.assemble_time_s, "solves": st.solve_time_s}
 
-    def _bases(self, alpha, bdir, cdir, left):
-        fom = self.fom
-        Vcols, Wcols = [], []
-        for a, b, c in zip(alpha, bdir, cdir):
-            cplx = abs(a.imag) > _COMPLEX_TOL * abs(a)
-            if cplx and a.imag < 0:
-                continue  # its conjugate partner's LU and solve give both columns
-            try:
-                lu = self._solver.factor(a if cplx else a.real)
-            except SingularShiftError as exc:
-                exc.shift = a
-                raise
-            rhs = fom.F @ (b if cplx else b.real)
-            v = lu.solve(rhs)
-            Vcols += [v.real, v.imag] if cplx else [np.real(v)]
-            if left:
-                w = lu.solve(fom.L.T @ (c if cplx else c.real), trans=True)
-                Wcols += [w.real, w.imag] if cplx else [np.real(w)]
-        V = np.column_stack(Vcols)
-        W = np.column_stack(Wcols) if left else None
-        return V, W
+    def _system(self):
+        f = self.fom
+        return f.M, f.D, f.K, f.F, f.L
 
-    def _project(self, V, W):
-        fom = self.fom
-        return SecondOrderROM(W.T @ (fom.M @ V), W.T @ (fom.D @ V), W.T @ (fom.K @ V), W.T @ fom.F, fom.L @ V)
+    def _factor(self, a):
+        try:
+            return self._solver.factor(a)
+        except SingularShiftError as exc:
+            exc.shift = a
+            raise
 
 
 register("irka", IRKA)

@@ -380,29 +380,12 @@ class IRKAProjected(IRKABase):
             raise exc
         return x
 
-    def _bases(self, alpha, bdir, cdir, left):
-        """Projected-coordinate bases (k x ...); same column layout as ``IRKA._bases``."""
+    def _system(self):
         pm = self._model
-        self._lu_times.append(0.0)
-        Vcols, Wcols = [], []
-        for a, b, c in zip(alpha, bdir, cdir):
-            cplx = abs(a.imag) > _COMPLEX_TOL * abs(a)
-            if cplx and a.imag < 0:
-                continue  # the conjugate partner's LU and solve give both columns
-            lu = self._factor(a if cplx else a.real)
-            v = self._solve(lu, pm.F @ (b if cplx else b.real), False, a)
-            Vcols += [v.real, v.imag] if cplx else [np.real(v)]
-            if left:
-                w = self._solve(lu, pm.L.T @ (c if cplx else c.real), True, a)
-                Wcols += [w.real, w.imag] if cplx else [np.real(w)]
-            del lu
-        V = np.column_stack(Vcols)
-        W = np.column_stack(Wcols) if left else None
-        return V, W
+        return pm.M, pm.D, pm.K, pm.F, pm.L
 
-    def _project(self, V, W):
-        pm = self._model
-        return SecondOrderROM(W.T @ (pm.M @ V), W.T @ (pm.D @ V), W.T @ (pm.K @ V), W.T @ pm.F, pm.L @ V)
+    def _begin_bases(self):
+        self._lu_times.append(0.0)
 
     def _reduce(self, r):
         fresh_before = self._model is None
