@@ -53,7 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from .bench import benchmark
-from .bench_scaling import new_figure, resolve_out_dir, save_png, write_table
+from .bench_scaling import code_state, new_figure, resolve_out_dir, save_png, write_table
 
 __all__ = ["bench_pareto", "profile_categories", "lu_floor", "METHODS"]
 
@@ -620,6 +620,7 @@ def bench_pareto(quick: bool = False, out_dir=None, *, plan: dict | None = None,
 
     plan = dict(plan or _plan(quick))
     out = resolve_out_dir(out_dir)
+    code_start = code_state()
     rows, pairs, verdicts, resp = [], [], [], {}
     for spec, methods in plan["models"]:
         fom = models.parse(spec)
@@ -670,6 +671,7 @@ def bench_pareto(quick: bool = False, out_dir=None, *, plan: dict | None = None,
     result = {"plan": {k: ([list(m) if isinstance(m, tuple) else m for m in v] if isinstance(v, (list, tuple)) else v)
                        for k, v in plan.items()},
               "methods": {k: {"reducer": v[0], "options": v[1], "order": v[2]} for k, v in METHODS.items()},
+              "code_start": code_start, "code": code_state(),
               "full_response": resp, "rows": rows, "pairs": pairs, "verdicts": verdicts, "floor": floor,
               "ratios": ratios, "note": note}
     files = write_outputs(result, out)

@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from .bench import benchmark
-from .bench_scaling import new_figure, resolve_out_dir, save_png, write_table
+from .bench_scaling import code_state, new_figure, resolve_out_dir, save_png, write_table
 
 __all__ = ["bench_peers", "pymor_available"]
 
@@ -267,7 +267,8 @@ def bench_peers(quick: bool = False, out_dir=None, *, plan: dict | None = None, 
     out = resolve_out_dir(out_dir)
     ok, version = pymor_available()
     result = {"plan": {k: list(v) if isinstance(v, tuple) else v for k, v in plan.items()},
-              "pymor": {"available": ok, "version" if ok else "reason": version}, "rows": [], "ratios": {}}
+              "pymor": {"available": ok, "version" if ok else "reason": version}, "rows": [], "ratios": {},
+              "code_start": code_state()}
     if not ok:
         result["note"] = (f"pyMOR is not importable ({version}); install the extra: "
                           f"pip install 'morsuite[peers]'. No peer was run.")
@@ -325,7 +326,7 @@ def bench_peers(quick: bool = False, out_dir=None, *, plan: dict | None = None, 
                              f"{x['peer_error'] if x['peer_error'] is not None else float('nan'):.2e})", flush=True)
         del fom, H, som
     ratios = _ratios(rows)
-    result.update(rows=rows, ratios=ratios, models=details,
+    result.update(rows=rows, ratios=ratios, models=details, code=code_state(),
                   note=f"time_ratio = our time / theirs; error_ratio = our max abs error / theirs (same "
                        f"{plan['nfreq']} log-spaced frequencies of the band, sigma_max); dense peers work on the Pi-projected model, whose setup time "
                        "is projection_setup_s (time_ratio_with_setup adds it to theirs); one BLAS thread "

@@ -65,7 +65,7 @@ from .bench import benchmark
 from .utils import atomic_path, atomic_write_text
 
 __all__ = ["bench_scaling", "run_case", "fit_exponent", "resolve_out_dir", "write_table", "save_png",
-           "MemoryProbe", "SIZES", "write_readme"]
+           "MemoryProbe", "SIZES", "write_readme", "code_state"]
 
 _MIB = 2.0 ** 20
 
@@ -228,6 +228,39 @@ class MemoryProbe:
                 "rss_peak_reset": self.hwm_reset}
 
 
+#: modules whose content decides the timings; hashed into every result (colleagues edit the
+#: tree while benchmarks run: a result must say which code it measured)
+_KEY_MODULES = ("linalg/saddle.py", "linalg/lradi.py", "linalg/dense.py", "reducers/irka.py",
+                "reducers/bt.py", "reducers/irka_projected.py", "reducers/base.py", "models/index3.py", "rom.py")
+
+
+def code_state(git: bool = True) -> dict:
+    """The code a measurement ran: git HEAD and dirty files (read-only git), and short SHA-256
+    hashes of the modules that decide the timings (``digest`` combines them)."""
+    import hashlib
+
+    pkg = Path(__file__).resolve().parent
+    hashes = {}
+    for rel in _KEY_MODULES:
+        try:
+            hashes[rel] = hashlib.sha256((pkg / rel).read_bytes()).hexdigest()[:12]
+        except OSError:
+            hashes[rel] = None
+    state = {"modules": hashes,
+             "digest": hashlib.sha256(json.dumps(hashes, sort_keys=True).encode()).hexdigest()[:12]}
+    if git:
+        def _git(*args):
+            try:
+                out = subprocess.run(["git", *args], cwd=pkg.parent, capture_output=True, text=True, timeout=20)
+                return out.stdout.strip() if out.returncode == 0 else None
+            except (OSError, subprocess.SubprocessError):
+                return None
+        state["git_head"] = _git("rev-parse", "HEAD")
+        dirty = _git("status", "--porcelain", "--", "morsuite")
+        state["git_dirty"] = dirty.splitlines() if dirty else []
+    return state
+
+
 def _load_average():
     try:
         return [round(x, 2) for x in os.getloadavg()]
@@ -268,6 +301,7 @@ def run_case(case: dict) -> dict:
     task, r = case["task"], int(case.get("r", 20))
     row = {"model": case["model"], "size": int(case["size"]), "n1": fom.n1, "n2": fom.n2, "task": task,
            "r": r, "model_build_s": build, "load_average": _load_average(),
+           "code_digest": code_state(git=False)["digest"],
            "dense_square_mb": 8.0 * fom.n1 ** 2 / _MIB}
     opts = dict(case.get("options") or {})
     probe = MemoryProbe(trace=bool(case.get("trace", True)))
@@ -549,6 +583,7 @@ def bench_scaling(quick: bool = False, out_dir=None, *, plan: dict | None = None
     """Time and peak memory of irka, bt (r = 20) and the full response against n1 up to 1e6."""
     plan = dict(plan or _plan(quick))
     out = resolve_out_dir(out_dir)
+    code_start = code_state()
     rows = []
     stopped = set()
     for case in _cases(plan):
@@ -580,6 +615,8 @@ def bench_scaling(quick: bool = False, out_dir=None, *, plan: dict | None = None
     result = {"plan": {k: (v if not isinstance(v, dict) else {kk: list(vv) if isinstance(vv, tuple) else vv
                                                                for kk, vv in v.items()})
                        for k, v in plan.items()},
+              "code": code_state(), "code_start": code_start,
+              "code_digests_of_cases": sorted({r.get("code_digest") for r in rows if r.get("code_digest")}),
               "rows": rows, "fits": fits, "ratios": ratios, "note": note}
     files = write_outputs(result, out)
     result["files"] = [str(p) for p in files]
@@ -731,6 +768,18 @@ def write_readme(out_dir="results/bench") -> Path:
         extra = sorted(p.name for p in out.glob(f"{path.stem}*") if p.suffix in (".csv", ".md", ".png"))
         if extra:
             head += " Files: " + ", ".join(f"`{e}`" for e in extra) + "."
+        code = res.get("code")
+        if code:
+            head += (f" Code: git {str(code.get('git_head'))[:10]}, module digest {code.get('digest')}"
+                     + (f", uncommitted: {', '.join(x.split()[-1] for x in code.get('git_dirty', []))}"
+                        if code.get("git_dirty") else "") + ".")
+            starts = {(res.get("code_start") or {}).get("digest"), code.get("digest"),
+                      *res.get("code_digests_of_cases", [])} - {None}
+            if len(starts) > 1:
+                head += (f" **The timed modules changed during the run** (digests {', '.join(sorted(starts))}): "
+                         f"colleagues edited the tree meanwhile.")
+        else:
+            head += " Code state not recorded."
         lines.append(head + "\n")
         lines.append(_ratio_table(res))
         section = _SECTIONS.get(name)

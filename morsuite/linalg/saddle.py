@@ -356,8 +356,9 @@ class SaddlePointSolver:
         self.stats.factor_time_s += t2 - t1
         norms = (0.0, 0.0)
         if self.backward_tol > 0:
-            absA = abs(A)
-            norms = (float(absA.sum(axis=1).max()), float(absA.sum(axis=0).max()))
+            av = np.abs(A.data)  # inf- and 1-norm from the fixed pattern, no new matrix
+            norms = (float(np.bincount(self._rows, weights=av, minlength=self.N).max()),
+                     float(np.add.reduceat(av, self._indptr[:-1]).max()))
         f = SaddleLU(key, lu, self.n1, self.n2, False, self.stats, ratio, np.iscomplexobj(A.data),
                      A if self.backward_tol > 0 else None, self.backward_tol, norms, dr, dc)
         if self.cache_size > 0:
