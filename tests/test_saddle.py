@@ -254,3 +254,22 @@ def test_high_frequency_is_not_a_pole(dsms50):
     M, D, K = (X.toarray() for X in (dsms50.M, dsms50.D, dsms50.K))
     ref = dsms50.L @ Z @ np.linalg.solve(Z.T @ (s * s * M + s * D + K) @ Z, Z.T @ dsms50.F)
     assert rel_err(dsms50.transfer(s), ref) < 1e-10
+
+
+def test_unstable_lu_is_refactored_not_returned(dsms50):
+    """An LU whose solves are off (an unstable pivot sequence: seen with COLAMD and threshold
+    0.1 on tcom(nc=3334), backward error 5e-4) fails the backward-error check; the solver
+    refactors once with partial pivoting and returns the right answer, not a wrong number."""
+    solver = dsms50.new_solver()
+    f = solver.factor(0.3j)
+    good = f.lu
+
+    class Off:  # stands for the unstable factorization: every solve 1e-3 off
+        def solve(self, b, trans="N"):
+            return good.solve(b, trans=trans) * (1 + 1e-3)
+
+    f.lu = Off()
+    x = f.solve(dsms50.F)
+    ref = np.linalg.solve(solver.matrix(0.3j).toarray(), np.vstack([dsms50.F, np.zeros((1, 1))]))[:50]
+    assert np.allclose(x, ref, rtol=1e-10, atol=0)
+    assert f.refactored and solver.stats.refactorizations == 1 and solver.stats.factorizations == 2

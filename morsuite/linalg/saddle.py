@@ -39,6 +39,7 @@ class SolverStats:
     """Counters of one :class:`SaddlePointSolver` (plain data)."""
 
     factorizations: int = 0
+    refactorizations: int = 0  # of them, stable re-factorizations after a failed accuracy check
     reused: int = 0
     solves: int = 0  # right-hand-side columns solved
     factor_time_s: float = 0.0
@@ -75,8 +76,10 @@ class SaddleLU:
     matrix: object = field(default=None, repr=False)
     backward_tol: float = 0.0
     norms: tuple = (0.0, 0.0)  # (inf-norm, 1-norm) of the matrix, for the backward error
-    dr: object = field(default=None, repr=False)  # Ruiz scaling: the LU is of diag(dr) S diag(dc)
+    dr: object = field(default=None, repr=False)  # scaling: the LU is of diag(dr) S diag(dc)
     dc: object = field(default=None, repr=False)
+    fallback: object = field(default=None, repr=False)  # () -> a more stable LU of the same matrix
+    refactored: bool = False
 
     def solve(self, rhs, *, trans: bool = False, full: bool = False):
         """Solve :math:`S x = b` (``trans=False``) or :math:`S^T x = b`.
@@ -135,11 +138,25 @@ class SaddleLU:
             return x
         x = x + self._raw_solve(r, trans)  # one step of iterative refinement
         eta, _ = self._backward_error(b, x, trans)
+        if not eta <= self.backward_tol and self.fallback is not None:
+            # an unstable pivot sequence (seen with COLAMD and threshold 0.1 on
+            # tcom(nc=3334): backward error 5e-4): refactor once with the
+            # symmetric ordering and full partial pivoting, and solve again
+            t0 = time.perf_counter()
+            self.lu, self.fallback, self.refactored = self.fallback(), None, True
+            self.stats.factorizations += 1
+            self.stats.refactorizations += 1
+            self.stats.factor_time_s += time.perf_counter() - t0
+            x = self._raw_solve(b, trans)
+            eta, r = self._backward_error(b, x, trans)
+            if not eta <= self.backward_tol:
+                x = x + self._raw_solve(r, trans)
+                eta, _ = self._backward_error(b, x, trans)
         if not eta <= self.backward_tol:
             raise SingularShiftError(
                 f"saddle-point solve at s-coefficients {self.coeffs} is inaccurate: backward error "
                 f"{eta:.1e} > backward_tol {self.backward_tol:.0e} after one refinement step "
-                "(the shift is next to a pole, or the LU is unstable: try diag_pivot_thresh=1.0)"
+                "(the shift is at or next to a pole)"
             )
         return x
 
@@ -359,8 +376,12 @@ class SaddlePointSolver:
             av = np.abs(A.data)  # inf- and 1-norm from the fixed pattern, no new matrix
             norms = (float(np.bincount(self._rows, weights=av, minlength=self.N).max()),
                      float(np.add.reduceat(av, self._indptr[:-1]).max()))
+        def stable_lu(As=As):
+            return spla.splu(As, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=1.0)
+
         f = SaddleLU(key, lu, self.n1, self.n2, False, self.stats, ratio, np.iscomplexobj(A.data),
-                     A if self.backward_tol > 0 else None, self.backward_tol, norms, dr, dc)
+                     A if self.backward_tol > 0 else None, self.backward_tol, norms, dr, dc,
+                     stable_lu if self.backward_tol > 0 else None)
         if self.cache_size > 0:
             self._cache[key] = f
             while len(self._cache) > self.cache_size:
