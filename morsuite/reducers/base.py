@@ -202,7 +202,7 @@ class Reducer:
         return Reduction(rom=rom, info=to_plain(base))
 
     def _reduce(self, r):  # pragma: no cover - abstract
-        raise NotImplementedError
+        raise TypeError(f"{type(self).__name__} must define the hook _reduce(r) -> (rom, info)")
 
 
 def as_complex(value) -> np.ndarray:

@@ -129,11 +129,11 @@ class IRKABase(Reducer):
 
     def _system(self):
         """(M, D, K, F, L) of the model the bases are built for (sparse or dense)."""
-        raise NotImplementedError  # pragma: no cover
+        raise TypeError(f"{type(self).__name__} must define the hook _system")  # pragma: no cover
 
     def _factor(self, a):
         """A factorization of a^2 M + a D + K (bordered by G for the index-3 model)."""
-        raise NotImplementedError  # pragma: no cover
+        raise TypeError(f"{type(self).__name__} must define the hook _factor")  # pragma: no cover
 
     def _solve(self, lu, rhs, trans, a):
         return lu.solve(rhs, trans=trans)
