@@ -326,6 +326,8 @@ CATEGORIES = [
     ("sparse overhead", "solve accuracy checks (backward error, refinement, condition estimate)",
      [("linalg/saddle.py", "_checked"), ("linalg/saddle.py", "_backward_error"), ("linalg/saddle.py", "_apply"),
       ("linalg/saddle.py", "_rcond_estimate")]),
+    ("sparse overhead", "saddle matrix equilibration (scaling S and the solves)",
+     [("linalg/saddle.py", "_equilibrate"), ("linalg/saddle.py", "_ruiz"), ("linalg/saddle.py", "_scaled_solve")]),
     ("sparse overhead", "SuperLU wrappers and saddle solver bookkeeping (norms, conversions)",
      [("linalg/saddle.py", "*"), ("sparse/linalg/_dsolve/", "*")]),
     ("orthogonalisation", "orthogonalisation (QR/SVD of n1 x k bases)",

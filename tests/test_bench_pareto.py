@@ -83,3 +83,10 @@ def test_pareto_quick_through_bench_run(tmp_path):
     verdict = (tmp_path / "pareto_verdict.md").read_text()
     assert "claim" in verdict
     assert all(np.isfinite(r["value"]) for r in res["ratios"].values())
+    assert {v["matched_on"] for v in data["verdicts"]} == {"states", "r"}
+    # derived tables can be recomputed from the JSON without measuring again
+    from morsuite.bench_pareto import rewrite
+
+    rewrite(tmp_path)
+    again = json.loads((tmp_path / "pareto.json").read_text())
+    assert again["rows"] == data["rows"] and len(again["pairs"]) == len(data["pairs"])

@@ -34,3 +34,6 @@ def test_peers_quick_against_pymor(tmp_path):
     assert all(np.isfinite(r["value"]) for r in res["ratios"].values())
     # same transfer function: the dense projected model the peers use matches the full one
     assert res["models"]["dsms:g=60"]["projected_model_rel_difference"] < 1e-10
+    bench._write_json(tmp_path / "peers.json", res)
+    bench_peers.rewrite(tmp_path)
+    assert json.loads((tmp_path / "peers.json").read_text())["ratios"].keys() == res["ratios"].keys()

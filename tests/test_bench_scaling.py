@@ -88,6 +88,13 @@ def test_scaling_quick_writes_finite_results(tmp_path):
     md = (tmp_path / "scaling_fits.md").read_text()
     assert "time_exponent" in md and "dsms" in md
     assert all(np.isfinite(r["value"]) for r in res["ratios"].values())
+    assert res["code"]["digest"] and all(r.get("code_digest") for r in res["rows"] if r["status"] == "ok")
+    from morsuite.bench_scaling import rewrite
+
+    bench._write_json(tmp_path / "scaling.json", res)
+    rewrite(tmp_path)
+    again = json.loads((tmp_path / "scaling.json").read_text())
+    assert again["ratios"].keys() == res["ratios"].keys()
 
 
 def test_write_readme_summarises_every_json(tmp_path):
