@@ -273,3 +273,46 @@ def test_unstable_lu_is_refactored_not_returned(dsms50):
     ref = np.linalg.solve(solver.matrix(0.3j).toarray(), np.vstack([dsms50.F, np.zeros((1, 1))]))[:50]
     assert np.allclose(x, ref, rtol=1e-10, atol=0)
     assert f.refactored and solver.stats.refactorizations == 1 and solver.stats.factorizations == 2
+
+
+@pytest.mark.parametrize("scaling", ["diagonal", "none", "ruiz"])
+@pytest.mark.parametrize("reuse", [True, False])
+def test_reused_ordering_solves_vs_dense(small_random, scaling, reuse):
+    """Later shifts factor the column-permuted matrix with the first shift's ordering;
+    plain, transposed, full, conjugate and unchecked solves must still be exact."""
+    fom = small_random
+    solver = SaddlePointSolver(fom.M, fom.D, fom.K, fom.G, scaling=scaling, reuse_ordering=reuse)
+    rng = np.random.default_rng(3)
+    B = rng.standard_normal((fom.n1 + fom.n2, 2)) + 1j * rng.standard_normal((fom.n1 + fom.n2, 2))
+    for s in (0.4 + 0.2j, 1.5j, 0.7, 0.3 - 2j):
+        S = explicit_matrix(fom, s)
+        f = solver.factor(s)
+        assert rel_err(f.solve(B, full=True), np.linalg.solve(S, B)) < 1e-12
+        assert rel_err(f.solve(B, trans=True, full=True), np.linalg.solve(S.T, B)) < 1e-12
+        assert rel_err(f._raw_solve(B, False), np.linalg.solve(S, B)) < 1e-12
+        assert rel_err(f._raw_solve(B, True), np.linalg.solve(S.T, B)) < 1e-12
+        g = solver.factor(np.conj(s))  # conjugate view of the same LU
+        Sc = explicit_matrix(fom, np.conj(s))
+        assert rel_err(g.solve(B, full=True), np.linalg.solve(Sc, B)) < 1e-12
+        assert rel_err(g.solve(B, trans=True, full=True), np.linalg.solve(Sc.T, B)) < 1e-12
+    reused = ("ordering", "COLAMD") in solver.pattern
+    assert reused == (reuse and scaling != "ruiz")
+    if reused:  # the model's other solvers see the same ordering
+        other = SaddlePointSolver(fom.M, fom.D, fom.K, fom.G, pattern=solver.pattern)
+        assert other._ordering() is solver.pattern[("ordering", "COLAMD")]
+
+
+def test_reused_ordering_rcond_check():
+    """The condition estimate goes through the permuted LU: a pole is still found."""
+    fom = ms.models.Index3Model(np.eye(2), np.zeros((2, 2)), np.diag([1.0, 2.0]), None,
+                                [[1.0], [1.0]], [[1.0, 1.0]])
+    solver = fom.new_solver(rcond_tol=1e-14)
+    assert solver.factor(0.5j).min_pivot_ratio > 0.1  # rcond of a well-conditioned shift
+    assert ("ordering", "COLAMD") in solver.pattern
+    with pytest.raises(ms.SingularShiftError, match="reciprocal condition"):
+        solver.factor(1j * (1 + 2.2e-16))
+
+
+def test_pattern_of_other_model_refused(small_random, dsms50):
+    with pytest.raises(ms.MorsuiteError, match="pattern"):
+        SaddlePointSolver(dsms50.M, dsms50.D, dsms50.K, dsms50.G, pattern=small_random.solver.pattern)

@@ -113,6 +113,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from ..errors import ModelError, ConvergenceWarning, InputError
+from ..utils import blas_threads
 
 __all__ = ["LRADIResult", "lradi", "lradi_pair", "projection_shifts", "penzl_shifts", "select_shifts",
            "ManifoldProjector"]
@@ -659,19 +660,6 @@ def _check_shifts(shifts):
     return reps
 
 
-_BLAS = None  # threadpoolctl controller, created on first use (it scans the loaded libraries)
-
-
-def _blas_one_thread():
-    """Context pinning BLAS to one thread: the dense work here is on n1 x k blocks and k x k
-    matrices, where BLAS threads only add synchronisation (see reducers.base.BLAS_THREADS)."""
-    global _BLAS
-    if _BLAS is None:
-        from threadpoolctl import ThreadpoolController
-        _BLAS = ThreadpoolController()
-    return _BLAS.limit(limits=1, user_api="blas")
-
-
 def _run(fom, equations, tol, maxiter, shifts, num_shifts, selection, solver):
     from ..models.index3 import Index3Model
 
@@ -685,7 +673,7 @@ def _run(fom, equations, tol, maxiter, shifts, num_shifts, selection, solver):
     if selection not in SELECTIONS:
         raise InputError(f"selection must be one of {', '.join(map(repr, SELECTIONS))}; got {selection!r}")
     strategy = _check_shifts(shifts)
-    with _blas_one_thread():
+    with blas_threads(1):
         return _iterate(fom, equations, float(tol), maxiter, strategy, num_shifts, selection, solver)
 
 

@@ -24,6 +24,7 @@ import scipy.sparse.linalg as spla
 
 from ..errors import DtypeWarning, ModelError, ShapeError, InputError
 from ..linalg.saddle import SaddlePointSolver
+from ..utils import blas_threads
 
 __all__ = ["Index3Model", "as_real_matrix"]
 
@@ -231,8 +232,11 @@ class Index3Model:
         return self._solver
 
     def new_solver(self, **options) -> SaddlePointSolver:
-        """A fresh saddle-point solver (own counters and cache) for a reducer run."""
-        return SaddlePointSolver(self.M, self.D, self.K, self.G, **options)
+        """A fresh saddle-point solver (own counters and cache) for a reducer run.
+
+        The sparsity pattern is built once per model and shared (read-only).
+        """
+        return SaddlePointSolver(self.M, self.D, self.K, self.G, pattern=self.solver.pattern, **options)
 
     def transfer(self, s, *, derivative: bool = False):
         r"""Transfer function :math:`T(s) = L x`, one sparse LU at ``s``.
@@ -244,7 +248,7 @@ class Index3Model:
         f = self.solver.factor(s)
         X = f.solve(self.F)
         if not derivative:
-            return self.L @ X
+            return _output(self.L, X)
         Y = f.solve(self.L.T.astype(X.dtype), trans=True)  # left solve
         return -(Y.T @ ((2 * s) * (self.M @ X) + self.D @ X))
 
@@ -261,8 +265,9 @@ class Index3Model:
         if progress:
             from tqdm.auto import tqdm
             it = tqdm(it, desc=f"freqresp {self.name}", unit="freq", leave=False)
-        for i in it:
-            out[i] = self.L @ solver.factor(1j * omega[i]).solve(self.F)
+        with blas_threads(1):
+            for i in it:
+                out[i] = _output(self.L, solver.factor(1j * omega[i]).solve(self.F))
         self.last_freqresp_stats = solver.stats.as_dict()
         return out
 
@@ -286,6 +291,13 @@ class Index3Model:
         return Index3Model(self.M, self.D, self.K, self.G, self.F if F is None else F,
                            self.L if L is None else L, name=name or self.name, band=self.band,
                            check_constraints=False)
+
+
+def _output(L, X):
+    """``L @ X`` for real L and complex X without converting L to complex (two real products)."""
+    if np.iscomplexobj(X) and not np.iscomplexobj(L):
+        return L @ X.real + 1j * (L @ X.imag)
+    return L @ X
 
 
 def _check_shift(s):

@@ -23,25 +23,13 @@ from typing import Any, Callable, ClassVar
 import numpy as np
 
 from ..errors import InputError, OptionError
-from ..utils import to_plain
+from ..utils import blas_threads, to_plain
 
 __all__ = ["Option", "Reducer", "Reduction", "make", "available", "register", "get_class", "as_complex"]
 
 
 #: BLAS threads used inside ``reduce`` (recorded in ``info["blas_threads"]``).
 BLAS_THREADS = 1
-_CONTROLLER = None
-
-
-def _blas_controller():
-    """One ThreadpoolController per process: building one scans the loaded
-    libraries (3.4 ms, more than a cached BT reduction costs)."""
-    global _CONTROLLER
-    if _CONTROLLER is None:
-        from threadpoolctl import ThreadpoolController
-        _CONTROLLER = ThreadpoolController()
-    return _CONTROLLER
-
 
 @dataclass(frozen=True)
 class Option:
@@ -184,7 +172,7 @@ class Reducer:
         # the dense work of a reducer is on tall-skinny n1 x r blocks and r x r
         # matrices, where BLAS threads only add synchronisation (10x slower on a
         # loaded 2-core machine, measured): pin BLAS to BLAS_THREADS for the run
-        with _blas_controller().limit(limits=BLAS_THREADS, user_api="blas"):
+        with blas_threads(BLAS_THREADS):
             t0 = time.perf_counter()
             rom, info = self._reduce(r)
             elapsed = time.perf_counter() - t0
