@@ -68,13 +68,14 @@ def test_dsms_first_order_errors_and_bound(dsms6000, dsms_grid, dsms_bt):
     err = max_error(dsms6000, res.rom, dsms_grid)
     assert res.info["kind"] == "first-order" and res.info["r"] == res.info["states"] == 10
     assert res.info["stable"] and err <= 1.3e-6 and err <= res.info["error_bound"]
-    # r = 20 is at 1e-11 of the largest HSV: the ADI tolerance 1e-10 leaves the tail HSVs (and the
-    # bound) 10-20% low (2.2e-12 against a computed bound of 2.0e-12); tol = 1e-12 resolves them
-    fine = ms.reducers.make("bt", dsms6000, tol=1e-12)
-    res20 = fine.reduce(20)
+    # r = 20 is at 1e-11 of the largest HSV: lradi's tolerance 1e-10 leaves the tail HSVs (and the
+    # bound) 10-20% low (2.2e-12 against a computed bound of 2.0e-12); bt's default 1e-12 resolves them
+    res20 = dsms_bt.reduce(20)
     err20 = max_error(dsms6000, res20.rom, dsms_grid)
+    assert res20.info["options"]["tol"] == 1e-12
     assert res20.info["r"] == 20 and err20 <= 2e-12 and err20 <= res20.info["error_bound"]
-    assert max_error(dsms6000, dsms_bt.reduce(20).rom, dsms_grid) <= 3e-12
+    coarse = ms.reducers.make("bt", dsms6000, tol=1e-10).reduce(20)
+    assert coarse.info["error_bound"] < err20 * 1.2  # the coarse bound is the one that fails
 
 
 def test_dsms600_hsv_against_dense_modal_computation():
@@ -140,13 +141,14 @@ def test_tcom_gramians_and_hankel_singular_values(tcom_bt):
     its = info["adi_iterations"]
     hist = info["residual_history"]
     assert info["converged"]
-    assert hist["controllability"][-1] <= 1e-10 and hist["observability"][-1] <= 1e-10
+    assert hist["controllability"][-1] <= 1e-12 and hist["observability"][-1] <= 1e-12
     # The issue asked for <= 300 iterations per Gramian. Not attainable by LR-ADI in this residual
     # norm: ADI with the exact eigenvalues as shifts, chosen greedily by residual content, needs
     # 128 / 372 / 606 iterations for nc = 50 / 200 / 500 (dense modal simulation). The default
-    # shifts need about 950; the independent implementation about 1200. Guard that level.
-    assert its["controllability"] <= 1100 and its["observability"] <= 1100
-    assert info["lu_count"] <= 600  # one LU per shift serves both equations
+    # shifts need about 950 for 1e-10 and 1200 for bt's default 1e-12; the independent implementation
+    # about 1200 for 1e-10. Guard that level.
+    assert its["controllability"] <= 1350 and its["observability"] <= 1350
+    assert info["lu_count"] <= 700  # one LU per shift serves both equations
     hsv = np.asarray(info["hsv"])
     assert np.all(np.abs(hsv[:10] - TCOM_HSV) <= 1e-4 * TCOM_HSV)
 
@@ -220,7 +222,7 @@ def test_options_validated():
         ms.reducers.make("bt", ms.models.dsms(g=50)).use_gramians_of(a)
     assert set(FORMS) == {"first-order", "pp", "pv", "vp", "vv", "fv"}
     info = a.reduce(4).info
-    assert info["options"]["form"] == "first-order" and info["options"]["tol"] == 1e-10
+    assert info["options"]["form"] == "first-order" and info["options"]["tol"] == 1e-12
 
 
 def test_unconverged_adi_warns_and_says_so():

@@ -53,13 +53,15 @@ costs one pair of ADI runs plus small dense work per r.
     :class:`StabilityWarning` and ``info["stable"] = False``. The paper
     compares its IRKA with ``vv``.
 
-Accuracy: the ADI tolerance ``tol`` (default 1e-10, the reference setting of
-``models.md``) resolves the Hankel singular values to about 1e-7 relative down
-to 1e-5 of the largest (measured on the DSMS). Truncating where the discarded
-values are near 1e-11 of the largest (the DSMS at r = 20) needs ``tol=1e-12``:
-with 1e-10 the tail values come out 10-20% low, and the error (2.2e-12) then
-exceeds the computed bound (2.0e-12); with 1e-12 it is 1.8e-12 against a bound
-of 3.7e-12, for 10 more ADI iterations.
+Accuracy: the ADI tolerance ``tol`` defaults to 1e-12, tighter than
+:func:`~morsuite.linalg.lradi`'s 1e-10 (the reference setting of ``models.md``).
+1e-10 resolves the Hankel singular values to about 1e-7 relative down to 1e-5
+of the largest (measured on the DSMS), but truncating where the discarded
+values are near 1e-11 of the largest (the DSMS at r = 20) then goes wrong: the
+tail values come out 10-20% low, and the error (2.2e-12) exceeds the computed
+bound (2.0e-12); with 1e-12 it is 1.8e-12 against a bound of 3.7e-12, for 10
+more ADI iterations (5 LUs). On tcom(2000) 1e-12 costs about 1200 iterations
+per Gramian instead of 950 (+25% time). ``tol=1e-10`` gives the reference setting.
 
 Truncation: r is capped at the number of singular values above ``hsv_tol``
 times the largest (tiny ones carry noise of the ADI residual, and the square
@@ -121,10 +123,14 @@ class BT(Reducer):
         "form": Option("first-order", "choice", "first-order square-root BT (stable, error bound) or a "
                        "second-order balancing level: position-position, position-velocity, "
                        "velocity-position, velocity-velocity (the paper's), free-velocity", choices=FORMS),
-        "tol": Option(1e-10, "float", "relative residual norm ||W^T W|| / ||W0^T W0|| at which LR-ADI stops",
+        "tol": Option(1e-12, "float", "relative residual norm ||W^T W|| / ||W0^T W0|| at which LR-ADI stops "
+                      "(1e-12, not lradi's 1e-10: the truncation and its bound need the tail Hankel singular "
+                      "values; on dsms(6000) at r = 20 tol 1e-10 left them 10-20% low and the error 2.24e-12 "
+                      "above its computed bound 1.96e-12; 1e-12 gives 1.80e-12 <= 3.66e-12 for 5 more LUs; on "
+                      "tcom(2000) it costs 1205 instead of 969 iterations)",
                       low=0, high=1, open_low=True, open_high=True),
-        "maxiter": Option(2000, "int", "largest number of LR-ADI iterations per equation (a complex pair "
-                          "counts two); the TCOM (nc = 2000) needs about 950", low=1),
+        "maxiter": Option(3000, "int", "largest number of LR-ADI iterations per equation (a complex pair "
+                          "counts two); the TCOM (nc = 2000) needs about 1200", low=1),
         "shifts": Option("projection", "choice", "shift strategy: adaptive projection (Ritz) shifts or "
                          "Penzl's heuristic", choices=("projection", "penzl")),
         "num_shifts": Option(16, "int", "shifts (a complex pair counted once) taken from each shift "
