@@ -22,6 +22,8 @@ import warnings
 
 import numpy as np
 
+from .bench import benchmark
+
 __all__ = ["bench_projected"]
 
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
@@ -44,6 +46,7 @@ def _run(name, fom, r, opts):
     return res
 
 
+@benchmark("projected")
 def bench_projected(quick: bool = False, *, sizes=None, r: int = 20, maxit: int | None = None,
                     irka_repeats: int = 5, verbose: bool = True) -> dict:
     r"""Time of ``"irka-projected"`` over ``"irka"`` on the DSMS, same shifts, same iteration count.

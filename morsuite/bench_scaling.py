@@ -729,11 +729,11 @@ def _section_rows(res, keys) -> str:
 
 _SECTIONS = {"pareto": _section_pareto, "scaling": _section_scaling, "peers": _section_peers,
              "irka": lambda res: _section_rows(res, ("model", "r_requested", "r", "converged", "iterations",
-                                                     "lu_count", "time_s", "lu_floor_s", "ratio")),
+                                                     "lu_count", "time_s", "floor_s", "ratio", "ratios_all")),
              "projected": lambda res: _section_rows(res, ("g", "n1", "r", "iterations", "time_projected_s",
                                                           "time_irka_s", "ratio", "ratio_per_iteration")),
-             "bt": lambda res: _section_rows(res, ("model", "r", "form", "converged", "lu_count", "time_s",
-                                                   "lu_floor_s", "ratio", "max_abs_error"))}
+             "bt": lambda res: _section_rows(res, ("model", "run", "time_s", "lu_count", "floor_s", "ratio",
+                                                   "ratios"))}
 
 
 _OWN_TABLES = ("pareto", "scaling", "peers")

@@ -135,6 +135,24 @@ def regime(kw: dict) -> str:
 
 
 # -- references independent of the solver under test ---------------------------
+def _ruiz(row, col, av, n: int, sweeps: int):
+    """Ruiz row/column max-norm scaling of the COO magnitudes ``av``: (dr, dc).
+
+    Written independently of the solver's own scaling (morsuite.linalg.saddle),
+    which is what these references check.
+    """
+    dr, dc = np.ones(n), np.ones(n)
+    for _ in range(sweeps):
+        a = av * dr[row] * dc[col]
+        rmax, cmax = np.zeros(n), np.zeros(n)
+        np.maximum.at(rmax, row, a)
+        np.maximum.at(cmax, col, a)
+        rmax[rmax == 0] = 1.0
+        cmax[cmax == 0] = 1.0
+        dr, dc = dr / np.sqrt(rmax), dc / np.sqrt(cmax)
+    return dr, dc
+
+
 class _EqLU:
     """LU of the Ruiz-equilibrated saddle-point matrix Dr S Dc (no pivot check)."""
 
@@ -142,16 +160,7 @@ class _EqLU:
         S = sp.coo_matrix(fom.solver.matrix(s))
         n = S.shape[0]
         row, col, val = S.row, S.col, S.data
-        av = np.abs(val)
-        dr, dc = np.ones(n), np.ones(n)
-        for _ in range(sweeps):
-            a = av * dr[row] * dc[col]
-            rmax, cmax = np.zeros(n), np.zeros(n)
-            np.maximum.at(rmax, row, a)
-            np.maximum.at(cmax, col, a)
-            rmax[rmax == 0] = 1.0
-            cmax[cmax == 0] = 1.0
-            dr, dc = dr / np.sqrt(rmax), dc / np.sqrt(cmax)
+        dr, dc = _ruiz(row, col, np.abs(val), n, sweeps)
         self.A = sp.csc_matrix((val * dr[row] * dc[col], (row, col)), shape=(n, n))
         self.dr, self.dc, self.n1 = dr, dc, fom.n1
         self.complex = np.iscomplexobj(val)
@@ -801,16 +810,8 @@ class equilibrated_saddle:
         def __init__(self, A, permc_spec):
             C = sp.coo_matrix(A)
             n = C.shape[0]
-            row, col, av = C.row, C.col, np.abs(C.data)
-            dr, dc = np.ones(n), np.ones(n)
-            for _ in range(5):
-                a = av * dr[row] * dc[col]
-                rm, cm = np.zeros(n), np.zeros(n)
-                np.maximum.at(rm, row, a)
-                np.maximum.at(cm, col, a)
-                rm[rm == 0] = 1.0
-                cm[cm == 0] = 1.0
-                dr, dc = dr / np.sqrt(rm), dc / np.sqrt(cm)
+            row, col = C.row, C.col
+            dr, dc = _ruiz(row, col, np.abs(C.data), n, 5)
             self.dr, self.dc = dr, dc
             self._lu = _REAL_SPLU(sp.csc_matrix((C.data * dr[row] * dc[col], (row, col)), shape=(n, n)),
                                   permc_spec=permc_spec)

@@ -57,7 +57,8 @@ def errors(fom, rom, omega, *, H_full=None):
     -------
     pandas.DataFrame
         Columns omega, sigma_full, sigma_rom, abs_error
-        (:math:`\\sigma_{max}(T - T_r)`), rel_error (abs_error / sigma_full).
+        (:math:`\\sigma_{max}(T - T_r)`), rel_error (abs_error / sigma_full; inf where
+        only the full response vanishes, 0 where both do).
     """
     import pandas as pd
 
@@ -71,6 +72,6 @@ def errors(fom, rom, omega, *, H_full=None):
     sf = sigma_max(Hf)
     ea = sigma_max(Hf - Hr)
     with np.errstate(divide="ignore", invalid="ignore"):
-        rel = np.where(sf > 0, ea / sf, np.inf)
+        rel = np.where(sf > 0, ea / sf, np.where(ea > 0, np.inf, 0.0))  # 0/0: both responses vanish
     return pd.DataFrame({"omega": omega, "sigma_full": sf, "sigma_rom": sigma_max(Hr),
                          "abs_error": ea, "rel_error": rel})
