@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from .bench import benchmark
+from .utils import atomic_write_text
 from .bench_scaling import code_state, new_figure, resolve_out_dir, save_png, write_table
 
 __all__ = ["bench_peers", "pymor_available"]
@@ -372,7 +373,42 @@ def write_outputs(result: dict, out_dir) -> list[Path]:
                                                  f"{result['pymor'].get('version', '(not installed)')}",
                         note=note, md_columns=cols if result["pymor"]["available"] else None)
     files.append(_figure(result["rows"], out / "peers.png"))
+    if result["pymor"]["available"]:
+        path = out / "peers_compact.md"
+        atomic_write_text(path, compact_table(result["rows"]))
+        files.append(path)
     return files
+
+
+def _short_status(status) -> str:
+    s = str(status or "")
+    if s == "ok":
+        return "ok"
+    if s.startswith("not converged"):
+        return "not converged"
+    return s.split(":")[0] + (": " + s.split(":")[1].strip().split(" ")[0] if ":" in s else "")
+
+
+def compact_table(rows) -> str:
+    """Markdown: per model and r, our method and the pyMOR peer side by side, with the ratios.
+
+    time ratio = our time / theirs, error ratio = our max abs error / theirs (below 1: we are
+    faster / more accurate). A failed peer keeps its row with the failure as the result.
+    """
+    def f(x, spec):
+        return "" if x is None or (isinstance(x, float) and not np.isfinite(x)) else format(x, spec)
+
+    lines = ["| model | r | ours | time [s] | max abs error | pyMOR peer | time [s] | max abs error | "
+             "time ratio | error ratio | peer result |",
+             "|---|---:|---|---:|---:|---|---:|---:|---:|---:|---|"]
+    for row in rows:
+        d = _derive(dict(row))
+        lines.append(" | ".join([
+            f"| {d['model']}", str(d["r"]), str(d["ours"]), f(d.get("ours_time_s"), ".3g"),
+            f(d.get("ours_error"), ".2e"), str(d["peer"]), f(d.get("peer_time_s"), ".3g"),
+            f(d.get("peer_error"), ".2e"), f(d.get("time_ratio"), ".3f"), f(d.get("error_ratio"), ".3g"),
+            _short_status(d.get("status")) + " |"]))
+    return "\n".join(lines) + "\n"
 
 
 @benchmark("peers")
