@@ -316,3 +316,30 @@ def test_reused_ordering_rcond_check():
 def test_pattern_of_other_model_refused(small_random, dsms50):
     with pytest.raises(ms.MorsuiteError, match="pattern"):
         SaddlePointSolver(dsms50.M, dsms50.D, dsms50.K, dsms50.G, pattern=small_random.solver.pattern)
+
+
+def test_fallbacks_are_tried_in_order_and_exhausted_raises(dsms50):
+    """Refactorizations follow the fallback list until one passes the check; if none does,
+    SingularShiftError (never the inaccurate number)."""
+    solver = dsms50.new_solver()
+    f = solver.factor(0.3j)
+    good = f.lu
+
+    class Off:
+        def solve(self, b, trans="N"):
+            return good.solve(b, trans=trans) * (1 + 1e-3)
+
+    assert len(f.fallback) == 3
+    calls = []
+    f.lu = Off()
+    f.fallback = (lambda: calls.append(1) or Off(), lambda: calls.append(2) or good, lambda: calls.append(3) or good)
+    x = f.solve(dsms50.F)
+    ref = np.linalg.solve(solver.matrix(0.3j).toarray(), np.vstack([dsms50.F, np.zeros((1, 1))]))[:50]
+    assert np.allclose(x, ref, rtol=1e-10, atol=0)
+    assert calls == [1, 2] and solver.stats.refactorizations == 2
+
+    g = solver.factor(0.5j)
+    g.lu = Off()
+    g.fallback = (lambda: Off(),)
+    with pytest.raises(ms.SingularShiftError, match="backward error"):
+        g.solve(dsms50.F)

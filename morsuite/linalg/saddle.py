@@ -78,7 +78,7 @@ class SaddleLU:
     norms: dict = field(default_factory=dict, repr=False)  # {trans: norm} of ``matrix``, filled lazily
     dr: object = field(default=None, repr=False)  # scaling: the LU is of diag(dr) S diag(dc)
     dc: object = field(default=None, repr=False)
-    fallback: object = field(default=None, repr=False)  # () -> a more stable LU of the same matrix
+    fallback: tuple = ()  # callables () -> another LU of the same matrix, tried in order
     refactored: bool = False
     q: object = field(default=None, repr=False)  # the LU is of (Dr S Dc)[q][:, q] (a reused ordering)
 
@@ -160,12 +160,16 @@ class SaddleLU:
             return x
         x = x + self._lu_solve(r, trans)  # one step of iterative refinement
         eta, _ = self._backward_error(b, x, trans)
-        if not eta <= self.backward_tol and self.fallback is not None:
-            # an unstable pivot sequence (seen with COLAMD and threshold 0.1 on
-            # tcom(nc=3334): backward error 5e-4): refactor once with the
-            # symmetric ordering and full partial pivoting, and solve again
+        while not eta <= self.backward_tol and self.fallback:
+            # an unstable pivot sequence: refactor the same matrix with the next
+            # pivoting/ordering of the fallback list (cheapest first) and solve again.
+            # Seen: tcom(nc=3334), COLAMD with threshold 0.1: backward error 5e-4;
+            # tcom(nc=33334) at w = 0.812: 4e-2 with threshold 0.1 and 3e-2 with partial
+            # pivoting (1.0), 3e-17 with 0.01; MMD_AT_PLUS_A with partial pivoting, the
+            # last resort, filled that LU in to 3.3 GB (190 s).
             t0 = time.perf_counter()
-            self.lu, self.fallback, self.refactored = self.fallback(), None, True
+            make, self.fallback = self.fallback[0], self.fallback[1:]
+            self.lu, self.refactored = make(), True
             self.stats.factorizations += 1
             self.stats.refactorizations += 1
             self.stats.factor_time_s += time.perf_counter() - t0
@@ -278,10 +282,14 @@ class SaddlePointSolver:
         solves, inf-norms for transposed ones; both need only the column sums
         of S_e), is checked (one sparse product, about 3% of an LU). Working on
         the equilibrated system makes the check independent of the units of
-        the model. Above ``backward_tol`` one step of
-        iterative refinement is made, and if that does not help a
+        the model. Above ``backward_tol`` one step of iterative refinement is
+        made; if that does not help, the matrix is refactored with, in turn,
+        the same ordering and diagonal pivot threshold 0.01, a fresh COLAMD
+        ordering, and MMD_AT_PLUS_A with partial pivoting (the last resort: it
+        can fill in heavily), each solve checked again; if none passes a
         :class:`SingularShiftError` is raised: an inaccurate solve is never
-        returned silently. ``0`` turns the check off.
+        returned silently. ``stats.refactorizations`` counts the refactorizations.
+        ``0`` turns the check off.
 
     Notes
     -----
@@ -451,12 +459,18 @@ class SaddlePointSolver:
         self.stats.factor_time_s += t2 - t1
         checked = self.backward_tol > 0
 
-        def stable_lu(As=As):
-            return spla.splu(As, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=1.0)
-
+        spec = "NATURAL" if perm else self.permc_spec
+        fallback = (
+            # more weight on the diagonal of the equilibrated matrix, same ordering (cheap)
+            lambda As=As: spla.splu(As, permc_spec=spec, diag_pivot_thresh=min(0.01, self.diag_pivot_thresh)),
+            # a fresh column ordering
+            lambda As=As: spla.splu(As, permc_spec="COLAMD", diag_pivot_thresh=self.diag_pivot_thresh),
+            # symmetric ordering, partial pivoting: the last resort (it can fill in heavily)
+            lambda As=As: spla.splu(As, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=1.0),
+        ) if checked else ()
         f = SaddleLU(key, lu, self.n1, self.n2, False, self.stats, ratio, np.iscomplexobj(As.data),
                      As if checked else None, self.backward_tol, {}, dr, dc,
-                     stable_lu if checked else None, q=perm["q"] if perm else None)
+                     fallback, q=perm["q"] if perm else None)
         if self.cache_size > 0:
             self._cache[key] = f
             while len(self._cache) > self.cache_size:
