@@ -123,19 +123,21 @@ def test_refined_solves_and_gram_schmidt_reach_the_long_double_accuracy():
         assert errs[name] > 3 * errs["default"], errs
 
 
-def test_csr_matvec_in_long_double():
-    import scipy.sparse as sp
-    from morsuite.reducers.irka import _csr_mv
-
-    A = sp.random(50, 40, density=0.1, format="csr", random_state=1)
-    A = sp.csr_matrix(A.toarray() * (np.arange(50) % 7 != 0)[:, None])  # some empty rows
-    rows = np.flatnonzero(np.diff(A.indptr) > 0)
-    packed = (A.data.astype(np.longdouble), A.indices, rows, A.indptr[rows], A.shape[0])
-    x = np.random.default_rng(0).standard_normal(40) + 1j * np.random.default_rng(1).standard_normal(40)
-    y = _csr_mv(packed, x.astype(np.clongdouble))
-    assert y.dtype == np.clongdouble
-    assert np.allclose(y.astype(complex), A @ x, rtol=1e-15, atol=1e-15)
-
+def test_refinement_operator_in_long_double():
+    """S(a) x and S(a)^T x of the refinement, in long double, against scipy's product in double."""
+    fom = ms.models.get("tcom", nc=20)
+    red = ms.reducers.make("irka", fom)
+    red._setup()
+    rng = np.random.default_rng(0)
+    N = fom.n1 + fom.n2
+    x = rng.standard_normal(N) + 1j * rng.standard_normal(N)
+    for a in (0.3 + 0.7j, 0.05):
+        S = red._solver.matrix(a)
+        for trans in (False, True):
+            y = red._refine_operator(a, trans, True)(x.astype(np.clongdouble))
+            assert y.dtype == np.clongdouble
+            ref = (S.T if trans else S) @ x
+            assert np.max(np.abs(y.astype(complex) - ref)) <= 1e-14 * np.max(np.abs(ref))
 
 def test_rom_matches_python_control():
     fom = ms.models.dsms(200)
