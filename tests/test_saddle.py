@@ -343,3 +343,19 @@ def test_fallbacks_are_tried_in_order_and_exhausted_raises(dsms50):
     g.fallback = (lambda: Off(),)
     with pytest.raises(ms.SingularShiftError, match="backward error"):
         g.solve(dsms50.F)
+
+
+def test_backward_error_of_a_factorization(dsms50):
+    f = dsms50.new_solver().factor(0.3j)
+    assert f.backward_error(dsms50.F) < 1e-14
+    assert f.backward_error(dsms50.L.T, trans=True) < 1e-14
+    good = f.lu
+
+    class Off:  # every solve 1e-3 off
+        def solve(self, b, trans="N"):
+            return good.solve(b, trans=trans) * (1 + 1e-3)
+
+    f.lu = Off()
+    assert 1e-5 < f.backward_error(dsms50.F) < 1e-2  # far above the 1e-10 the solver accepts
+    with pytest.raises(ms.InputError, match="backward_tol"):
+        dsms50.new_solver(backward_tol=0).factor(0.3j).backward_error(dsms50.F)

@@ -125,6 +125,17 @@ class SaddleLU:
             x = x[: self.n1]
         return x[:, 0] if vector else x
 
+    def backward_error(self, rhs, *, trans: bool = False) -> float:
+        """Normwise backward error of one unchecked solve with ``rhs`` (n1 or n1 + n2 rows),
+        measured as the per-solve check measures it (on the equilibrated system)."""
+        if self.matrix is None:
+            raise InputError("backward_error needs a factorization made with backward_tol > 0")
+        b = np.asarray(rhs).reshape(np.shape(rhs)[0], -1)
+        if b.shape[0] == self.n1 and self.n2:
+            b = np.vstack([b, np.zeros((self.n2, b.shape[1]), dtype=b.dtype)])
+        b = self._to_lu_space(b, trans)
+        return self._backward_error(b, self._lu_solve(b, trans), trans)[0]
+
     def _apply(self, x, trans):
         """The factorized matrix (conjugated/transposed as this view says) times x."""
         A = self.matrix.T if trans else self.matrix
@@ -376,8 +387,9 @@ class SaddlePointSolver:
     def matrix(self, s=None, *, coeffs=None) -> sp.csc_matrix:
         """The assembled bordered matrix for shift ``s`` (or ``coeffs=(a, b, c)``)."""
         a, b, c = self._coeffs(s, coeffs)
-        data = a * self._m + b * self._d + c * self._k + self._g
-        return sp.csc_matrix((data, self._indices, self._indptr), shape=(self.N, self.N))
+        # own index arrays: the pattern's are shared and read-only
+        return sp.csc_matrix((self._combine(a, b, c, self.pattern), self._indices.copy(), self._indptr.copy()),
+                             shape=(self.N, self.N))
 
     @staticmethod
     def _coeffs(s, coeffs):

@@ -705,24 +705,24 @@ class IRKA(IRKABase):
         The entries of S(a) = [[a^2 M + a D + K, G^T], [G, 0]] on the solver's fixed pattern
         are formed once per shift in that precision; the product is a gather, a multiply
         and a segmented sum (scipy.sparse has no long double)."""
-        key = (complex(a), bool(trans), bool(ext))
         cache = self.__dict__.setdefault("_refine_cache", {})
-        if cache.get("key") != key:
-            P = self._solver.pattern
-            ft, ct = (np.longdouble, np.clongdouble) if ext else (float, complex)
-            if "parts" not in cache or cache["parts"][0] is not ext:
-                cache["parts"] = (ext, *(P[k].astype(ft) for k in ("_m", "_d", "_k", "_g")))
-            _, m, d, k, g = cache["parts"]
-            aa = ct(a)
+        P = self._solver.pattern
+        if cache.get("ext") is not ext:  # the pattern's entries in this precision, its CSR view: once
+            ft = np.longdouble if ext else float
+            perm = P["_csr_perm"]
+            rowptr, colptr = np.asarray(P["_rowptr"]), np.asarray(P["_indptr"])
+            rows_ne, cols_ne = np.flatnonzero(np.diff(rowptr) > 0), np.flatnonzero(np.diff(colptr) > 0)
+            cache.clear()
+            cache.update(ext=ext, parts=tuple(P[k].astype(ft) for k in ("_m", "_d", "_k", "_g")), perm=perm,
+                         structure={False: (P["_cols"][perm], rowptr[rows_ne], rows_ne),  # row sums (CSR)
+                                    True: (P["_rows"], colptr[cols_ne], cols_ne)})  # column sums (CSC)
+        if cache.get("a") != complex(a):  # the entries of S(a): once per shift, for both solves
+            m, d, k, g = cache["parts"]
+            aa = (np.clongdouble if ext else complex)(a)
             data = (aa * aa) * m + aa * d + k + g
-            if trans:  # column sums of the CSC pattern: (S^T x)_j = sum_i S_ij x_i
-                idx, ptr = P["_rows"], P["_indptr"]
-            else:  # row sums: the CSR view of the pattern
-                perm = P["_csr_perm"]
-                data, idx, ptr = data[perm], P["_cols"][perm], P["_rowptr"]
-            nonempty = np.flatnonzero(np.diff(ptr) > 0)
-            cache.update(key=key, data=data, idx=idx, starts=np.asarray(ptr)[nonempty], nonempty=nonempty)
-        data, idx, starts, nonempty = cache["data"], cache["idx"], cache["starts"], cache["nonempty"]
+            cache.update(a=complex(a), data={True: data, False: data[cache["perm"]]})
+        data = cache["data"][bool(trans)]
+        idx, starts, nonempty = cache["structure"][bool(trans)]
 
         def apply(x):
             y = np.zeros(x.shape[0], dtype=np.result_type(data, x))
