@@ -257,3 +257,46 @@ def test_cli_reduce_json():
                 "max_rel_error"):
         assert key in d
     assert d["converged"] and d["max_abs_error"] < 1e-3
+
+
+def test_cholesky_qr_orth_matches_svd_and_falls_back():
+    """The BLAS-3 orthonormal basis: same singular values and span as numpy's SVD of the
+    column-scaled matrix; an ill-conditioned or rank-deficient matrix goes to Householder."""
+    from morsuite.reducers.irka import _orth
+
+    rng = np.random.default_rng(3)
+    for cond in (1.0, 1e4, 1e9):
+        U0, _ = np.linalg.qr(rng.standard_normal((500, 12)))
+        X = U0 @ np.diag(np.logspace(0, -np.log10(cond), 12)) @ np.linalg.qr(rng.standard_normal((12, 12)))[0]
+        Xn = X / np.linalg.norm(X, axis=0)
+        Ur, s_ref, _ = np.linalg.svd(Xn, full_matrices=False)
+        Q, s = _orth(X, 1e-14)
+        assert np.allclose(s, s_ref, rtol=1e-8, atol=1e-15 * s_ref[0])
+        assert np.allclose(Q.T @ Q, np.eye(Q.shape[1]), atol=1e-13)
+        # the span of the leading singular vectors, up to the gap to the next singular value
+        k = Q.shape[1]
+        assert np.linalg.norm(Ur[:, :k] - Q @ (Q.T @ Ur[:, :k])) < 1e-10
+    X = rng.standard_normal((500, 6))
+    X = np.hstack([X, X[:, :2]])  # rank 6
+    Q, s = _orth(X, 1e-12)
+    assert Q.shape[1] == 6 and s[-1] < 1e-12 * s[0]
+
+
+def test_kernel_projection_and_first_solve_checks():
+    """A basis already in null(G) is left as it is (kernel_tol); a range(G^T) component is
+    removed; checking only the first solve of each LU gives the same model as checking all."""
+    fom = ms.models.tcom(nc=30)
+    red = ms.reducers.make("irka", fom)
+    red._setup()
+    G = fom.G.toarray()
+    N = np.linalg.svd(G)[2][G.shape[0]:].T  # orthonormal basis of null(G), dense reference
+    rng = np.random.default_rng(1)
+    X = np.linalg.qr(N @ rng.standard_normal((N.shape[1], 5)))[0]
+    assert red._restrict(X) is X
+    Y = np.linalg.qr(X + 1e-3 * G.T @ rng.standard_normal((G.shape[0], 5)))[0]
+    Z = red._restrict(Y)
+    assert np.abs(G @ Z).max() < 1e-14 and np.allclose(Z.T @ Z, np.eye(5), atol=1e-13)
+    assert np.linalg.norm(Z - N @ (N.T @ Z)) < 1e-13
+    a = _reduce(fom, 6).rom.freqresp(np.logspace(-2, 0, 20))
+    b = _reduce(fom, 6, check_solves="all").rom.freqresp(np.logspace(-2, 0, 20))
+    assert np.max(np.abs(a - b)) <= 1e-10 * np.max(np.abs(a))

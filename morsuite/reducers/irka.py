@@ -94,6 +94,7 @@ convergence the stable iterate with the smallest change is returned with
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 import scipy.linalg as sla
@@ -202,7 +203,7 @@ class IRKABase(Reducer):
             v = self._solve(lu, F @ (b if cplx else b.real), False, a)
             Vcols += [v.real, v.imag] if cplx else [np.real(v)]
             if left:
-                w = self._solve(lu, L.T @ (c if cplx else c.real), True, a)
+                w = self._solve(self._second(lu), L.T @ (c if cplx else c.real), True, a)
                 Wcols += [w.real, w.imag] if cplx else [np.real(w)]
             del lu  # a dense LU of the projected baseline is n1 x n1: free it before the next
         V = np.column_stack(Vcols)
@@ -213,6 +214,10 @@ class IRKABase(Reducer):
         """Hook: whether this iteration's solves are refined (IRKA: ``refine_when``)."""
         return False
 
+    def _second(self, lu):
+        """Hook: the factorization as used by the second (transposed) solve with it."""
+        return lu
+
     def _orthonormal(self, X):
         """(Q, s, gram_schmidt_used) per the option ``orthonormalization``."""
         o = self.options
@@ -222,10 +227,46 @@ class IRKABase(Reducer):
         if how == "auto" and getattr(self, "_ill_conditioned", False):
             # the previous iteration's bases were ill-conditioned: these will be too
             return (*_gram_schmidt(X, o["rank_tol"]), True)
-        Q, s = orth(X, o["rank_tol"])
+        Q, s = _orth(X, o["rank_tol"])
         if how == "auto" and Q.shape[1] and s[Q.shape[1] - 1] < o["ill_cond_tol"] * s[0]:
             return (*_gram_schmidt(X, o["rank_tol"]), True)
         return Q, s, False
+
+    def _rom_from_raw(self, Vraw, Wraw, left):
+        """Orthonormal bases, null(G), the oblique selection and the projection.
+
+        Returns (rom, k, k_rank, ill, gram_schmidt_used): k the order kept, k_rank
+        the numerical rank of the bases before the oblique selection, ill whether
+        a kept basis direction has relative singular value below ``ill_cond_tol``."""
+        o = self.options
+        V, sv, gs = self._orthonormal(Vraw)
+        ill = sv.size > 0 and sv[min(V.shape[1], sv.size) - 1] < o["ill_cond_tol"] * sv[0]
+        V = self._restrict(V)
+        if left:
+            W, sw, gs_w = self._orthonormal(Wraw)
+            gs = gs or gs_w
+            ill = ill or (sw.size > 0 and sw[min(W.shape[1], sw.size) - 1] < o["ill_cond_tol"] * sw[0])
+            W = self._restrict(W)
+            k = min(V.shape[1], W.shape[1])
+            if k == 0:
+                raise ModelError(_ZERO_MSG.format(name=self.name, what="the projection bases have rank 0"))
+            V, W = V[:, :k], W[:, :k]
+            k_rank = k
+            if o["oblique_tol"] > 0:
+                # drop directions in which the oblique projection V (W^T V)^-1 W^T
+                # is ill-conditioned: they give a near-singular reduced mass matrix
+                # and spurious (often unstable) poles of negligible residue
+                U_, s_, Zt_ = np.linalg.svd(W.T @ V)
+                k = int(np.sum(s_ > o["oblique_tol"] * s_[0])) if s_.size and s_[0] > 0 else 0
+                if k == 0:
+                    raise ModelError(_ZERO_MSG.format(name=self.name, what="W^T V = 0"))
+                V, W = V @ Zt_[:k].T, W @ U_[:, :k]
+        else:
+            W, k = V, V.shape[1]
+            k_rank = k
+            if k == 0:
+                raise ModelError(_ZERO_MSG.format(name=self.name, what="the projection basis has rank 0"))
+        return self._project(V, W), k, k_rank, bool(ill), bool(gs)
 
     def _restrict(self, X):
         """Hook: an orthonormal basis X moved back onto the model's state space
@@ -342,33 +383,7 @@ class IRKABase(Reducer):
             alpha, Vraw, Wraw, npert = self._bases_safe(alpha, bdir, cdir, left)
             perturbed += npert
             t0 = time.perf_counter()
-            V, sv, gs_v = self._orthonormal(Vraw)
-            ill = sv.size > 0 and sv[min(V.shape[1], sv.size) - 1] < o["ill_cond_tol"] * sv[0]
-            V = self._restrict(V)
-            if left:
-                W, sw, gs_w = self._orthonormal(Wraw)
-                ill = ill or (sw.size > 0 and sw[min(W.shape[1], sw.size) - 1] < o["ill_cond_tol"] * sw[0])
-                W = self._restrict(W)
-                k = min(V.shape[1], W.shape[1])
-                if k == 0:
-                    raise ModelError(_ZERO_MSG.format(name=self.name, what="the projection bases have rank 0"))
-                V, W = V[:, :k], W[:, :k]
-                k_rank = k
-                if o["oblique_tol"] > 0:
-                    # drop directions in which the oblique projection V (W^T V)^-1 W^T
-                    # is ill-conditioned: they give a near-singular reduced mass matrix
-                    # and spurious (often unstable) poles of negligible residue
-                    U_, s_, Zt_ = np.linalg.svd(W.T @ V)
-                    k = int(np.sum(s_ > o["oblique_tol"] * s_[0])) if s_.size and s_[0] > 0 else 0
-                    if k == 0:
-                        raise ModelError(_ZERO_MSG.format(name=self.name, what="W^T V = 0"))
-                    V, W = V @ Zt_[:k].T, W @ U_[:, :k]
-            else:
-                W, k = V, V.shape[1]
-                k_rank = k
-                if k == 0:
-                    raise ModelError(_ZERO_MSG.format(name=self.name, what="the projection basis has rank 0"))
-            rom = self._project(V, W)
+            rom, k, k_rank, ill, gs = self._rom_from_raw(Vraw, Wraw, left)
             poles = rom.poles()
             stable = bool(np.all(poles.real < 0))
             max_pole_real = float(poles.real.max()) if poles.size else -np.inf
@@ -400,7 +415,7 @@ class IRKABase(Reducer):
             self._ill_conditioned = bool(ill)
             rec = {"iteration": it, "shifts": alpha.copy(), "n_shifts": int(alpha.size), "rank": int(k),
                    "ill_conditioned": bool(ill), "refined": bool(refined),
-                   "gram_schmidt": bool(gs_v or (left and gs_w)),
+                   "gram_schmidt": gs,
                    "measure": measure, "shift_change": d_shift, "response_change": d_resp, "criterion": crit, "stable": stable, "max_pole_real": max_pole_real,
                    "update": uinfo["update"], "mirrored": uinfo["mirrored"]}
             history.append(rec)
@@ -531,6 +546,48 @@ def _relax(alpha, bdir, cdir, new_alpha, new_b, new_c, w):
     return a[order], b[order], c[order]
 
 
+def _orth(X, rank_tol):
+    """:func:`~morsuite.linalg.dense.orth` (the leading left singular vectors of the
+    column-scaled X and all its singular values), by two Cholesky-QR passes when X
+    is well-conditioned.
+
+    Cholesky-QR twice gives an orthonormal factor to rounding when cond(X) is below
+    about 1e6 (checked here: the relative singular values of the second pass);
+    otherwise, or when the Cholesky factorization fails, Householder QR as in
+    ``orth``. BLAS-3 instead of the BLAS-2 of Householder on a tall, thin matrix:
+    measured 1.7 ms against 5.0 ms for 6001 x 20 on one thread.
+    """
+    k = X.shape[1]
+    if k == 0 or X.shape[0] <= 4 * k:
+        return orth(X, rank_tol)
+    norms = np.linalg.norm(X, axis=0)
+    norms[norms == 0] = 1.0
+    Xn = X / norms
+    try:
+        Q, R = _cholesky_qr2(Xn, min_diag=1e-6)
+    except np.linalg.LinAlgError:
+        return orth(X, rank_tol)
+    U, s, _ = np.linalg.svd(R)
+    if not s[-1] > 1e-6 * s[0]:
+        return orth(X, rank_tol)
+    k = int(np.sum(s > rank_tol * s[0]))
+    return Q @ U[:, :k], s
+
+
+def _cholesky_qr2(X, min_diag=0.0):
+    """X = Q R by two Cholesky-QR passes (Q orthonormal to rounding for cond(X) up to
+    about 1e6). Raises LinAlgError when a Cholesky factorization fails or, in the
+    first pass, a diagonal entry of R is at most ``min_diag`` times the largest."""
+    R1 = np.linalg.cholesky(X.T @ X).T
+    d = np.abs(np.diag(R1))
+    if not d.min() > min_diag * d.max():
+        raise np.linalg.LinAlgError("ill-conditioned")
+    Q = sla.solve_triangular(R1, X.T, trans="T", lower=False, check_finite=False).T
+    R2 = np.linalg.cholesky(Q.T @ Q).T
+    Q = sla.solve_triangular(R2, Q.T, trans="T", lower=False, check_finite=False).T
+    return Q, R2 @ R1
+
+
 def _gram_schmidt(X, rank_tol, pivot=True):
     """Orthonormal basis of the numerical range of X by column-pivoted modified
     Gram-Schmidt with one reorthogonalisation of every accepted vector.
@@ -650,6 +707,13 @@ class IRKA(IRKABase):
         "kernel_projection": Option(True, "bool", "project the orthonormalised bases back onto null(G) "
                                     "(rounding in the orthonormalisation moves directions of singular value "
                                     "sigma out of it by eps/sigma)"),
+        "kernel_tol": Option(1e-14, "float", "kernel_projection leaves an orthonormal basis unchanged when the "
+                             "component it would remove has norm at most this (per column, RMS)",
+                             low=0, high=1, open_high=True),
+        "check_solves": Option("first", "choice", "backward-error check of the saddle-point solves: the first "
+                               "solve with each LU (it probes the stability of the factors, which the "
+                               "transposed solve shares) or all of them",
+                               choices=("first", "all")),
     }
 
     def _setup(self):
@@ -699,6 +763,11 @@ class IRKA(IRKABase):
         o = self.options
         return o["refine"] > 0 and (o["refine_when"] == "always" or getattr(self, "_ill_conditioned", False))
 
+    def _second(self, lu):
+        if self.options["check_solves"] == "all" or lu.matrix is None:
+            return lu
+        return replace(lu, matrix=None)  # the same factors, unchecked
+
     def _refine_operator(self, a, trans, ext):
         """x -> S(a) x (``trans``: S(a)^T x) in the refinement precision, one sparse product.
 
@@ -746,18 +815,18 @@ class IRKA(IRKABase):
         if self._GGt is None or X.shape[1] == 0:
             return X
         G = self.fom.G
-        for _ in range(2):  # twice is enough
-            X = X - G.T @ self._GGt.solve(np.asarray(G @ X))
+        C = G.T @ self._GGt.solve(np.asarray(G @ X))
+        if np.linalg.norm(C) <= self.options["kernel_tol"] * np.sqrt(X.shape[1]):
+            return X  # X is in null(G) to rounding (a well-conditioned basis): nothing to remove
+        X = X - C
+        X = X - G.T @ self._GGt.solve(np.asarray(G @ X))  # twice is enough
         # re-orthonormalise in order (X is orthonormal up to the removed part); a direction
         # almost wholly in range(G^T) carries no state and is dropped (Gram-Schmidt). When
         # every column kept most of its norm, X is near-orthonormal and two Cholesky-QR
         # passes (BLAS-3, the same column span and order) do it at a fraction of the cost
         if np.min(np.linalg.norm(X, axis=0)) > 0.5:
             try:
-                for _ in range(2):
-                    R = np.linalg.cholesky(X.T @ X).T
-                    X = sla.solve_triangular(R, X.T, trans="T", lower=False).T
-                return X
+                return _cholesky_qr2(X)[0]
             except np.linalg.LinAlgError:
                 pass
         return _gram_schmidt(X, 1e-2, pivot=False)[0]
