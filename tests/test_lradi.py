@@ -252,3 +252,42 @@ def test_unconstrained_model():
     assert c.converged and o.converged
     rp, rq = dense_residuals(fom, c, o)
     assert rp < 1e-9 and rq < 1e-9
+
+
+def test_standard_eigenproblem_shifts_equal_qz_shifts():
+    """Projection shifts from geev on E^-1 A (the default for a well-conditioned X^T M X)
+    are those of QZ on the pencil (standard_rcond=0), for both selections."""
+    fom = ms.models.tcom(nc=10)
+    c, o = lradi_pair(fom, tol=1e-6)
+    X = np.hstack([c.position, c.velocity])
+    res = [("controllability", c.position[:, :1], c.velocity[:, :1]),
+           ("observability", o.position[:, :1], o.velocity[:, :1])]
+    for kw in ({"selection": "gain"}, {"residuals": res}):
+        a = projection_shifts(fom, X, 6, **kw)
+        b = projection_shifts(fom, X, 6, standard_rcond=0, **kw)
+        assert a.size == b.size > 0
+        assert np.max(np.abs(np.sort_complex(a) - np.sort_complex(b)) / np.abs(b).max()) < 1e-9
+    assert c.summary()["ritz_standard_rcond"] == 1e-8
+
+
+def test_range_space_projection_equals_dense_projector(make_random_model):
+    """ManifoldProjector.project (b - G^T X^T b) against Pi = I - G^T (G M^-1 G^T)^-1 G M^-1,
+    formed densely; above RANGE_FORM_MAX_N2 constraints it falls back to the solve."""
+    from morsuite.linalg.lradi import ManifoldProjector
+
+    fom = make_random_model(n1=14, n2=3, m=2, p=2, seed=4)
+    M, G = fom.M.toarray(), fom.G.toarray()
+    Mi = np.linalg.inv(M)
+    Pi = np.eye(fom.n1) - G.T @ np.linalg.solve(G @ Mi @ G.T, G @ Mi)
+    b = np.random.default_rng(0).standard_normal((fom.n1, 4)) + 1j
+    proj = ManifoldProjector(fom, fom.new_solver(cache_size=0))
+    assert proj._X is not None
+    assert np.allclose(proj.project(b), Pi @ b, rtol=0, atol=1e-12 * np.abs(Pi @ b).max())
+    assert np.allclose(proj.project(b), proj(b)[0], rtol=0, atol=1e-12 * np.abs(b).max())
+    try:
+        ManifoldProjector.RANGE_FORM_MAX_N2 = 2
+        proj2 = ManifoldProjector(fom, fom.new_solver(cache_size=0))
+        assert proj2._X is None
+        assert np.allclose(proj2.project(b), Pi @ b, rtol=0, atol=1e-12 * np.abs(Pi @ b).max())
+    finally:
+        ManifoldProjector.RANGE_FORM_MAX_N2 = 64
