@@ -481,8 +481,8 @@ def _projection_diagnostics(method, fom, info):
         red._setup()
         o = red.options
         V, W = red._bases(as_complex(info["shifts"]), as_complex(info["b"]), as_complex(info["c"]), True)
-        Vo, sv = orth(V, o["rank_tol"])
-        Wo, sw = orth(W, o["rank_tol"])
+        Vo, sv = orth(V, o["rank_tol"], method="householder")
+        Wo, sw = orth(W, o["rank_tol"], method="householder")
         k = min(Vo.shape[1], Wo.shape[1])
         if k == 0:
             return None

@@ -262,7 +262,7 @@ def test_cli_reduce_json():
 def test_cholesky_qr_orth_matches_svd_and_falls_back():
     """The BLAS-3 orthonormal basis: same singular values and span as numpy's SVD of the
     column-scaled matrix; an ill-conditioned or rank-deficient matrix goes to Householder."""
-    from morsuite.reducers.irka import _orth
+    from morsuite.linalg.dense import orth
 
     rng = np.random.default_rng(3)
     for cond in (1.0, 1e4, 1e9):
@@ -270,15 +270,17 @@ def test_cholesky_qr_orth_matches_svd_and_falls_back():
         X = U0 @ np.diag(np.logspace(0, -np.log10(cond), 12)) @ np.linalg.qr(rng.standard_normal((12, 12)))[0]
         Xn = X / np.linalg.norm(X, axis=0)
         Ur, s_ref, _ = np.linalg.svd(Xn, full_matrices=False)
-        Q, s = _orth(X, 1e-14)
+        Q, s = orth(X, 1e-14)
         assert np.allclose(s, s_ref, rtol=1e-8, atol=1e-15 * s_ref[0])
         assert np.allclose(Q.T @ Q, np.eye(Q.shape[1]), atol=1e-13)
         # the span of the leading singular vectors, up to the gap to the next singular value
         k = Q.shape[1]
         assert np.linalg.norm(Ur[:, :k] - Q @ (Q.T @ Ur[:, :k])) < 1e-10
+        Qh, sh = orth(X, 1e-14, method="householder")
+        assert np.allclose(s, sh, rtol=1e-8, atol=1e-15 * sh[0]) and Qh.shape == Q.shape
     X = rng.standard_normal((500, 6))
     X = np.hstack([X, X[:, :2]])  # rank 6
-    Q, s = _orth(X, 1e-12)
+    Q, s = orth(X, 1e-12)
     assert Q.shape[1] == 6 and s[-1] < 1e-12 * s[0]
 
 

@@ -579,8 +579,10 @@ def projection_shifts(fom, basis, num, *, residuals=(), selection="residual", us
     # the pencil's eigenvalues and right vectors, and its left vectors are Ehs^T times the pencil's
     mlu = None
     standard_rcond = STANDARD_RCOND if standard_rcond is None else standard_rcond
-    if standard_rcond > 0:
-        mlu = sla.lu_factor(Mk, check_finite=False)
+    if standard_rcond > 0 and nm > 0:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", sla.LinAlgWarning)  # a singular Mk: dgecon says so
+            mlu = sla.lu_factor(Mk, check_finite=False)
         rcond, info = sla.lapack.dgecon(mlu[0], nm, norm="1")
         if info != 0 or not rcond > standard_rcond:
             mlu = None
