@@ -134,10 +134,28 @@ def test_refinement_operator_in_long_double():
     for a in (0.3 + 0.7j, 0.05):
         S = red._solver.matrix(a)
         for trans in (False, True):
-            y = red._refine_operator(a, trans, True)(x.astype(np.clongdouble))
-            assert y.dtype == np.clongdouble
+            op = red._refine_operator(a, trans, True)
+            yr, yi = op(x.real.astype(np.longdouble), x.imag.astype(np.longdouble))
+            assert yr.dtype == yi.dtype == np.longdouble
             ref = (S.T if trans else S) @ x
-            assert np.max(np.abs(y.astype(complex) - ref)) <= 1e-14 * np.max(np.abs(ref))
+            assert np.max(np.abs(yr.astype(float) + 1j * yi.astype(float) - ref)) <= 1e-14 * np.max(np.abs(ref))
+            # a real vector: the imaginary part is that of S(a) alone (None for a real shift)
+            yr, yi = op(x.real.astype(np.longdouble))
+            ref = (S.T if trans else S) @ x.real
+            got = yr.astype(float) + (0 if yi is None else 1j * yi.astype(float))
+            assert (yi is None) == (np.imag(a) == 0)
+            assert np.max(np.abs(got - ref)) <= 1e-14 * np.max(np.abs(ref))
+            # the same bits as complex long double arithmetic on the complex entries
+            m, d, k, g = red._refine_cache["parts"]
+            aa = np.clongdouble(a)
+            data = (aa * aa) * m + aa * d + k + g
+            idx, starts, nonempty = red._refine_cache["structure"][trans]
+            data = data if trans else data[red._refine_cache["perm"]]
+            xe = x.astype(np.clongdouble)
+            ye = np.zeros(N, dtype=np.clongdouble)
+            ye[nonempty] = np.add.reduceat(data * xe[idx], starts)
+            yr, yi = op(x.real.astype(np.longdouble), x.imag.astype(np.longdouble))
+            assert np.array_equal(yr, ye.real) and np.array_equal(yi, ye.imag)
 
 def test_rom_matches_python_control():
     fom = ms.models.dsms(200)
@@ -302,3 +320,38 @@ def test_kernel_projection_and_first_solve_checks():
     a = _reduce(fom, 6).rom.freqresp(np.logspace(-2, 0, 20))
     b = _reduce(fom, 6, check_solves="all").rom.freqresp(np.logspace(-2, 0, 20))
     assert np.max(np.abs(a - b)) <= 1e-10 * np.max(np.abs(a))
+
+
+def test_residue_selection_hysteresis_keeps_a_pole_in_use():
+    """Two real poles with near-equal H2 scores compete for one slot: without hysteresis the
+    larger score wins; with it the pole whose mirror is a current shift stays, unless the
+    other scores higher by more than the factor 1 + h."""
+    from morsuite.reducers.irka import _select_by_residue
+
+    lam = np.array([-1.0, -2.0], dtype=complex)
+    # scores |b||c| / sqrt(2 |Re lam|): pole 1 scores 2% above pole 0
+    b = np.array([[1.0], [1.02 * np.sqrt(2.0)]], dtype=complex)
+    c = np.ones((2, 1), dtype=complex)
+    assert list(_select_by_residue(lam, b, c, 1)) == [1]
+    assert list(_select_by_residue(lam, b, c, 1, current=np.array([1.0 + 0j]), hysteresis=0.3)) == [0]
+    assert list(_select_by_residue(lam, b, c, 1, current=np.array([1.0 + 0j]), hysteresis=0.01)) == [1]
+    # a current shift farther than the radius from every mirrored pole: no preference
+    assert list(_select_by_residue(lam, b, c, 1, current=np.array([1.2 + 0j]), hysteresis=0.3,
+                                   radius=0.05)) == [1]
+    # conjugate pairs stay whole
+    lam = np.array([-1 + 3j, -1 - 3j, -0.5], dtype=complex)
+    b = np.array([[2.0], [2.0], [1.0]], dtype=complex)  # scores 1.41, 1.41, 1
+    c3 = np.ones((3, 1), dtype=complex)
+    assert sorted(_select_by_residue(lam, b, c3, 2)) == [0, 1]
+    # the favoured real pole takes the first slot; the pair does not fit in the one left
+    # and is not split (the update's _fill_odd_slot fills that slot)
+    assert list(_select_by_residue(lam, b, c3, 2, current=np.array([0.5 + 0j]), hysteresis=10.0)) == [2]
+    assert sorted(_select_by_residue(lam, b, c3, 3, current=np.array([0.5 + 0j]), hysteresis=10.0)) == [0, 1, 2]
+
+
+def test_irka_records_the_hysteresis_option():
+    fom = ms.models.tcom(nc=20)
+    info = ms.reducers.make("irka", fom, update="residue", residue_hysteresis=0.0).reduce(4).info
+    assert info["options"]["residue_hysteresis"] == 0.0 and info["options"]["hysteresis_radius"] == 0.05
+    with pytest.raises(ms.errors.InputError, match="residue_hysteresis"):
+        ms.reducers.make("irka", fom, residue_hysteresis=-1.0)

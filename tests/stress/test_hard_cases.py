@@ -181,7 +181,7 @@ def test_a_forced_two_cycle_is_detected_and_the_best_iterate_returned(monkeypatc
             np.array([0.05, 0.1 - 0.1j, 0.1 + 0.1j], dtype=complex)]
     calls = []
 
-    def alternate(self, rom, k, how):
+    def alternate(self, rom, k, how, current=None):
         alpha = sets[len(calls) % 2]
         calls.append(how)
         ones = np.ones((3, 1), dtype=complex)
