@@ -736,8 +736,7 @@ class IRKA(IRKABase):
         ft = np.longdouble if ext else float
         n1 = self.fom.n1
         apply = self._refine_operator(a, trans, ext)
-        # real and imaginary parts held apart (numpy's complex long double arithmetic is
-        # several times slower; the same products and sums in the same order, so the same bits)
+        # real and imaginary parts held apart (see _refine_operator: the same bits, faster)
         b = np.asarray(rhs).reshape(-1)
         cplx = np.iscomplexobj(x) or np.iscomplexobj(b) or complex(a).imag != 0
         br = np.zeros(x.size, dtype=ft)
@@ -777,8 +776,9 @@ class IRKA(IRKABase):
         fixed pattern are formed once per shift in that precision; the product is a
         gather, a multiply and a segmented sum (scipy.sparse has no long double). The
         real operations and their order are those of numpy's complex arithmetic on the
-        complex entries (so the result is bit for bit that of the complex product), at a
-        third of its cost: numpy's complex long double multiply is not vectorised."""
+        complex entries, so the result is bit for bit that of the complex product (tested);
+        measured on dsms(6000), forming S(a) and two products: 1.5x faster than in complex
+        long double for a complex shift, 3.9x for a real one (its vectors stay real)."""
         cache = self.__dict__.setdefault("_refine_cache", {})
         P = self._solver.pattern
         ft = np.longdouble if ext else float
