@@ -593,7 +593,7 @@ def _gram_schmidt(X, rank_tol, pivot=True):
     s = []
     m = 0
     while m < k:
-        res = np.sqrt(np.einsum("ij,ij->j", R[:, m:], R[:, m:]))
+        res = np.sqrt(np.einsum("ij,ij->j", R[:, m:k], R[:, m:k]))
         j = m + int(np.argmax(res)) if pivot else m
         rj = res[j - m]
         if rj <= rank_tol:
@@ -611,14 +611,18 @@ def _gram_schmidt(X, rank_tol, pivot=True):
         s.append(rj)
         m += 1
         if m < k:
-            # R[:, m:] -= outer(q, c) a column at a time through one buffer: the same
-            # products and differences, bit for bit (tested), without the n x (k - m)
-            # temporary; 2x faster on the dsms(6000) bases (6000 x 20)
-            c = q @ R[:, m:]
-            for jj in range(m, k):
-                np.multiply(q, c[jj - m], out=tmp)
-                np.subtract(R[:, jj], tmp, out=R[:, jj])
+            _remove_direction(R, q, m, k, tmp)
     return Q[:, :m], np.asarray(s)
+
+
+def _remove_direction(R, q, m, k, tmp):
+    """R[:, m:k] -= outer(q, q @ R[:, m:k]), a column at a time through the n-buffer tmp:
+    the same products and differences as with np.outer, bit for bit (tested), without
+    the n x (k - m) temporary; 2x faster on the dsms(6000) bases (6000 x 20)."""
+    c = q @ R[:, m:k]
+    for j in range(m, k):
+        np.multiply(q, c[j - m], out=tmp)
+        np.subtract(R[:, j], tmp, out=R[:, j])
 
 
 def _normalize_rows(X):
