@@ -23,6 +23,7 @@ from hypothesis import strategies as st
 
 import morsuite as ms
 from morsuite import stress as S
+from morsuite.stress.outcomes import _run_reducer
 from stress_support import STRESS, model_params
 
 pytestmark = pytest.mark.stress
@@ -127,7 +128,7 @@ def test_converged_irka_satisfies_hermite_conditions(kw, r):
 
     fom = ms.models.random_constrained(**kw)
     r = min(r, fom.order)
-    res, exc, W = S._run_reducer("irka", fom, r, {"maxit": 60})
+    res, exc, W = _run_reducer("irka", fom, r, {"maxit": 60})
     if exc is not None:
         accept(S.classify_exception(fom, exc, W))
         return

@@ -1,0 +1,402 @@
+r"""The table of refused inputs: every input the suite refuses, its error class and message.
+
+Each row is a :class:`Refusal` ``(key, area, what, call, error, match,
+needs_data)``: ``call(tmp, data)`` must raise ``error`` (a subclass of
+:class:`~morsuite.errors.MorsuiteError`) with a message matching the regex
+``match``; ``tmp`` is a scratch directory and ``data`` the directory holding
+:data:`DATA_FILE` (the M.E.S.S. DSMS file with g = 600), used only by the rows
+with ``needs_data``. tests/stress/test_refused_inputs.py runs one test per row;
+:func:`markdown_table` runs every row and prints the table of the README
+section "Refused inputs" with the actual messages::
+
+    python -m morsuite.stress --refused-table [--data-dir DIR]
+
+The data directory defaults to ``tests/data`` of the repository checkout the
+package is imported from (:func:`default_data_dir`); where that file is absent
+(an installed package) the rows that need it are left out of the table and
+named on stderr. Running the table costs a few seconds (it builds dsms(2000)
+and runs IRKA on dsms(20)).
+"""
+
+from __future__ import annotations
+
+import copy
+import sys
+import tempfile
+import warnings
+from pathlib import Path
+from typing import Callable, NamedTuple
+
+import numpy as np
+import scipy.io as sio
+import scipy.sparse as sp
+
+import morsuite as ms
+
+from ..errors import (FileFormatError, InputError, MemoryBudgetError, ModelError, OptionError, ShapeError,
+                      SingularShiftError, SpecError)
+
+__all__ = ["Refusal", "CASES", "DATA_FILE", "default_data_dir", "table_rows", "markdown_table"]
+
+#: the data file of the rows with ``needs_data``
+DATA_FILE = "mess_msd_ind3_g600.mat"
+#: messages longer than this are cut in the table
+MAX_MESSAGE = 160
+_CHECKOUT_DATA = Path(__file__).resolve().parents[2] / "tests" / "data"
+
+
+class Refusal(NamedTuple):
+    """One row of the table: ``call(tmp, data)`` raises ``error`` with a message matching ``match``."""
+
+    key: str
+    area: str
+    what: str
+    call: Callable
+    error: type
+    match: str
+    needs_data: bool = False
+
+
+def default_data_dir() -> Path | None:
+    """``tests/data`` of the repository checkout (None if it has no :data:`DATA_FILE`)."""
+    return _CHECKOUT_DATA if (_CHECKOUT_DATA / DATA_FILE).is_file() else None
+
+
+def _parts():
+    """Consistent (M, D, K, G, F, L) of a 6-mass chain with one constraint."""
+    n1 = 6
+    M = sp.identity(n1, format="csr") * 2.0
+    K = sp.diags([-np.ones(n1 - 1), 3 * np.ones(n1), -np.ones(n1 - 1)], [-1, 0, 1], format="csr")
+    G = sp.csr_matrix(([1.0, -1.0], ([0, 0], [0, n1 - 1])), shape=(1, n1))
+    F = np.zeros((n1, 1))
+    F[0, 0] = 1.0
+    L = np.zeros((2, n1))
+    L[0, 1] = L[1, 2] = 1.0
+    return dict(M=M, D=0.1 * K, K=K, G=G, F=F, L=L)
+
+
+def _model(**replace):
+    p = _parts()
+    p.update(replace)
+    kw = {k: p.pop(k) for k in ("band",) if k in p}
+    return ms.models.Index3Model(p["M"], p["D"], p["K"], p["G"], p["F"], p["L"], **kw)
+
+
+def _small():
+    return ms.models.dsms(20)
+
+
+def _irka(**options):
+    return ms.reducers.make("irka", _small(), **options)
+
+
+_SPEC = {"name": "t", "models": {"d": "dsms:g=20"}, "methods": {"irka": {}},
+         "scenes": [{"name": "s", "kind": "error", "model": "d", "r": 2}]}
+
+
+def _spec(**edit):
+    """A copy of a minimal valid study dict with top-level or scene keys replaced (``scene_*``)."""
+    from ..studies.spec import study_from_dict
+
+    data = copy.deepcopy(_SPEC)
+    for k, v in edit.items():
+        if k.startswith("scene_"):
+            data["scenes"][0][k[6:]] = v
+        else:
+            data[k] = v
+    return study_from_dict(data)
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+def _mat_without(tmp: Path, data: Path, key: str) -> Path:
+    raw = sio.loadmat(str(data / DATA_FILE))
+    kept = {k: v for k, v in raw.items() if not k.startswith("__") and k != key}
+    out = tmp / f"no{key}.mat"
+    sio.savemat(str(out), kept)
+    return out
+
+
+def _npz_without(tmp: Path, key: str) -> Path:
+    out = tmp / "m.npz"
+    ms.models.save_npz(_small(), out)
+    with np.load(out, allow_pickle=False) as z:
+        data = {k: z[k] for k in z.files if k != key}
+    bad = tmp / f"no_{key}.npz"
+    np.savez(bad, **data)
+    return bad
+
+
+def _pole_model():
+    n1 = 4
+    K = sp.diags([-1.0, 2.0, 2.0, 2.0], format="csr")
+    G = sp.csr_matrix(([1.0, -1.0], ([0, 0], [1, 3])), shape=(1, n1))
+    F = np.ones((n1, 1))
+    return ms.models.Index3Model(sp.identity(n1), sp.csr_matrix((n1, n1)), K, G, F, F.T)
+
+
+def _lradi():
+    import importlib
+    return importlib.import_module("morsuite.linalg.lradi").lradi
+
+
+_ROWS = [
+    # -- model matrices ------------------------------------------------------------
+    ("M-missing", "matrix", "M is None", lambda t, d: _model(M=None), InputError, r"matrix M is missing"),
+    ("M-not-square", "matrix", "M of shape (6, 5)", lambda t, d: _model(M=sp.random(6, 5, 0.5, format="csr")),
+     ShapeError, r"matrix M must be square"),
+    ("M-empty", "matrix", "M of shape (0, 0)", lambda t, d: ms.models.Index3Model(
+        np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0)), None, np.zeros((0, 1)), np.zeros((1, 0))),
+     ShapeError, r"matrix M is empty"),
+    ("D-shape", "matrix", "D not n1 x n1", lambda t, d: _model(D=sp.identity(5)), ShapeError,
+     r"matrix D has shape \(5, 5\); expected \(6, 6\)"),
+    ("K-shape", "matrix", "K not n1 x n1", lambda t, d: _model(K=sp.identity(7)), ShapeError, r"matrix K has shape"),
+    ("G-columns", "matrix", "G with n1 - 1 columns", lambda t, d: _model(G=sp.csr_matrix(np.ones((1, 5)))),
+     ShapeError, r"matrix G has 5 columns; expected n1 = 6"),
+    ("G-too-many-rows", "matrix", "n2 >= n1", lambda t, d: _model(G=sp.identity(6, format="csr")), ShapeError,
+     r"matrix G has n2 = 6 rows; expected n2 < n1"),
+    ("F-rows", "matrix", "F with n1 - 1 rows", lambda t, d: _model(F=np.ones((5, 1))), ShapeError,
+     r"matrix F has 5 rows; expected n1 = 6"),
+    ("L-columns", "matrix", "L with n1 + 1 columns", lambda t, d: _model(L=np.ones((1, 7))), ShapeError,
+     r"matrix L has 7 columns; expected n1 = 6"),
+    ("F-no-columns", "matrix", "F of shape (n1, 0)", lambda t, d: _model(F=np.zeros((6, 0))), ShapeError,
+     r"at least one input and one output"),
+    ("K-nan", "matrix", "NaN entry in K", lambda t, d: _model(K=_parts()["K"] * np.nan), InputError,
+     r"matrix K has non-finite entries"),
+    ("F-inf", "matrix", "inf entry in F", lambda t, d: _model(F=np.full((6, 1), np.inf)), InputError,
+     r"matrix F has non-finite entries"),
+    ("K-complex", "matrix", "complex K (nonzero imaginary part)", lambda t, d: _model(K=_parts()["K"] * (1 + 1j)),
+     InputError, r"matrix K is complex with a nonzero imaginary part"),
+    ("F-object", "matrix", "F of dtype object", lambda t, d: _model(F=np.array([[None]] * 6)), InputError,
+     r"matrix F has dtype object"),
+    ("L-strings", "matrix", "L of strings", lambda t, d: _model(L=np.array([["a"] * 6])), InputError,
+     r"matrix L has non-numeric dtype"),
+    ("M-ragged", "matrix", "M as a ragged nested list", lambda t, d: _model(M=[[1.0, 2.0], [3.0]]), InputError,
+     r"matrix M is not a rectangular array"),
+    ("M-3d", "matrix", "M with 3 dimensions", lambda t, d: _model(M=np.ones((6, 6, 1))), ShapeError,
+     r"matrix M must be 2-D"),
+    ("G-zero-row", "matrix", "a zero row in G", lambda t, d: _model(G=sp.csr_matrix(np.vstack([
+        _parts()["G"].toarray(), np.zeros((1, 6))]))), ModelError, r"matrix G has zero rows \[1\]"),
+    ("G-rank", "matrix", "G with two equal rows", lambda t, d: _model(G=sp.csr_matrix(np.vstack([
+        _parts()["G"].toarray()] * 2))), ModelError, r"matrix G is numerically rank deficient"),
+    ("M-singular", "matrix", "singular M with constraints", lambda t, d: _model(M=sp.diags([1.0, 1, 1, 1, 1, 0])),
+     ModelError, r"matrix M is singular; the constraint check needs M\^-1"),
+    ("band-order", "model", "band = (1, 0.1)", lambda t, d: _model(band=(1.0, 0.1)), InputError,
+     r"band must satisfy 0 < lo < hi < inf"),
+    ("band-pair", "model", "band = 5", lambda t, d: _model(band=5), InputError, r"band must be a pair"),
+    # -- evaluation ---------------------------------------------------------------------
+    ("s-nan", "argument", "transfer(nan)", lambda t, d: _small().transfer(np.nan), InputError,
+     r"s must be finite"),
+    ("s-text", "argument", "transfer('1j')", lambda t, d: _small().transfer("x"), InputError,
+     r"s must be a scalar number"),
+    ("omega-empty", "argument", "freqresp([])", lambda t, d: _small().freqresp([]), InputError,
+     r"omega must be a non-empty 1-D array"),
+    ("omega-complex", "argument", "freqresp([1j])", lambda t, d: _small().freqresp([1j]), InputError,
+     r"omega must be real"),
+    ("omega-nan", "argument", "freqresp([nan])", lambda t, d: _small().freqresp([np.nan]), InputError,
+     r"omega has non-finite entries"),
+    ("s-pole", "argument", "transfer(s) at a pole", lambda t, d: _pole_model().transfer(1.0), SingularShiftError,
+     r"exactly singular: the shift is a pole"),
+    ("coeffs-nan", "argument", "SaddlePointSolver.factor(coeffs=(nan, 0, 1))",
+     lambda t, d: _small().new_solver().factor(coeffs=(np.nan, 0.0, 1.0)), InputError, r"coeffs must be finite"),
+    ("rhs-rows", "argument", "SaddleLU.solve with a wrong number of rows",
+     lambda t, d: _small().new_solver().factor(1j).solve(np.ones(3)), InputError, r"rhs has 3 rows"),
+    # -- generators and the catalog --------------------------------------------------------------
+    ("dsms-g", "generator", "dsms(g=3)", lambda t, d: ms.models.dsms(3), InputError, r"g must be finite and >= 4"),
+    ("tcom-odd", "generator", "tcom(nc=5) constrained", lambda t, d: ms.models.tcom(5), InputError,
+     r"nc must be even for the constrained TCOM"),
+    ("random-n2", "generator", "random_constrained(n1=10, n2=6)",
+     lambda t, d: ms.models.random_constrained(n1=10, n2=6), InputError, r"n2 must be an integer in \[0, 5\]"),
+    ("random-damping", "generator", "random_constrained(damping='viscous')",
+     lambda t, d: ms.models.random_constrained(damping="viscous"), InputError, r"damping must be one of"),
+    ("random-spread", "generator", "random_constrained(mass_spread=20)",
+     lambda t, d: ms.models.random_constrained(mass_spread=20), InputError, r"mass_spread must be finite and in"),
+    ("random-unit", "generator", "random_constrained(stiffness_unit=-1)",
+     lambda t, d: ms.models.random_constrained(stiffness_unit=-1.0), InputError,
+     r"stiffness_unit must be finite and in \(0"),
+    ("catalog-name", "model spec", "'nope:g=3'", lambda t, d: ms.models.parse("nope:g=3"), InputError,
+     r"unknown model 'nope'; available: dsms, random, tcom"),
+    ("catalog-param", "model spec", "'dsms:h=3'", lambda t, d: ms.models.parse("dsms:h=3"), InputError,
+     r"model 'dsms' has no parameter 'h'"),
+    ("catalog-syntax", "model spec", "'dsms:g'", lambda t, d: ms.models.parse("dsms:g"), InputError,
+     r"expected key=value, got 'g'"),
+    # -- files ---------------------------------------------------------------------------------------
+    ("file-missing", "file", "load('nothing.npz')", lambda t, d: ms.models.load(t / "nothing.npz"),
+     FileFormatError, r"does not exist or is not a file"),
+    ("file-extension", "file", "load('model.txt')", lambda t, d: ms.models.load(_write(t / "model.txt", "x")),
+     FileFormatError, r"unknown extension '\.txt'; expected \.mat or \.npz"),
+    ("npz-corrupt", "file", "a .npz that is not a zip", lambda t, d: ms.models.load(_write(t / "bad.npz", "junk")),
+     FileFormatError, r"not a readable npz file"),
+    ("npz-key", "file", ".npz without F", lambda t, d: ms.models.load(_npz_without(t, "F")), FileFormatError,
+     r"missing key F"),
+    ("npz-format", "file", ".npz without the format tag", lambda t, d: ms.models.load(_npz_without(t, "format")),
+     FileFormatError, r"entry 'format' is missing"),
+    ("mat-corrupt", "file", "a .mat that is not MATLAB", lambda t, d: ms.models.load(_write(t / "bad.mat", "junk")),
+     FileFormatError, r"not a readable \.mat file"),
+    ("mat-G", "file", ".mat without G", lambda t, d: ms.models.load(_mat_without(t, d, "G")), FileFormatError,
+     r"missing matrix G"),
+    ("mat-sign", "file", "M.E.S.S. file read with sign='physical'",
+     lambda t, d: ms.models.load_mat(d / DATA_FILE, sign="physical"), FileFormatError,
+     r"does not follow the sign='physical' convention"),
+    ("mat-sign-option", "option", "load_mat(sign='negative')",
+     lambda t, d: ms.models.load_mat(d / DATA_FILE, sign="negative"), InputError,
+     r"sign must be 'mess' or 'physical'"),
+    ("save-non-model", "argument", "save_npz(a dict)", lambda t, d: ms.models.save_npz({}, t / "x.npz"),
+     InputError, r"model must be an Index3Model; got dict"),
+    ("rom-missing", "file", "load_rom('none.npz')", lambda t, d: ms.rom.load_rom(t / "none.npz"),
+     FileFormatError, r"ROM file .* does not exist"),
+    ("rom-kind", "file", "ROM .npz without 'kind'",
+     lambda t, d: ms.rom.load_rom((np.savez(t / "r.npz", M=np.eye(1)), t / "r.npz")[1]),
+     FileFormatError, r"entry 'kind' missing or unknown"),
+    ("rom-extension", "argument", "rom.save('rom.txt')",
+     lambda t, d: ms.rom.SecondOrderROM(np.eye(1), np.eye(1), np.eye(1), np.ones(1), np.ones(1)).save(t / "r.txt"),
+     InputError, r"extension must be \.npz or \.mat"),
+    # -- reducers: names, options, r ----------------------------------------------------------------
+    ("reducer-name", "option", "make('irk', fom)", lambda t, d: ms.reducers.make("irk", _small()), OptionError,
+     r"unknown reducer 'irk'; available: .*irka"),
+    ("reducer-fom", "argument", "make('irka', a matrix)", lambda t, d: ms.reducers.make("irka", np.eye(3)),
+     InputError, r"fom must be an Index3Model"),
+    ("option-unknown", "option", "irka(tolerance=1e-6)", lambda t, d: _irka(tolerance=1e-6), OptionError,
+     r"IRKA got unknown option\(s\) 'tolerance'; valid options: .*tol"),
+    ("option-tol", "option", "irka(tol=-1)", lambda t, d: _irka(tol=-1), OptionError,
+     r"The 'tol' parameter of IRKA must be a float in \(0, 1\)\. Got -1 instead\."),
+    ("option-maxit", "option", "irka(maxit=0)", lambda t, d: _irka(maxit=0), OptionError,
+     r"The 'maxit' parameter of IRKA must be an int in \[1, inf\)"),
+    ("option-bool", "option", "irka(maxit=True)", lambda t, d: _irka(maxit=True), OptionError,
+     r"The 'maxit' parameter of IRKA must be an int"),
+    ("option-choice", "option", "irka(update='newton')", lambda t, d: _irka(update="newton"), OptionError,
+     r"The 'update' parameter of IRKA must be one of 'auto', 'bt', 'residue'"),
+    ("option-nan-shift", "option", "irka(init='given', init_shifts=[nan])",
+     lambda t, d: _irka(init="given", init_shifts=[np.nan]), OptionError,
+     r"The 'init_shifts' parameter of IRKA must be an array of numbers"),
+    ("given-missing", "option", "irka(init='given') without init_shifts", lambda t, d: _irka(init="given"),
+     InputError, r"init='given' needs the option init_shifts"),
+    ("given-unused", "option", "irka(init_shifts=[1.0]) with init='logspace'", lambda t, d: _irka(init_shifts=[1.0]),
+     InputError, r"only used with init='given'"),
+    ("given-lhp", "option", "init_shifts in the left half-plane",
+     lambda t, d: _irka(init="given", init_shifts=[-1.0, 0.5]).reduce(2), InputError,
+     r"init_shifts must lie in the open right half-plane"),
+    ("given-imag-axis", "option", "init_shifts on the imaginary axis",
+     lambda t, d: _irka(init="given", init_shifts=[1j, -1j]).reduce(2), InputError,
+     r"init_shifts must lie in the open right half-plane"),
+    ("given-conjugate", "option", "init_shifts not closed under conjugation",
+     lambda t, d: _irka(init="given", init_shifts=[1 + 1j, 2.0]).reduce(2), InputError,
+     r"init_shifts must be closed under complex conjugation"),
+    ("r-zero", "argument", "reduce(0)", lambda t, d: _irka().reduce(0), InputError,
+     r"r must be a positive integer; got 0"),
+    ("r-float", "argument", "reduce(2.5)", lambda t, d: _irka().reduce(2.5), InputError,
+     r"r must be a positive integer; got 2\.5"),
+    ("r-bool", "argument", "reduce(True)", lambda t, d: _irka().reduce(True), InputError,
+     r"r must be a positive integer; got True"),
+    ("r-order", "argument", "reduce(r) with r > n1 - n2", lambda t, d: _irka().reduce(20), InputError,
+     r"r = 20 exceeds the order of the full model on its hidden manifold \(n1 - n2 = 19\)"),
+    ("projected-memory", "option", "irka-projected over its memory budget",
+     lambda t, d: ms.reducers.make("irka-projected", ms.models.dsms(2000), memory_budget_gib=0.01), MemoryBudgetError,
+     r"would need about .* GiB .* above the budget memory_budget_gib = 0\.01"),
+    # -- reduced models and analysis -----------------------------------------------------------------
+    ("rom-nan", "matrix", "SecondOrderROM with a NaN in K",
+     lambda t, d: ms.rom.SecondOrderROM(np.eye(2), np.eye(2), np.full((2, 2), np.nan), np.ones(2), np.ones(2)),
+     InputError, r"matrix K has non-finite entries"),
+    ("rom-shape", "matrix", "SecondOrderROM with a non-square M",
+     lambda t, d: ms.rom.SecondOrderROM(np.ones((2, 3)), np.eye(2), np.eye(2), np.ones(2), np.ones(2)),
+     ShapeError, r"matrix M must be square"),
+    ("grid-band", "argument", "freq_grid((1, 0.1))", lambda t, d: ms.analysis.freq_grid((1.0, 0.1)), InputError,
+     r"band must satisfy 0 < lo < hi"),
+    ("sigma-shape", "argument", "sigma_max of a 4-D array", lambda t, d: ms.analysis.sigma_max(np.ones((2, 2, 2, 2))),
+     InputError, r"H must have shape \(k, p, m\) or \(p, m\)"),
+    ("errors-H", "argument", "errors(..., H_full of the wrong length)",
+     lambda t, d: ms.analysis.errors(_small(), _irka(maxit=2).reduce(2).rom, [0.1, 0.2], H_full=np.ones((3, 3, 1))),
+     InputError, r"H_full has 3 frequencies; omega has 2"),
+    # -- low-rank ADI ------------------------------------------------------------------------------
+    ("adi-tol", "option", "lradi(tol=2)", lambda t, d: _lradi()(_small(), tol=2.0), InputError,
+     r"tol must be a float in \(0, 1\)"),
+    ("adi-shifts", "option", "lradi(shifts=[1.0]) (right half-plane)", lambda t, d: _lradi()(_small(), shifts=[1.0]),
+     InputError, r"shifts must lie in the open left half-plane"),
+    ("adi-equation", "option", "lradi(equation='both')", lambda t, d: _lradi()(_small(), equation="both"),
+     InputError, r"equation must be 'controllability' or 'observability'"),
+    # -- study specifications ---------------------------------------------------------------------------
+    ("spec-missing", "study spec", "load_spec('none.toml')",
+     lambda t, d: __import__("morsuite.studies.spec", fromlist=["load_spec"]).load_spec(t / "none.toml"),
+     SpecError, r"study spec .*none\.toml' does not exist"),
+    ("spec-toml", "study spec", "a file that is not TOML",
+     lambda t, d: __import__("morsuite.studies.spec", fromlist=["load_spec"]).load_spec(_write(t / "s.toml", "[[x")),
+     SpecError, r"not valid TOML"),
+    ("spec-key", "study spec", "scene key 'gird'", lambda t, d: _spec(scene_gird="default"), SpecError,
+     r"unknown key 'gird'.*did you mean 'grid'"),
+    ("spec-kind", "study spec", "scene kind 'errors'", lambda t, d: _spec(scene_kind="errors"), SpecError,
+     r"unknown value 'errors'.*valid choices"),
+    ("spec-model", "study spec", "model 'nope:g=3'", lambda t, d: _spec(models={"d": "nope:g=3"}), SpecError,
+     r"unknown model 'nope'"),
+    ("spec-reducer", "study spec", "method with reducer 'irk'",
+     lambda t, d: _spec(methods={"irka": {"reducer": "irk"}}), SpecError, r"unknown reducer 'irk'"),
+    ("spec-option", "study spec", "method option tol = 2",
+     lambda t, d: _spec(methods={"irka": {"options": {"tol": 2}}}), SpecError,
+     r"The 'tol' parameter of IRKA must be a float in \(0, 1\)"),
+    ("spec-r", "study spec", "r above n1 - n2", lambda t, d: _spec(scene_r=40), SpecError,
+     r"r = 40 exceeds the order n1 - n2 = 19"),
+    ("spec-r-type", "study spec", "r = 'ten'", lambda t, d: _spec(scene_r="ten"), SpecError,
+     r"expected a positive integer, a list of them"),
+    ("spec-name", "study spec", "name with a slash", lambda t, d: _spec(name="a/b"), SpecError,
+     r"'a/b' is not a file-name-safe string"),
+]
+
+
+_NEEDS_DATA = frozenset({"mat-G", "mat-sign", "mat-sign-option"})
+CASES = [Refusal(*row, needs_data=row[0] in _NEEDS_DATA) for row in _ROWS]
+
+
+def table_rows(data_dir=None):
+    """Run every row; ``(rows, skipped)``.
+
+    ``rows`` are ``(area, what, got, message, key)`` with the class actually
+    raised (``"X (expected Y)"`` on a mismatch, ``"(not refused!)"`` if nothing
+    was raised) and the message with the scratch directory shown as ``<dir>``,
+    the checkout's data directory as ``tests/data`` (another one as
+    ``<data>``), whitespace collapsed and cut at :data:`MAX_MESSAGE`
+    characters. ``skipped`` are the keys of the rows that need
+    :data:`DATA_FILE` when ``data_dir`` (default :func:`default_data_dir`)
+    does not hold it.
+    """
+    data = Path(data_dir) if data_dir is not None else default_data_dir()
+    have_data = data is not None and (data / DATA_FILE).is_file()
+    label = "tests/data" if have_data and data.resolve() == _CHECKOUT_DATA else "<data>"
+    out, skipped = [], []
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d)
+        for case in CASES:
+            if case.needs_data and not have_data:
+                skipped.append(case.key)
+                continue
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                try:
+                    case.call(tmp, data)
+                except Exception as e:  # noqa: BLE001 - we want its class and message
+                    got, msg = type(e).__name__, str(e)
+                else:
+                    got, msg = "(not refused!)", ""
+            msg = msg.replace(str(tmp), "<dir>")
+            if have_data:
+                msg = msg.replace(str(data), label)
+            msg = " ".join(msg.split())
+            if len(msg) > MAX_MESSAGE:
+                msg = msg[: MAX_MESSAGE - 3] + "..."
+            if got != case.error.__name__:
+                got = f"{got} (expected {case.error.__name__})"
+            out.append((case.area, case.what, got, msg, case.key))
+    return out, skipped
+
+
+def markdown_table(data_dir=None) -> str:
+    """The Markdown table of :func:`table_rows`; the keys of the rows left out are printed to stderr."""
+    rows, skipped = table_rows(data_dir)
+    if skipped:
+        print(f"left out (no {DATA_FILE} in the data directory): {', '.join(skipped)}", file=sys.stderr)
+    lines = ["| area | input | error | message | test id |", "|---|---|---|---|---|"]
+    for area, what, got, msg, key in rows:
+        esc = msg.replace("|", "\\|")
+        lines.append(f"| {area} | {what.replace('|', '/')} | `{got}` | {esc} | `{key}` |")
+    return "\n".join(lines)
