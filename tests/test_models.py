@@ -638,7 +638,7 @@ def test_parse_mat_path(data_dir):
 
 
 @pytest.mark.parametrize("constraints, n2", [("curvature", 3), ("averaging", 3), ("pairs", 6)])
-@pytest.mark.parametrize("io", ["sum", "chains"])
+@pytest.mark.parametrize("io", ["sum", "chains", "points"])
 def test_tcom_variants_transfer_vs_nullspace(constraints, n2, io):
     """The constraint and input/output variants of the TCOM family: sizes, G x = 0 for the
     defining pattern of each row, and T(s) against the dense null-space evaluation."""
@@ -656,6 +656,9 @@ def test_tcom_variants_transfer_vs_nullspace(constraints, n2, io):
     if io == "chains":
         assert np.array_equal(fom.F.sum(axis=0), [nc, nc, nc]) and np.array_equal(fom.L, fom.F.T)
         assert fom.F[-1].sum() == 0  # the central mass is not driven
+    if io == "points":
+        assert np.array_equal(np.flatnonzero(fom.F.sum(axis=1)), [2, 12, 22])
+        assert np.array_equal(np.flatnonzero(fom.L.sum(axis=0)), [7, 17, 27])
     for s in (0.05j, 0.3 + 0.7j):
         assert rel_err(fom.transfer(s), nullspace_transfer(fom, s)) < 1e-10
     assert "constraints=" in fom.name or constraints == "pairs"

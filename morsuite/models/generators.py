@@ -105,13 +105,16 @@ def tcom(nc: int = 2000, *, masses=(1.0, 2.0, 3.0), central_mass: float = 10.0,
         ``"sum"`` (default): one input, the same force on every mass, and one
         output, the sum of all positions. ``"chains"``: three inputs and three
         outputs, input i the same force on every mass of chain i, output i the
-        sum of the positions of chain i.
+        sum of the positions of chain i. ``"points"``: three inputs and three
+        outputs, non-collocated: input i a force on the mass a quarter into chain
+        i (0-based index :math:`o + \lfloor nc/4 \rfloor`), output i the position
+        of the mass three quarters into it (:math:`o + \lfloor 3nc/4 \rfloor`).
     """
     nc = _positive("nc", nc, integer=True, minimum=2)
     if constraints not in ("pairs", "curvature", "averaging"):
         raise InputError(f"constraints must be 'pairs', 'curvature' or 'averaging'; got {constraints!r}")
-    if io not in ("sum", "chains"):
-        raise InputError(f"io must be 'sum' or 'chains'; got {io!r}")
+    if io not in ("sum", "chains", "points"):
+        raise InputError(f"io must be 'sum', 'chains' or 'points'; got {io!r}")
     if constrained and constraints == "pairs" and nc % 2:
         raise InputError(f"nc must be even for the constrained TCOM; got {nc}")
     if constrained and constraints != "pairs" and nc < 3:
@@ -142,11 +145,16 @@ def tcom(nc: int = 2000, *, masses=(1.0, 2.0, 3.0), central_mass: float = 10.0,
     if io == "sum":
         F = np.ones((n1, 1))
         L = np.ones((1, n1))
-    else:
+    elif io == "chains":
         F = np.zeros((n1, 3))
         for ch in range(3):
             F[ch * nc:(ch + 1) * nc, ch] = 1.0
         L = F.T.copy()
+    else:
+        F, L = np.zeros((n1, 3)), np.zeros((3, n1))
+        for ch in range(3):
+            F[ch * nc + nc // 4, ch] = 1.0
+            L[ch, ch * nc + (3 * nc) // 4] = 1.0
     extra = "" if constraints == "pairs" or not constrained else f", constraints={constraints}"
     extra += "" if io == "sum" else f", io={io}"
     return Index3Model(M, D, K, G, F, L, name=name or f"tcom(nc={nc}{extra})", band=(1e-3, 1.0))
