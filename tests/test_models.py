@@ -635,3 +635,38 @@ def test_parse_bad_value_reaches_generator():
 def test_parse_mat_path(data_dir):
     fom = ms.models.parse(str(data_dir / "mess_msd_ind3_g600.mat"))
     assert fom.n1 == 600
+
+
+@pytest.mark.parametrize("constraints, n2", [("curvature", 3), ("averaging", 3), ("pairs", 6)])
+@pytest.mark.parametrize("io", ["sum", "chains", "points"])
+def test_tcom_variants_transfer_vs_nullspace(constraints, n2, io):
+    """The constraint and input/output variants of the TCOM family: sizes, G x = 0 for the
+    defining pattern of each row, and T(s) against the dense null-space evaluation."""
+    nc = 10
+    fom = ms.models.tcom(nc=nc, constraints=constraints, io=io)
+    m = 1 if io == "sum" else 3
+    assert (fom.n1, fom.n2, fom.m, fom.p) == (3 * nc + 1, n2, m, m)
+    G = fom.G.toarray()
+    if constraints == "curvature":
+        x = np.arange(fom.n1, dtype=float)  # linear in each chain: zero curvature everywhere
+        assert np.allclose(G @ x, 0)
+    if constraints == "averaging":
+        x = np.ones(fom.n1)  # a constant chain sits at its mean
+        assert np.allclose(G @ x, 0)
+    if io == "chains":
+        assert np.array_equal(fom.F.sum(axis=0), [nc, nc, nc]) and np.array_equal(fom.L, fom.F.T)
+        assert fom.F[-1].sum() == 0  # the central mass is not driven
+    if io == "points":
+        assert np.array_equal(np.flatnonzero(fom.F.sum(axis=1)), [2, 12, 22])
+        assert np.array_equal(np.flatnonzero(fom.L.sum(axis=0)), [7, 17, 27])
+    for s in (0.05j, 0.3 + 0.7j):
+        assert rel_err(fom.transfer(s), nullspace_transfer(fom, s)) < 1e-10
+    assert "constraints=" in fom.name or constraints == "pairs"
+
+
+def test_tcom_variant_bad_options():
+    with pytest.raises(ms.InputError, match="constraints"):
+        ms.models.tcom(nc=4, constraints="bogus")
+    with pytest.raises(ms.InputError, match="io"):
+        ms.models.tcom(nc=4, io="mimo")
+    assert ms.models.parse("tcom:nc=6,constraints=curvature,io=chains").m == 3

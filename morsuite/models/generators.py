@@ -78,7 +78,8 @@ def dsms(g: int = 6000, *, mass: float = 100.0, k: float = 2.0, kappa: float = 2
 
 def tcom(nc: int = 2000, *, masses=(1.0, 2.0, 3.0), central_mass: float = 10.0,
          stiffness=(10.0, 20.0, 1.0), k0: float = 50.0, alpha: float = 0.01, beta: float = 0.01,
-         v: float = 5.0, constrained: bool = True, name: str | None = None) -> Index3Model:
+         v: float = 5.0, constrained: bool = True, constraints: str = "pairs", io: str = "sum",
+         name: str | None = None) -> Index3Model:
     r"""Constrained triple chain oscillator (Truhar and Veselic 2009).
 
     Three chains of ``nc`` masses coupled to one central mass (last index):
@@ -89,10 +90,35 @@ def tcom(nc: int = 2000, *, masses=(1.0, 2.0, 3.0), central_mass: float = 10.0,
     and 2 nc + 1. Six constraints (``constrained=True``, nc even): within each
     chain, :math:`x_{o+1} = x_{o+nc/2}` and :math:`x_{o+nc/2+1} = x_{o+nc}`.
     Input: the same force on every mass; output: the sum of all positions.
+
+    Variants of the same family (for MIMO and constraint studies; not in the
+    literature's TCOM, defined here):
+
+    ``constraints``
+        ``"pairs"`` (default): the six ties above. ``"curvature"``: one row per
+        chain, zero discrete curvature at its middle,
+        :math:`x_{o+h-1} - 2x_{o+h} + x_{o+h+1} = 0` with :math:`h = \lceil nc/2 \rceil`.
+        ``"averaging"``: one row per chain, the middle mass at the chain's mean
+        position, :math:`x_{o+h} - \frac{1}{nc}\sum_{i=1}^{nc} x_{o+i} = 0`.
+        ``constrained=False`` drops every constraint (n2 = 0).
+    ``io``
+        ``"sum"`` (default): one input, the same force on every mass, and one
+        output, the sum of all positions. ``"chains"``: three inputs and three
+        outputs, input i the same force on every mass of chain i, output i the
+        sum of the positions of chain i. ``"points"``: three inputs and three
+        outputs, non-collocated: input i a force on the mass a quarter into chain
+        i (0-based index :math:`o + \lfloor nc/4 \rfloor`), output i the position
+        of the mass three quarters into it (:math:`o + \lfloor 3nc/4 \rfloor`).
     """
     nc = _positive("nc", nc, integer=True, minimum=2)
-    if constrained and nc % 2:
+    if constraints not in ("pairs", "curvature", "averaging"):
+        raise InputError(f"constraints must be 'pairs', 'curvature' or 'averaging'; got {constraints!r}")
+    if io not in ("sum", "chains", "points"):
+        raise InputError(f"io must be 'sum', 'chains' or 'points'; got {io!r}")
+    if constrained and constraints == "pairs" and nc % 2:
         raise InputError(f"nc must be even for the constrained TCOM; got {nc}")
+    if constrained and constraints != "pairs" and nc < 3:
+        raise InputError(f"nc must be >= 3 for constraints={constraints!r}; got {nc}")
     if len(masses) != 3 or len(stiffness) != 3:
         raise InputError("masses and stiffness must have three entries (one per chain)")
     ms_ = [_positive(f"masses[{i}]", x) for i, x in enumerate(masses)]
@@ -115,20 +141,49 @@ def tcom(nc: int = 2000, *, masses=(1.0, 2.0, 3.0), central_mass: float = 10.0,
     for idx in (0, nc - 1, 2 * nc):
         D[idx, idx] += v
     D = sp.csr_matrix(D)
-    if constrained:
-        rows, cols, vals = [], [], []
-        h = nc // 2
-        r = 0
+    G = _tcom_constraints(nc, n1, constraints) if constrained else sp.csr_matrix((0, n1))
+    if io == "sum":
+        F = np.ones((n1, 1))
+        L = np.ones((1, n1))
+    elif io == "chains":
+        F = np.zeros((n1, 3))
         for ch in range(3):
-            o = ch * nc
+            F[ch * nc:(ch + 1) * nc, ch] = 1.0
+        L = F.T.copy()
+    else:
+        F, L = np.zeros((n1, 3)), np.zeros((3, n1))
+        for ch in range(3):
+            F[ch * nc + nc // 4, ch] = 1.0
+            L[ch, ch * nc + (3 * nc) // 4] = 1.0
+    extra = "" if constraints == "pairs" or not constrained else f", constraints={constraints}"
+    extra += "" if io == "sum" else f", io={io}"
+    return Index3Model(M, D, K, G, F, L, name=name or f"tcom(nc={nc}{extra})", band=(1e-3, 1.0))
+
+
+def _tcom_constraints(nc: int, n1: int, kind: str):
+    """Constraint rows of the TCOM variants (0-based indices; see :func:`tcom`)."""
+    rows, cols, vals = [], [], []
+    r = 0
+    for ch in range(3):
+        o = ch * nc
+        if kind == "pairs":
+            h = nc // 2
             for a, b in ((o, o + h - 1), (o + h, o + nc - 1)):
                 rows += [r, r]
                 cols += [a, b]
                 vals += [1.0, -1.0]
                 r += 1
-        G = sp.csr_matrix((vals, (rows, cols)), shape=(6, n1))
-    else:
-        G = sp.csr_matrix((0, n1))
-    F = np.ones((n1, 1))
-    L = np.ones((1, n1))
-    return Index3Model(M, D, K, G, F, L, name=name or f"tcom(nc={nc})", band=(1e-3, 1.0))
+            continue
+        mid = o + (nc + 1) // 2 - 1  # the middle mass, x_{o+h} with h = ceil(nc/2)
+        if kind == "curvature":
+            cols += [mid - 1, mid, mid + 1]
+            vals += [1.0, -2.0, 1.0]
+            rows += [r] * 3
+        else:  # averaging
+            w = np.full(nc, -1.0 / nc)
+            w[mid - o] += 1.0
+            cols += list(range(o, o + nc))
+            vals += w.tolist()
+            rows += [r] * nc
+        r += 1
+    return sp.csr_matrix((vals, (rows, cols)), shape=(r, n1))
