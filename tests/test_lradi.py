@@ -15,8 +15,8 @@ import pytest
 import scipy.linalg as sla
 
 import morsuite as ms
-from morsuite.linalg.lradi import (LRADIResult, lradi, lradi_pair, penzl_shifts, projection_shifts,
-                                   select_shifts)
+from morsuite.linalg.adi_shifts import penzl_shifts, projection_shifts, select_shifts
+from morsuite.linalg.lradi import LRADIResult, lradi, lradi_pair
 
 
 def projected_system(fom):
@@ -246,6 +246,38 @@ def test_not_a_model_and_zero_rhs():
         lradi(fom.with_io(F=F), "controllability")
 
 
+def test_any_constrained_system_is_accepted(make_random_model):
+    """lradi takes any object with M, D, K, G, F, L, n1, n2, m, p (linalg.system.ConstrainedSystem),
+    not only an Index3Model; without new_solver it builds its own solver. Checked against the
+    dense residual on ker G."""
+    from types import SimpleNamespace
+
+    from morsuite.linalg import ConstrainedSystem
+
+    fom = make_random_model(n1=14, n2=2, m=2, p=3, seed=5)
+    plain = SimpleNamespace(**{a: getattr(fom, a) for a in ("M", "D", "K", "G", "F", "L", "n1", "n2", "m", "p")})
+    assert isinstance(plain, ConstrainedSystem) and not hasattr(plain, "new_solver")
+    c, o = lradi_pair(plain, tol=1e-12)
+    assert c.converged and o.converged
+    rp, rq = dense_residuals(fom, c, o)
+    assert rp < 1e-11 and rq < 1e-11
+
+
+def test_incomplete_system_names_the_argument_and_attribute():
+    from types import SimpleNamespace
+
+    fom = ms.models.dsms(g=20)
+    attrs = {a: getattr(fom, a) for a in ("M", "D", "K", "G", "F", "L", "n1", "n2", "m", "p")}
+    with pytest.raises(ms.InputError, match=r"fom must provide the attributes .*SimpleNamespace lacks F, L"):
+        lradi(SimpleNamespace(**{k: v for k, v in attrs.items() if k not in "FL"}))
+    with pytest.raises(ms.ShapeError, match=r"fom\.F has shape \(19, 1\); expected \(20, 1\)"):
+        lradi(SimpleNamespace(**{**attrs, "F": attrs["F"][1:]}))
+    with pytest.raises(ms.InputError, match=r"fom\.M must be a scipy\.sparse matrix"):
+        lradi(SimpleNamespace(**{**attrs, "M": attrs["M"].toarray()}))
+    with pytest.raises(ms.InputError, match=r"fom\.n2 must be a non-negative integer"):
+        lradi(SimpleNamespace(**{**attrs, "n2": 1.5}))
+
+
 def test_unconstrained_model():
     fom = ms.models.tcom(nc=10, constrained=False)
     c, o = lradi_pair(fom)
@@ -273,7 +305,7 @@ def test_standard_eigenproblem_shifts_equal_qz_shifts():
 def test_range_space_projection_equals_dense_projector(make_random_model):
     """ManifoldProjector.project (b - G^T X^T b) against Pi = I - G^T (G M^-1 G^T)^-1 G M^-1,
     formed densely; above RANGE_FORM_MAX_N2 constraints it falls back to the solve."""
-    from morsuite.linalg.lradi import ManifoldProjector
+    from morsuite.linalg.manifold import ManifoldProjector
 
     fom = make_random_model(n1=14, n2=3, m=2, p=2, seed=4)
     M, G = fom.M.toarray(), fom.G.toarray()

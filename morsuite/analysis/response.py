@@ -5,29 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
+from ..linalg.dense import sigma_max  # public here too (ms.analysis.sigma_max); reducers take it from linalg
 
 __all__ = ["sigma_max", "errors", "freq_grid"]
-
-
-def sigma_max(H) -> np.ndarray:
-    """Largest singular value of each matrix of a response array.
-
-    Parameters
-    ----------
-    H : array_like, shape (k, p, m) or (p, m)
-
-    Returns
-    -------
-    ndarray, shape (k,) (or a scalar for one matrix)
-    """
-    H = np.asarray(H)
-    if H.ndim == 2:
-        return float(np.linalg.norm(H, 2))
-    if H.ndim != 3:
-        raise InputError(f"H must have shape (k, p, m) or (p, m); got {H.shape}")
-    if min(H.shape[1:]) == 1:
-        return np.sqrt(np.sum(np.abs(H) ** 2, axis=(1, 2)))
-    return np.linalg.svd(H, compute_uv=False)[:, 0]
 
 
 def freq_grid(band, n: int = 200) -> np.ndarray:

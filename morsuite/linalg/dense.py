@@ -1,4 +1,4 @@
-r"""Small dense kernels: balanced truncation, orthonormal bases, shift matching.
+r"""Small dense kernels: balanced truncation, orthonormal bases, shift matching, sigma_max.
 
 Used on r x r and 2r x 2r matrices only (the IRKA shift update, the BT of the
 reduced first-order realization).
@@ -12,7 +12,8 @@ from scipy.optimize import linear_sum_assignment
 
 from ..errors import InputError, MorsuiteError
 
-__all__ = ["dense_bt", "orth", "cholesky_qr2", "shift_distance", "lyap_factor", "BTResult", "UnstableError"]
+__all__ = ["dense_bt", "orth", "cholesky_qr2", "shift_distance", "lyap_factor", "sigma_max", "BTResult",
+           "UnstableError"]
 
 
 class UnstableError(MorsuiteError, ArithmeticError):
@@ -154,3 +155,24 @@ def shift_distance(new, old) -> float:
     i, j = linear_sum_assignment(cost)
     d = float(cost[i, j].max())
     return d if new.size == old.size else max(d, 1.0)
+
+
+def sigma_max(H) -> np.ndarray:
+    """Largest singular value of each matrix of a response array.
+
+    Parameters
+    ----------
+    H : array_like, shape (k, p, m) or (p, m)
+
+    Returns
+    -------
+    ndarray, shape (k,) (or a scalar for one matrix)
+    """
+    H = np.asarray(H)
+    if H.ndim == 2:
+        return float(np.linalg.norm(H, 2))
+    if H.ndim != 3:
+        raise InputError(f"H must have shape (k, p, m) or (p, m); got {H.shape}")
+    if min(H.shape[1:]) == 1:
+        return np.sqrt(np.sum(np.abs(H) ** 2, axis=(1, 2)))
+    return np.linalg.svd(H, compute_uv=False)[:, 0]

@@ -1,0 +1,180 @@
+r"""One LR-ADI iteration: the shifted solves, the factor and the residual of one equation.
+
+With :math:`S(s) = s^2M + sD + K`, the shifted solve
+:math:`(A + \mu E)[v_1; v_2] = [w_1; w_2]` of the first-order form
+(:mod:`morsuite.linalg.lradi`) is
+
+.. math::
+
+    \begin{bmatrix} S(-\mu) & G^T \\ G & 0 \end{bmatrix}
+    \begin{bmatrix} v_1 \\ \lambda \end{bmatrix} =
+    \begin{bmatrix} (\mu M - D) w_1 - w_2 \\ 0 \end{bmatrix},\qquad
+    v_2 = w_1 - \mu v_1,
+
+and :math:`(A + \mu E)^T [v_1; v_2] = [w_1; w_2]` is
+
+.. math::
+
+    \begin{bmatrix} S(-\mu) & G^T \\ G & 0 \end{bmatrix}^T
+    \begin{bmatrix} v_2 \\ \gamma \end{bmatrix} =
+    \begin{bmatrix} \mu w_2 - w_1 \\ 0 \end{bmatrix},\qquad
+    v_1 = \Pi\,\bigl(w_2 - (\mu M^T - D^T) v_2\bigr),
+
+one sparse LU of the saddle-point matrix at :math:`s = -\mu` serving both
+(``SaddlePointSolver.factor(-mu)``); :math:`\Pi` is never formed. In the
+controllability iteration both blocks of :math:`V_j` lie in :math:`\ker G` and
+:math:`W_j` stays in :math:`\ker G \times \operatorname{range}\Pi` without any
+projection. In the observability iteration the position block :math:`v_1` is a
+covector, defined only modulo :math:`\operatorname{range}(G^T)`: it is kept
+unprojected (the solves only see it through the multiplier) and projected by
+:meth:`ManifoldProjector.project` where it matters, in :math:`W_j` before its
+norm is taken, so that :math:`W_jW_j^T` is the residual of the projected
+equation, and in the factor once, when it is asked for.
+
+Cost per step: one solve (plain or transposed) with an LU made by the driver,
+one sparse product with :math:`[M; D]`, an m x m (p x p) symmetric eigenvalue
+for the residual norm; no LU of its own.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..errors import InputError
+
+__all__ = ["ADIIteration"]
+
+
+class ADIIteration:
+    """State of one LR-ADI iteration (controllability or observability).
+
+    Parameters
+    ----------
+    fom : ConstrainedSystem
+        Reads M, F, L, n1, m, p.
+    equation : {"controllability", "observability"}
+    proj : ManifoldProjector
+    operators : dict
+        ``{equation: (Mt, MD, symmetric_M)}``: :math:`M` or :math:`M^T`, the
+        stacked :math:`[M; D]` or :math:`[M^T; D^T]` (one sparse product a
+        step), and whether M is symmetric.
+    """
+
+    def __init__(self, fom, equation, proj, operators):
+        self.fom, self.equation, self.proj = fom, equation, proj
+        # [M; D] (controllability) or [M^T; D^T] (observability) stacked: one sparse product a step
+        self.Mt, self.MD, self.symmetric_M = operators[equation]
+        n1 = fom.n1
+        if equation == "controllability":
+            b, x = proj(fom.F)
+            self.W1, self.W2 = np.zeros((n1, fom.m)), np.array(b, dtype=float)
+        else:
+            b, x = proj(fom.L.T)
+            self.W1, self.W2 = np.array(b, dtype=float), np.zeros((n1, fom.p))
+        self.primal0 = np.array(x, dtype=float)
+        self.norm0 = self._norm2()
+        if not self.norm0 > 0:
+            raise InputError(f"the right-hand side of the {equation} equation is zero: matrix "
+                             f"{'F' if equation == 'controllability' else 'L'} vanishes on the hidden manifold")
+        # position and velocity blocks of the factor, column-major, grown by doubling: a run
+        # should not reserve maxiter columns it may never use (docs/design/lradi.md)
+        self.Z1 = np.empty((n1, 32 * self.W1.shape[1]), order="F")
+        self.Z2 = np.empty_like(self.Z1, order="F")
+        self.k = 0
+        self.residuals = [1.0]
+        self.shifts = []
+        self.iterations = 0
+        self.done = self.converged = False
+        self.block = []  # primal n1-columns produced since the last shift computation
+        self.t_solve = self.t_res = 0.0
+
+    def _norm2(self) -> float:
+        r""":math:`\|W^TW\|_2` of the projected residual factor (an m x m or p x p eigenvalue).
+
+        The observability iteration keeps :math:`W_1` modulo
+        :math:`\operatorname{range}(G^T)` (nothing else depends on that
+        component) and projects it here (:meth:`ManifoldProjector.project`: two
+        products with n2 columns per step instead of a solve for the complex
+        :math:`v_1`).
+        """
+        W1 = self.W1 if self.equation == "controllability" else self.proj.project(self.W1)
+        return float(np.linalg.eigvalsh(W1.T @ W1 + self.W2.T @ self.W2)[-1])
+
+    def step(self, lu, p):
+        """One step with shift p (Re p < 0); a complex p is the double step for p and conj(p)."""
+        t0 = time.perf_counter()
+        fom = self.fom
+        n1 = fom.n1
+        if self.equation == "controllability":
+            MD = self.MD @ self.W1
+            V1 = lu.solve(p * MD[:n1] - MD[n1:] - self.W2)
+            V2 = self.W1 - p * V1
+            prim = V1  # V2 = W1 - p V1 adds nothing to the span but W1
+        else:
+            V2 = lu.solve(p * self.W2 - self.W1, trans=True)
+            MD = self.MD @ V2
+            V1 = self.W2 - p * MD[:n1] + MD[n1:]  # projected in _norm2 and factors()
+            prim = V2  # the primal block: approximates left eigenvectors of the quadratic pencil
+        t1 = time.perf_counter()
+        if p.imag != 0:
+            g = 2.0 * np.sqrt(-p.real)
+            d = p.real / p.imag
+            R1, R2 = V1.real + d * V1.imag, V2.real + d * V2.imag
+            c = g * np.sqrt(d * d + 1.0)
+            self._append(g, R1, R2)
+            self._append(c, V1.imag, V2.imag)
+            self._update(g * g, R1, R2)
+            self.shifts += [p, np.conj(p)]
+            self.iterations += 2
+            self.block += [prim.real, prim.imag]
+        else:
+            pr = p.real
+            V1, V2 = np.real(V1), np.real(V2)
+            self._append(np.sqrt(-2.0 * pr), V1, V2)
+            self._update(-2.0 * pr, V1, V2)
+            self.shifts.append(complex(pr))
+            self.iterations += 1
+            self.block.append(np.real(prim))
+        t2 = time.perf_counter()
+        self.residuals.append(self._norm2() / self.norm0)
+        self.t_solve += t1 - t0
+        self.t_res += time.perf_counter() - t2
+
+    def _append(self, c, X1, X2):
+        """Append the columns c [X1; X2] to the factor (written in place: no temporaries)."""
+        k, j = self.k, X1.shape[1]
+        if k + j > self.Z1.shape[1]:
+            for name in ("Z1", "Z2"):
+                Z = np.empty((self.fom.n1, 2 * (k + j)), order="F")
+                Z[:, :k] = getattr(self, name)[:, :k]
+                setattr(self, name, Z)
+        np.multiply(X1, c, out=self.Z1[:, k:k + j])
+        np.multiply(X2, c, out=self.Z2[:, k:k + j])
+        self.k = k + j
+
+    def _update(self, c, R1, R2):
+        r""":math:`W \leftarrow W + c\,ER` (controllability) or :math:`W + c\,E^TR` (observability)."""
+        self.W1 = self.W1 + c * R1
+        if self.equation == "controllability":
+            self.W2 = self.W2 + c * (self.fom.M @ R2)
+        elif self.symmetric_M:
+            self.W2 = self.W2 + c * (self.Mt @ R2)
+        else:  # M^T ker G is not range(Pi) when M is not symmetric
+            self.W2 = self.W2 + c * self.proj.project(self.Mt @ R2)
+
+    def take_block(self):
+        """The primal columns produced since the last call, and the primal residual directions."""
+        cols = list(self.block)
+        self.block = []
+        # E^{-1}W (controllability) or its primal counterpart (observability): where the residual lives
+        cols += [self.W1, self.proj(self.W2)[1]] if self.equation == "controllability" else \
+            [self.proj(self.W1)[1], self.proj(self.W2)[1]]
+        return np.column_stack(cols)
+
+    def factor(self):
+        """The position and velocity blocks of the factor (n1 x k views; the observability
+        position block unprojected, see LRADIResult.position)."""
+        return self.Z1[:, : self.k], self.Z2[:, : self.k]
+
