@@ -8,7 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from morsuite import bench, bench_peers
+from morsuite import bench
+from morsuite.bench import peers as bench_peers
 
 
 def test_peers_without_pymor_records_the_reason(tmp_path, monkeypatch):

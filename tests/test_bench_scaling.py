@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from morsuite import bench
-from morsuite.bench_scaling import (MemoryProbe, bench_scaling, fit_exponent, resolve_out_dir, run_case,
+from morsuite.bench.scaling import (MemoryProbe, bench_scaling, fit_exponent, resolve_out_dir, run_case,
                                     _run_isolated)
 
 
@@ -89,7 +89,7 @@ def test_scaling_quick_writes_finite_results(tmp_path):
     assert "time_exponent" in md and "dsms" in md
     assert all(np.isfinite(r["value"]) for r in res["ratios"].values())
     assert res["code"]["digest"] and all(r.get("code_digest") for r in res["rows"] if r["status"] == "ok")
-    from morsuite.bench_scaling import rewrite
+    from morsuite.bench.scaling import rewrite
 
     bench._write_json(tmp_path / "scaling.json", res)
     rewrite(tmp_path)
@@ -98,7 +98,7 @@ def test_scaling_quick_writes_finite_results(tmp_path):
 
 
 def test_write_readme_summarises_every_json(tmp_path):
-    from morsuite.bench_scaling import write_readme
+    from morsuite.bench.scaling import write_readme
 
     (tmp_path / "irka.json").write_text(json.dumps({
         "benchmark": "irka", "quick": False, "wall_time_s": 3.0, "finished": "now",

@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import OptionError
-from .utils import atomic_path
+from ..errors import OptionError
+from ..utils import atomic_path
 
 __all__ = ["BENCHMARKS", "benchmark", "run", "machine_info"]
 
@@ -54,7 +54,7 @@ def benchmark(name: str):
 
 
 def _discover():
-    """Import the modules ``morsuite.bench_*``: each registers its benchmarks.
+    """Import the modules of this package: each benchmark module registers its benchmarks.
 
     A module that cannot be imported (e.g. a missing optional dependency) is
     skipped with a warning, so that the other benchmarks still run.
@@ -64,10 +64,10 @@ def _discover():
     import warnings
 
     from . import __path__ as package_path
-    from .errors import MorsuiteWarning
+    from ..errors import MorsuiteWarning
 
     for mod in pkgutil.iter_modules(package_path):
-        if mod.name.startswith("bench_"):
+        if not mod.name.startswith("_"):
             try:
                 importlib.import_module(f"{__package__}.{mod.name}")
             except ImportError as exc:
@@ -76,7 +76,7 @@ def _discover():
 
 
 def available() -> list[str]:
-    """Names of the registered benchmarks (``morsuite.bench_*`` modules included)."""
+    """Names of the registered benchmarks (every module of ``morsuite.bench`` imported)."""
     _discover()
     return sorted(BENCHMARKS)
 
@@ -104,7 +104,7 @@ def machine_info() -> dict:
     """Plain data about the machine and the software that produced a timing."""
     import scipy
 
-    from . import __version__
+    from .. import __version__
 
     info = {
         "cpu_count": os.cpu_count(),
@@ -243,8 +243,8 @@ def bench_freqresp(quick: bool) -> dict:
     paid 50 times instead of once, against us. The block is repeated 3 times
     (once with ``quick``); the headline is the median.
     """
-    from .analysis import sigma_max
-    from .models import dsms
+    from ..analysis import sigma_max
+    from ..models import dsms
     import scipy.sparse.linalg as spla
 
     g, nfreq, repeats, chunk = 6000, (100 if quick else 500), (1 if quick else 3), 10

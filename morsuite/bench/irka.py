@@ -16,13 +16,13 @@ from __future__ import annotations
 import time
 import warnings
 
-from .bench import bare_lu_floor, benchmark
-from .utils import blas_threads
+from . import bare_lu_floor, benchmark
+from ..utils import blas_threads
 
 
 def lu_shifts(info) -> list:
     """The shifts at which a run factorized: per iteration, one per real shift or conjugate pair."""
-    from .reducers.base import as_complex
+    from ..reducers.base import as_complex
 
     out = []
     for sh in info["history"]["shifts"]:
@@ -33,7 +33,7 @@ def lu_shifts(info) -> list:
 @benchmark("irka")
 def bench_irka(quick: bool) -> dict:
     """IRKA on dsms(6000) and tcom(nc=2000), r = 10, 20, 30: wall time over the bare LU floor (target <= 1.5)."""
-    from . import models, reducers
+    from .. import models, reducers
 
     cases = [("dsms:g=6000", r) for r in (10, 20, 30)] + [("tcom:nc=2000", r) for r in (10, 20, 30)]
     repeats = 3

@@ -39,9 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .bench import benchmark
-from .utils import atomic_write_text
-from .bench_scaling import code_state, new_figure, resolve_out_dir, save_png, write_table
+from . import benchmark
+from ..utils import atomic_write_text
+from .scaling import code_state, new_figure, resolve_out_dir, save_png, write_table
 
 __all__ = ["bench_peers", "pymor_available"]
 
@@ -66,7 +66,7 @@ def _plan(quick: bool) -> dict:
 
 
 def _max_error(H, Hr) -> float:
-    from .analysis import sigma_max
+    from ..analysis import sigma_max
 
     return float(np.max(sigma_max(H - Hr)))
 
@@ -162,7 +162,7 @@ def _peer_record(fn, omega, H):
 
 
 def _ours(label, fom, r, omega, H):
-    from . import reducers
+    from .. import reducers
 
     name, opts = {"irka": ("irka", {}), "bt-vv": ("bt", {"form": "vv"})}[label]
     with warnings.catch_warnings():
@@ -225,7 +225,7 @@ def rewrite(out_dir="results/bench") -> list[Path]:
     and the CSV, Markdown and PNG (the measurements are not repeated)."""
     import json
 
-    from .bench import _write_json
+    from . import _write_json
 
     out = Path(out_dir)
     res = json.loads((out / "peers.json").read_text())
@@ -261,8 +261,8 @@ def _first_order_peer(spec, fom, r, omega, H, ours, timeout_s=None):
 
 def bench_peers(quick: bool = False, out_dir=None, *, plan: dict | None = None, echo=print) -> dict:
     """pyMOR's IRKA (first-order descriptor), SOR-IRKA and SOBTv (dense Pi-projected) against ours."""
-    from . import models
-    from .analysis import freq_grid
+    from .. import models
+    from ..analysis import freq_grid
 
     plan = dict(plan or _plan(quick))
     out = resolve_out_dir(out_dir)
@@ -284,7 +284,7 @@ def bench_peers(quick: bool = False, out_dir=None, *, plan: dict | None = None, 
     from pymor.reductors.sobt import SOBTvReductor
     from pymor.reductors.sor_irka import SORIRKAReductor
 
-    from .reducers.irka_projected import IRKAProjected
+    from ..reducers.irka_projected import IRKAProjected
 
     rows, details = [], {}
     specs = list(dict.fromkeys(list(plan["dense_models"]) + list(plan["sparse_models"])))

@@ -22,7 +22,7 @@ import warnings
 
 import numpy as np
 
-from .bench import benchmark
+from . import benchmark
 
 __all__ = ["bench_projected"]
 
@@ -38,7 +38,7 @@ def _fit_exponent(g, t):
 
 
 def _run(name, fom, r, opts):
-    from . import reducers
+    from .. import reducers
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # not converging is the point: maxit is fixed
@@ -75,7 +75,7 @@ def bench_projected(quick: bool = False, *, sizes=None, r: int = 20, maxit: int 
         ratio ~ g^p and of each time), ``ratios`` (morsuite.bench format),
         ``settings``.
     """
-    from . import models
+    from .. import models
 
     sizes = tuple(sizes) if sizes is not None else ((250, 500, 1000) if quick else (1000, 2000, 4000))
     maxit = int(maxit) if maxit is not None else (2 if quick else 3)

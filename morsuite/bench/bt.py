@@ -24,8 +24,8 @@ import warnings
 
 import numpy as np
 
-from .bench import bare_lu_floor, benchmark
-from .utils import blas_threads
+from . import bare_lu_floor, benchmark
+from ..utils import blas_threads
 
 __all__ = ["bench_bt"]
 
@@ -46,8 +46,8 @@ def bench_bt(quick: bool = False) -> dict:
         ``rows`` (one per timed run) and ``ratios`` (name -> value, target,
         pass, what), the format of :mod:`morsuite.bench`.
     """
-    from . import models, reducers
-    from .reducers.base import BLAS_THREADS, as_complex
+    from .. import models, reducers
+    from ..reducers.base import BLAS_THREADS, as_complex
 
     spec = "dsms:g=600" if quick else "dsms:g=6000"
     fom = models.parse(spec)

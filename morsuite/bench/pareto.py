@@ -52,8 +52,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .bench import benchmark
-from .bench_scaling import code_state, new_figure, resolve_out_dir, save_png, write_table
+from . import benchmark
+from .scaling import code_state, new_figure, resolve_out_dir, save_png, write_table
 
 __all__ = ["bench_pareto", "profile_categories", "lu_floor", "METHODS"]
 
@@ -95,8 +95,8 @@ def standalone_time(info: dict) -> float:
 
 
 def _sweep(spec, fom, methods, rs, omega, H, echo):
-    from . import reducers
-    from .analysis import errors
+    from .. import reducers
+    from ..analysis import errors
 
     rows = []
     for label in methods:
@@ -143,7 +143,7 @@ def _sweep(spec, fom, methods, rs, omega, H, echo):
 
 
 def _noise_floor(H) -> float:
-    from .analysis import sigma_max
+    from ..analysis import sigma_max
 
     return 1e3 * np.finfo(float).eps * float(np.max(sigma_max(H)))
 
@@ -224,9 +224,9 @@ def rewrite(out_dir="results/bench") -> list[Path]:
     this code, and rewrite the JSON and every output file; the measurements are not repeated."""
     import json
 
-    from . import models
-    from .analysis import freq_grid
-    from .bench import _write_json
+    from .. import models
+    from ..analysis import freq_grid
+    from . import _write_json
 
     out = Path(out_dir)
     res = json.loads((out / "pareto.json").read_text())
@@ -461,7 +461,7 @@ def profile_categories(fn, *args, top: int = 10, **kwargs) -> tuple:
 
 
 def _floor_shifts(label, info):
-    from .reducers.base import as_complex
+    from ..reducers.base import as_complex
 
     if label.startswith("irka"):  # LUs at the shifts alpha (one per conjugate pair)
         s = as_complex(info["shifts"])
@@ -471,7 +471,7 @@ def _floor_shifts(label, info):
 
 
 def _floor_case(spec, fom, label, r, samples, repeat):
-    from . import reducers
+    from .. import reducers
 
     name, opts, _ = METHODS[label]
     with warnings.catch_warnings():
@@ -619,8 +619,8 @@ def write_outputs(result: dict, out_dir) -> list[Path]:
 
 def bench_pareto(quick: bool = False, out_dir=None, *, plan: dict | None = None, echo=print) -> dict:
     """Time against error for irka, bt, bt-vv (and irka-projected on a small DSMS); floors at r = 20."""
-    from . import models
-    from .analysis import freq_grid
+    from .. import models
+    from ..analysis import freq_grid
 
     plan = dict(plan or _plan(quick))
     out = resolve_out_dir(out_dir)

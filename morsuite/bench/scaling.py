@@ -18,7 +18,7 @@ For the DSMS (``dsms(g)``, :math:`n_1 = g`) and the TCOM (``tcom(nc)``,
     the explicit :math:`\Pi`-projected dense baseline, on small sizes up to
     where its memory guard (:class:`~morsuite.errors.MemoryBudgetError`) refuses.
 
-Each case runs in its own process (``python -m morsuite.bench_scaling --case
+Each case runs in its own process (``python -m morsuite.bench.scaling --case
 JSON``) with a time limit and an RSS watchdog, so that one case cannot take
 the machine's memory and so that its memory is measured from a clean state:
 
@@ -61,8 +61,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .bench import benchmark
-from .utils import atomic_path, atomic_write_text
+from . import benchmark
+from ..utils import atomic_path, atomic_write_text
 
 __all__ = ["bench_scaling", "run_case", "fit_exponent", "resolve_out_dir", "write_table", "save_png",
            "MemoryProbe", "SIZES", "write_readme", "code_state"]
@@ -112,7 +112,7 @@ def resolve_out_dir(out_dir=None) -> Path:
     """
     if out_dir is not None:
         return Path(out_dir)
-    from . import bench
+    from .. import bench
 
     frame = sys._getframe(1)
     while frame is not None:
@@ -124,7 +124,7 @@ def resolve_out_dir(out_dir=None) -> Path:
 
 def write_table(df, stem, *, title: str = "", note: str = "", md_columns=None) -> list[Path]:
     """``stem``.csv (every column, full precision) and ``stem``.md (``md_columns``, 6 digits), atomically."""
-    from .report.tables import to_markdown
+    from ..report.tables import to_markdown
 
     csv, md = Path(f"{stem}.csv"), Path(f"{stem}.md")
     atomic_write_text(csv, df.to_csv(index=False))
@@ -239,7 +239,7 @@ def code_state(git: bool = True) -> dict:
     hashes of the modules that decide the timings (``digest`` combines them)."""
     import hashlib
 
-    pkg = Path(__file__).resolve().parent
+    pkg = Path(__file__).resolve().parent.parent
     hashes = {}
     for rel in _KEY_MODULES:
         try:
@@ -273,7 +273,7 @@ def _load_average():
 # ---------------------------------------------------------------------------
 
 def _model(family: str, size: int):
-    from . import models
+    from .. import models
 
     if family == "dsms":
         return models.dsms(int(size))
@@ -291,9 +291,9 @@ def run_case(case: dict) -> dict:
     every k-th of the grid), ``options`` (reducer options), ``trace``
     (tracemalloc on).
     """
-    from . import reducers
-    from .analysis import freq_grid
-    from .errors import MemoryBudgetError
+    from .. import reducers
+    from ..analysis import freq_grid
+    from ..errors import MemoryBudgetError
 
     t0 = time.perf_counter()
     fom = _model(case["model"], case["size"])
@@ -346,7 +346,7 @@ def run_case(case: dict) -> dict:
         row.update(probe.as_dict())
     _derive_row(row)
     if task == "irka-projected":
-        from .reducers.irka_projected import memory_estimate
+        from ..reducers.irka_projected import memory_estimate
 
         row["memory_estimate_gib"] = memory_estimate(fom.n1, fom.n2)["peak_gib"]
     return row
@@ -369,7 +369,7 @@ def _derive_row(row: dict) -> dict:
 
 def _run_isolated(case: dict, timeout_s: float, rss_limit_gib: float) -> dict:
     """Run ``case`` in a child process with a time limit and an RSS watchdog."""
-    cmd = [sys.executable, "-m", "morsuite.bench_scaling", "--case", json.dumps(case)]
+    cmd = [sys.executable, "-m", "morsuite.bench.scaling", "--case", json.dumps(case)]
     try:
         import psutil
     except ImportError:  # pragma: no cover
@@ -498,7 +498,7 @@ def _ratios(fits) -> dict:
 def rewrite(out_dir="results/bench") -> list[Path]:
     """Re-derive rows, fits and ratios of ``out_dir``/scaling.json with this code and rewrite it and
     the CSV, Markdown and PNG files (the measurements are not repeated)."""
-    from .bench import _write_json
+    from . import _write_json
 
     out = Path(out_dir)
     res = json.loads((out / "scaling.json").read_text())
@@ -750,7 +750,7 @@ def write_readme(out_dir="results/bench") -> Path:
             manifest = {}
     m = manifest.get("machine", {})
     lines = ["# Benchmark results\n",
-             "Written by `python -m morsuite.bench_scaling --readme DIR` from the JSON files in this folder "
+             "Written by `python -m morsuite.bench.scaling --readme DIR` from the JSON files in this folder "
              "(`morsuite bench NAME --out DIR` writes them). Every figure is a ratio or a trend measured in "
              "one run on one machine; lower ratios are better, `value <= target` passes.\n",
              f"Machine (manifest of the last `morsuite bench` run): {m.get('cpu_count')} CPUs "
@@ -808,7 +808,7 @@ def write_readme(out_dir="results/bench") -> Path:
 def _main(argv=None):  # pragma: no cover - the child process of _run_isolated, and --readme
     import argparse
 
-    ap = argparse.ArgumentParser(prog="python -m morsuite.bench_scaling")
+    ap = argparse.ArgumentParser(prog="python -m morsuite.bench.scaling")
     ap.add_argument("--case", help="JSON of one case (see run_case); prints its result")
     ap.add_argument("--readme", metavar="DIR", help="write DIR/README.md summarising the benchmark JSONs in DIR")
     args = ap.parse_args(argv)
