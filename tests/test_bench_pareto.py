@@ -10,7 +10,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from morsuite import bench
-from morsuite.bench.pareto import REST, StackProfiler, _compare, standalone_time
+from morsuite.bench.pareto import _compare, standalone_time
+from morsuite.bench.profiler import REST, StackProfiler
 from morsuite.linalg.dense import orth
 
 

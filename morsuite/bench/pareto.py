@@ -1,51 +1,30 @@
-r"""Benchmark "pareto": wall time against error for every reducer, and each run against its LU floor.
+r"""Benchmark ``pareto``: wall time against error for every reducer, and each run against its LU floor.
 
-**Time against error.** For the DSMS (g = 6000), the TCOM (nc = 2000) and a
-small DSMS (g = 1000, the only one where the :math:`O(n_1^3)`
-``"irka-projected"`` baseline is run), every reducer reduces to
-r = 2, 4, ..., 40 with *one reducer instance per (model, method)* (BT keeps
-its Gramians across r). The error is
-:math:`\max_\omega \sigma_{\max}(T(j\omega) - T_r(j\omega))` on 200
-log-spaced :math:`\omega` of the model's band; the full response is computed
-once per model and passed to :func:`morsuite.analysis.errors`.
+**Time against error.** Every method reduces each model to r = 2, 4, ..., 40 with
+one reducer per (model, method), so BT keeps its Gramians across r: ``irka``
+(2r first-order states), ``bt`` (first-order square-root BT, r states), ``bt-vv``
+(``bt`` with ``form="vv"``, 2r states) on dsms(6000) and tcom(2000), and also
+``irka-projected`` (2r states, :math:`O(n_1^3)`) on dsms(1000). Error:
+:math:`\max_\omega \sigma_{\max}(T(j\omega) - T_r(j\omega))` on 200 log-spaced
+frequencies of the band, the full response computed once per model. Time:
+``time_standalone_s``, the cost of the ROM from scratch (:func:`standalone_time`).
+The paper's claim (IRKA more accurate and faster than BT) is judged pairwise at
+equal numbers of first-order states, and at equal r (:data:`COMPARISONS`).
 
-Methods: ``irka`` (second-order ROM of order r: 2r first-order states),
-``bt`` (default form, first-order square-root BT: r first-order states),
-``bt-vv`` (``bt`` with ``form="vv"``, the paper's second-order velocity-velocity
-BT: 2r states), ``irka-projected`` (2r states).
+**The floor.** At r = 20 on dsms(6000) and tcom(2000) a fresh ``irka``, ``bt`` and
+``bt-vv`` run is timed against ``lu_count`` x the median of one bare LU with its
+right and transposed solve at the run's own shifts
+(:func:`~morsuite.bench.floor.lu_floor`, 8 shifts x 3); target 1.5. A profiled
+repeat (:func:`~morsuite.bench.profiler.profile_categories`) says where the rest
+goes.
 
-Time: ``time_s`` is the reducer's ``info["time_s"]`` as measured in the
-sweep (a reused BT reducer pays only the truncation); ``time_standalone_s``
-adds back the r-independent work paid once (``info["setup_cost"]``: BT's
-LR-ADI and factor products, irka-projected's :math:`\Pi`, splitting and
-projection), i.e. the cost of producing that ROM from scratch. The paper's
-claim ("IRKA is more accurate and faster than BT") is checked with the
-standalone times **at equal numbers of first-order states**: IRKA at r
-against first-order BT at 2r, and IRKA at r against ``bt-vv`` at r.
-
-**The floor.** At r = 20 on the DSMS (g = 6000) and the TCOM (nc = 2000) a
-fresh ``irka``, ``bt`` and ``bt-vv`` run is timed, and in the same process
-the floor is measured: the median time of one sparse LU (``splu`` of the
-pre-assembled saddle matrix with the solver's ordering and pivot threshold)
-with its right and transposed solve, at the run's own shifts (IRKA's final
-shifts; the ADI shifts :math:`p` for BT, factorised at :math:`s = -p`). The
-ratio is ``time_s / (lu_count x floor)``. A profiled repeat splits the run into
-categories (:func:`profile_categories`, :class:`StackProfiler`: a deterministic
-profiler like cProfile, but charging each interval to the first category with a
-function on the call stack, so that e.g. a QR inside ``orth`` counts as
-orthogonalisation): sparse LU and solves (the floor), saddle assembly, solve
-accuracy checks and solver bookkeeping, orthogonalisation, dense work on
-n1 x k blocks and r x r matrices, sparse products, other NumPy functions, and
-the rest, Python overhead (interpreter time and inline NumPy operators in
-uncategorised Python code). A cProfile repeat lists the functions with the most
-own time. Profiling slows Python-heavy parts more than SuperLU, so the shares
-are of the profiled run (``profile_overhead`` = profiled / plain wall time).
+``quick``: dsms(200) and tcom(20), r = 2, 4, 50 frequencies: seconds. Writes
+``pareto.json`` and the tables and figures of :mod:`~morsuite.bench.pareto_report`;
+:func:`rewrite` recomputes the verdicts from a saved ``pareto.json``.
 """
 
 from __future__ import annotations
 
-import cProfile
-import pstats
 import time
 import warnings
 from pathlib import Path
@@ -53,9 +32,12 @@ from pathlib import Path
 import numpy as np
 
 from . import benchmark
-from .scaling import code_state, new_figure, resolve_out_dir, save_png, write_table
+from .floor import adi_lu_shifts, lu_floor, upper_half
+from .output import code_state, resolve_out_dir, rewrite_derived
+from .pareto_report import write_outputs
+from .profiler import profile_categories
 
-__all__ = ["bench_pareto", "profile_categories", "lu_floor", "METHODS"]
+__all__ = ["bench_pareto", "derive_verdicts", "rewrite", "standalone_time", "METHODS"]
 
 #: method label -> (registry name, options, what r means)
 METHODS = {
@@ -222,27 +204,21 @@ def derive_verdicts(rows, noise: dict) -> tuple[list, list]:
 def rewrite(out_dir="results/bench") -> list[Path]:
     """Recompute the derived tables (pairs, verdicts, their ratios) of ``out_dir``/pareto.json with
     this code, and rewrite the JSON and every output file; the measurements are not repeated."""
-    import json
-
     from .. import models
     from ..analysis import freq_grid
-    from . import _write_json
 
-    out = Path(out_dir)
-    res = json.loads((out / "pareto.json").read_text())
-    noise = {}
-    for spec, info in res["full_response"].items():
-        if "noise_floor" not in info:  # older files: recompute from the full response
-            fom = models.parse(spec)
-            info["noise_floor"] = _noise_floor(fom.freqresp(freq_grid(fom.band, info["nfreq"])))
-        noise[spec] = info["noise_floor"]
-    res["pairs"], res["verdicts"] = derive_verdicts(res["rows"], noise)
-    res["ratios"] = {k: v for k, v in res["ratios"].items() if k.startswith("floor ")}
-    res["ratios"] = {**_verdict_ratios(res["verdicts"]), **res["ratios"]}
-    files = write_outputs(res, out)
-    res["files"] = [str(p) for p in files]
-    _write_json(out / "pareto.json", res)
-    return files
+    def derive(res):
+        noise = {}
+        for spec, info in res["full_response"].items():
+            if "noise_floor" not in info:  # older files: recompute from the full response
+                fom = models.parse(spec)
+                info["noise_floor"] = _noise_floor(fom.freqresp(freq_grid(fom.band, info["nfreq"])))
+            noise[spec] = info["noise_floor"]
+        res["pairs"], res["verdicts"] = derive_verdicts(res["rows"], noise)
+        floor_ratios = {k: v for k, v in res["ratios"].items() if k.startswith("floor ")}
+        res["ratios"] = {**_verdict_ratios(res["verdicts"]), **floor_ratios}
+
+    return rewrite_derived(out_dir, "pareto", derive, write_outputs)
 
 
 def _verdict_ratios(verdicts) -> dict:
@@ -265,209 +241,10 @@ def _verdict_ratios(verdicts) -> dict:
 # floor
 # ---------------------------------------------------------------------------
 
-def lu_floor(fom, shifts, widths=(1, 1), samples: int = 8, repeat: int = 3) -> dict:
-    """Median seconds of one sparse LU of the saddle matrix plus a right and a transposed solve.
-
-    ``splu`` of the pre-assembled matrix with the options of
-    ``fom.new_solver()`` (ordering, pivot threshold), at up to ``samples``
-    of ``shifts`` (evenly chosen) ``repeat`` times each, alternating. Also
-    the same through :meth:`SaddlePointSolver.factor` (assembly and solve
-    checks included): ``solver_median_s``.
-    """
-    import scipy.sparse.linalg as spla
-    from threadpoolctl import threadpool_limits
-
-    shifts = np.asarray(shifts, dtype=complex).ravel()
-    if shifts.size == 0:
-        raise ValueError("lu_floor needs at least one shift")
-    idx = np.unique(np.linspace(0, shifts.size - 1, min(samples, shifts.size)).round().astype(int))
-    sample = [complex(s) for s in shifts[idx]]
-    solver = fom.new_solver(cache_size=0)
-    n = fom.n1 + fom.n2
-    raw, via = [], []
-    with threadpool_limits(limits=1, user_api="blas"):
-        for k in range(repeat):
-            for s in (sample if k % 2 == 0 else sample[::-1]):
-                s_ = s if s.imag != 0 else s.real
-                A = solver.matrix(s_)
-                dt = np.complex128 if np.iscomplexobj(A.data) else np.float64
-                br = np.zeros((n, widths[0]), dtype=dt)
-                br[: fom.n1] = (fom.F @ np.ones((fom.m, widths[0]))) if widths[0] <= fom.m else 1.0
-                bl = np.zeros((n, widths[1]), dtype=dt)
-                bl[: fom.n1] = (fom.L.T @ np.ones((fom.p, widths[1]))) if widths[1] <= fom.p else 1.0
-                t0 = time.perf_counter()
-                lu = spla.splu(A, permc_spec=solver.permc_spec, diag_pivot_thresh=solver.diag_pivot_thresh)
-                lu.solve(br)
-                lu.solve(bl, trans="T")
-                raw.append(time.perf_counter() - t0)
-                del lu
-                t0 = time.perf_counter()
-                f = solver.factor(s_)
-                f.solve(br[: fom.n1])
-                f.solve(bl[: fom.n1], trans=True)
-                via.append(time.perf_counter() - t0)
-    return {"median_s": float(np.median(raw)), "solver_median_s": float(np.median(via)),
-            "samples": len(raw), "shifts_sampled": [[s.real, s.imag] for s in sample],
-            "definition": f"splu(S(s), permc_spec={solver.permc_spec}, diag_pivot_thresh="
-                          f"{solver.diag_pivot_thresh}) + solve with {widths[0]} and transposed solve with "
-                          f"{widths[1]} columns, S pre-assembled; median over {len(raw)}"}
-
-
-#: profile categories in priority order: an instant of the run counts for the first category
-#: that has a function on the call stack (so the SuperLU factorization inside a saddle
-#: solver call counts as "sparse LU", a QR inside ``orth`` as orthogonalisation).
-#: (group, category, matchers); a matcher is ("builtin", substring of "module.name" of a
-#: C function, or "Type.name" for a method) or (path substring, function name or "*").
-CATEGORIES = [
-    ("floor", "sparse LU (SuperLU gstrf)", [("builtin", "_superlu.gstrf")]),
-    ("floor", "sparse triangular solves (SuperLU)", [("builtin", "SuperLU.solve")]),
-    ("sparse overhead", "saddle matrix assembly and equilibration (one pass)",
-     [("linalg/saddle.py", "matrix"), ("linalg/saddle.py", "_coeffs"), ("linalg/saddle.py", "_build_pattern"),
-      ("linalg/saddle.py", "_assemble_scaled"), ("linalg/saddle.py", "_diagonal_scaling"),
-      ("linalg/saddle.py", "_csc")]),
-    ("sparse overhead", "solve accuracy checks (backward error, refinement, condition estimate)",
-     [("linalg/saddle.py", "_checked"), ("linalg/saddle.py", "_backward_error"), ("linalg/saddle.py", "_apply"),
-      ("linalg/saddle.py", "_rcond_estimate")]),
-    ("sparse overhead", "Ruiz equilibration",
-     [("linalg/saddle.py", "_ruiz")]),
-    ("sparse overhead", "SuperLU wrappers and saddle solver bookkeeping (norms, conversions)",
-     [("linalg/saddle.py", "*"), ("sparse/linalg/_dsolve/", "*")]),
-    ("orthogonalisation", "orthogonalisation (QR/SVD of n1 x k bases)",
-     [("linalg/dense.py", "orth"), ("reducers/bt.py", "_orthonormal"), ("linalg/lradi.py", "_orthonormal_map"),
-      ("linalg/lradi.py", "_gram_basis")]),
-    ("dense work", "projection onto the bases (n1 x k products)",
-     [("reducers/irka.py", "_project"), ("reducers/irka_projected.py", "_project"),
-      ("reducers/bt.py", "_first_order"), ("reducers/bt.py", "_second_order")]),
-    ("dense work", "ADI shift computation (Ritz values)",
-     [("linalg/lradi.py", "projection_shifts"), ("linalg/lradi.py", "penzl_shifts"),
-      ("linalg/lradi.py", "select_shifts")]),
-    ("dense work", "ADI vector updates, residual and factor (n1 x k)",
-     [("linalg/lradi.py", "step"), ("linalg/lradi.py", "take_block"), ("linalg/lradi.py", "factor"),
-      ("linalg/lradi.py", "_append"), ("linalg/lradi.py", "_update"), ("linalg/lradi.py", "_norm2"),
-      ("linalg/lradi.py", "__call__")]),
-    ("dense work", "dense r-sized work (shift update, poles, reduced responses, small SVDs)",
-     [("reducers/irka.py", "_update"), ("morsuite/rom.py", "*"), ("linalg/dense.py", "*"),
-      ("reducers/bt.py", "_svd"), ("reducers/bt.py", "_cap"), ("analysis/response.py", "*"),
-      ("numpy/linalg/", "*"), ("scipy/linalg/", "*"), ("builtin", "numpy.linalg"), ("builtin", "scipy.linalg")]),
-    ("sparse overhead", "sparse-matrix products and conversions (scipy.sparse)",
-     [("scipy/sparse/", "*"), ("builtin", "scipy.sparse")]),
-    ("dense work", "other NumPy array functions (copies, stacking, reductions)",
-     [("numpy/", "*"), ("builtin", "numpy."), ("builtin", "ndarray."), ("builtin", "ufunc.")]),
-]
-REST = ("Python overhead (interpreter; inline NumPy operators such as @ and + in Python code "
-        "outside the categories above)")
-
-
-class StackProfiler:
-    """A deterministic profiler (``sys.setprofile``) that charges time to categories by call stack.
-
-    cProfile charges each function's own time but cannot say under which caller it ran;
-    here every interval between two profile events goes to the highest-priority category
-    with a function on the stack (``CATEGORIES``), or to ``REST``. The time spent in the
-    profile callback itself is excluded from every category.
-    """
-
-    def __init__(self, categories=None):
-        self.categories = list(categories or CATEGORIES)
-        self.n = len(self.categories)
-        self.times = [0.0] * (self.n + 1)
-        self._code = {}
-        self._c = {}
-        self.stack = [self.n]
-        self.last = 0.0
-        self.events = 0
-
-    def _match(self, kind, text, name):
-        for i, (_, _, matchers) in enumerate(self.categories):
-            for path, func in matchers:
-                if kind == "c" and path == "builtin" and func in text:
-                    return i
-                if kind == "py" and path != "builtin" and path in text and (func == "*" or func == name):
-                    return i
-        return self.n
-
-    def _code_cat(self, code):
-        c = self._code.get(code)
-        if c is None:
-            c = self._code[code] = self._match("py", code.co_filename.replace("\\", "/"), code.co_name)
-        return c
-
-    def _c_cat(self, func):
-        mod = getattr(func, "__module__", None)
-        owner = mod or type(getattr(func, "__self__", None)).__name__
-        desc = f"{owner}.{getattr(func, '__name__', '?')}"
-        c = self._c.get(desc)
-        if c is None:
-            c = self._c[desc] = self._match("c", desc, None)
-        return c
-
-    def __call__(self, frame, event, arg):
-        now = time.perf_counter()
-        st = self.stack
-        self.times[st[-1]] += now - self.last
-        self.events += 1
-        if event == "call":
-            st.append(min(st[-1], self._code_cat(frame.f_code)))
-        elif event == "c_call":
-            st.append(min(st[-1], self._c_cat(arg)))
-        elif len(st) > 1:  # return, c_return, c_exception
-            st.pop()
-        self.last = time.perf_counter()
-
-    def run(self, fn, *args, **kwargs):
-        import sys
-
-        self.last = time.perf_counter()
-        sys.setprofile(self)
-        try:
-            return fn(*args, **kwargs)
-        finally:
-            sys.setprofile(None)
-
-    def summary(self) -> dict:
-        """Seconds per category and per group (plain data)."""
-        cats, groups = {}, {}
-        for (group, name, _), t in zip(self.categories, self.times):
-            cats[name] = t
-            groups[group] = groups.get(group, 0.0) + t
-        cats[REST] = self.times[self.n]
-        groups["Python overhead"] = self.times[self.n]
-        return {"total_s": float(sum(self.times)), "categories_s": cats, "groups_s": groups,
-                "events": self.events}
-
-
-def profile_categories(fn, *args, top: int = 10, **kwargs) -> tuple:
-    """Run ``fn`` twice: under :class:`StackProfiler` (time per category) and under cProfile
-    (the ``top`` functions by own time). Returns (fn's result of the first run, summary)."""
-    prof = StackProfiler()
-    t0 = time.perf_counter()
-    out = prof.run(fn, *args, **kwargs)
-    wall = time.perf_counter() - t0
-    summ = prof.summary()
-    summ["wall_s"] = wall
-    cp = cProfile.Profile()
-    cp.enable()
-    try:
-        fn(*args, **kwargs)
-    finally:
-        cp.disable()
-    st = pstats.Stats(cp)
-    rows = sorted(((v[2], v[3], v[1], k) for k, v in st.stats.items()), reverse=True)[:top]
-    summ["cprofile_total_s"] = float(st.total_tt)
-    summ["cprofile_top_self_time"] = [
-        {"function": (k[2] if k[0] == "~" else f"{Path(k[0]).name}:{k[1]}({k[2]})"), "self_s": float(tt),
-         "cumulative_s": float(ct), "calls": int(nc)} for tt, ct, nc, k in rows]
-    return out, summ
-
-
 def _floor_shifts(label, info):
-    from ..reducers.base import as_complex
-
-    if label.startswith("irka"):  # LUs at the shifts alpha (one per conjugate pair)
-        s = as_complex(info["shifts"])
-        return s[s.imag >= 0]
-    p = as_complex(info["adi"]["controllability"]["shifts"])  # LU of S(-p) per ADI shift p
-    return -p[p.imag >= 0]
+    if label.startswith("irka"):  # LUs at the final shifts alpha (one per conjugate pair)
+        return upper_half(info["shifts"])
+    return adi_lu_shifts(info)
 
 
 def _floor_case(spec, fom, label, r, samples, repeat):
@@ -499,126 +276,17 @@ def _floor_case(spec, fom, label, r, samples, repeat):
 
 
 # ---------------------------------------------------------------------------
-# outputs
-# ---------------------------------------------------------------------------
-
-_COLORS = {"irka": "C0", "bt": "C3", "bt-vv": "C1", "irka-projected": "C2"}
-_MARKERS = {"irka": "o", "bt": "s", "bt-vv": "v", "irka-projected": "D"}
-
-
-def _pareto_figure(spec, rows, summaries, path):
-    fig, (ax,) = new_figure()
-    for label in METHODS:
-        pts = sorted(((x["time_standalone_s"], x["max_abs_error"], x["r_requested"], x["states_nominal"])
-                      for x in rows if x["model"] == spec and x["method"] == label and x.get("status") == "ok"),
-                     key=lambda p: p[3])
-        if not pts:
-            continue
-        t = np.array([p[0] for p in pts])
-        e = np.maximum(np.array([p[1] for p in pts]), 1e-300)
-        ax.plot(t, e, "-", lw=0.7, marker=_MARKERS[label], ms=4, color=_COLORS[label],
-                label=f"{label}: {METHODS[label][2]}")
-        for p in pts[:: max(1, len(pts) // 5)]:
-            ax.annotate(f"{p[3]}", (p[0], max(p[1], 1e-300)), fontsize=6, color=_COLORS[label],
-                        xytext=(3, 2), textcoords="offset points")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("wall time of the reduction from scratch [s] (BT: Gramians included)")
-    ax.set_ylabel(r"$\max_\omega \sigma_{\max}(T - T_r)$ on the frequency grid")
-    summ = [s for s in summaries if s["model"] == spec]
-    rs = [x["r_requested"] for x in rows if x["model"] == spec and "r_requested" in x]
-    title = (f"{spec}: time against error, r = {min(rs, default=0)}..{max(rs, default=0)} "
-             f"(labels: first-order states asked for)")
-    ax.set_title(title, fontsize=9)
-    if summ:
-        txt = "\n".join(f"vs {s['against']}: IRKA more accurate {s['irka_more_accurate']}/{s['pairs']}, "
-                        f"faster {s['irka_faster']}/{s['pairs']}, both {s['claim_holds']}/{s['pairs']}"
-                        for s in summ)
-        ax.text(0.01, 0.01, txt, transform=ax.transAxes, fontsize=6.5, va="bottom")
-    ax.grid(True, which="major", alpha=0.3)
-    ax.legend(fontsize=6.5, loc="upper right")
-    return save_png(fig, path)
-
-
-def _floor_figure(floor_rows, path):
-    from matplotlib import colormaps
-
-    fig, (ax,) = new_figure(width=10.0, height=4.6)
-    labels = [f"{x['model']}\n{x['method']}" for x in floor_rows]
-    names = list(floor_rows[0]["profile"]["categories_s"]) if floor_rows else []
-    cmap = colormaps["tab20"]
-    bottom = np.zeros(len(floor_rows))
-    for j, name in enumerate(names):
-        frac = np.array([x["profile"]["categories_s"][name] / max(x["profile"]["total_s"], 1e-300)
-                         for x in floor_rows])
-        ax.bar(range(len(floor_rows)), frac, bottom=bottom, label=name if len(name) < 70 else name[:67] + "...",
-               color=cmap(j % 20), width=0.7)
-        bottom += frac
-    for i, x in enumerate(floor_rows):
-        ax.text(i, 1.01, f"ratio {x['ratio']:.2f}", ha="center", fontsize=7)
-    ax.set_xticks(range(len(floor_rows)), labels, fontsize=7)
-    ax.set_ylim(0, 1.1)
-    ax.set_ylabel("share of the profiled run")
-    ax.set_title("where the time goes; ratio = time / (LUs x one LU with its solves)", fontsize=9)
-    fig.legend(loc="outside right upper", fontsize=6.5)
-    return save_png(fig, path)
-
-
-def _slug(spec: str) -> str:
-    return spec.replace(":", "_").replace("=", "").replace(",", "_")
-
-
-def write_outputs(result: dict, out_dir) -> list[Path]:
-    import pandas as pd
-
-    out = Path(out_dir)
-    files = []
-    rows = pd.DataFrame(result["rows"])
-    cols = ["model", "method", "r_requested", "r", "states", "states_nominal", "status", "converged", "stable",
-            "iterations", "lu_count", "lu_count_standalone", "time_s", "time_standalone_s", "max_abs_error",
-            "max_rel_error", "error_bound", "warnings"]
-    files += write_table(rows[[c for c in cols if c in rows]], out / "pareto",
-                         title="pareto: wall time against max abs error",
-                         note=result["note"], md_columns=cols)
-    pairs = pd.DataFrame(result["pairs"])
-    if not pairs.empty:
-        files += write_table(pairs, out / "pareto_pairs", title="pareto: IRKA against BT at equal state counts",
-                             note="times: standalone (BT with its Gramians); error: max abs over the grid")
-    summ = pd.DataFrame(result["verdicts"])
-    files += write_table(summ, out / "pareto_verdict", title="pareto: the paper's claim, as measured",
-                         md_columns=["model", "against", "matched_on", "pairs", "irka_more_accurate", "other_more_accurate",
-                                     "accuracy_ties", "irka_faster", "other_faster", "claim_holds",
-                                     "median_time_ratio", "median_error_ratio", "verdict"])
-    if result["floor"]:
-        flat = []
-        for x in result["floor"]:
-            rec = {k: v for k, v in x.items() if k not in ("time_breakdown", "floor", "profile")}
-            tot = max(x["profile"]["total_s"], 1e-300)
-            for g, v in x["profile"]["groups_s"].items():
-                rec[f"share {g}"] = v / tot
-            for c, v in x["profile"]["categories_s"].items():
-                rec[f"cat {c}"] = v / tot
-            flat.append(rec)
-        fdf = pd.DataFrame(flat)
-        md = ["model", "method", "r_used", "converged", "iterations", "lu_count", "time_s", "lu_floor_s",
-              "ratio", "ratio_via_solver", "profile_overhead"] + [c for c in fdf if c.startswith("share ")]
-        files += write_table(fdf, out / "pareto_floor", title="pareto: each run against its LU floor (r = 20)",
-                             note="ratio = time_s / (lu_count x median(one splu + right solve + transposed solve "
-                                  "at the run's shifts)); shares: fractions of the profiled repeat (StackProfiler: time "
-                                  "charged to the first category with a function on the call stack)",
-                             md_columns=md)
-        files.append(_floor_figure(result["floor"], out / "pareto_floor.png"))
-    for spec in dict.fromkeys(x["model"] for x in result["rows"]):
-        files.append(_pareto_figure(spec, result["rows"], result["verdicts"], out / f"pareto_{_slug(spec)}.png"))
-    return files
-
-
-# ---------------------------------------------------------------------------
 # the benchmark
 # ---------------------------------------------------------------------------
 
 def bench_pareto(quick: bool = False, out_dir=None, *, plan: dict | None = None, echo=print) -> dict:
-    """Time against error for irka, bt, bt-vv (and irka-projected on a small DSMS); floors at r = 20."""
+    """Time against error for irka, bt, bt-vv (and irka-projected on a small DSMS); floors at r = 20.
+
+    ``quick`` picks the plan of the module docstring (``plan`` replaces it); tables and
+    figures go to ``out_dir`` (default :func:`~morsuite.bench.output.resolve_out_dir`),
+    progress lines to ``echo`` (None: silent). Returns plain data (``rows``, ``ratios``,
+    ``files``, ...).
+    """
     from .. import models
     from ..analysis import freq_grid
 
