@@ -18,7 +18,11 @@ Its result may hold ``"ratios"``, a mapping ``name -> {"value": float,
 passes); :func:`run` prints one line per ratio and writes
 ``<out_dir>/<name>.json`` and ``<out_dir>/manifest.json`` (machine, versions,
 thread settings) atomically. A benchmark that writes more files asks
-:func:`~morsuite.bench.output.resolve_out_dir` where.
+:func:`~morsuite.bench.output.resolve_out_dir` where. The long benchmarks
+(``pareto``, ``peers``, ``scaling``) also have a function
+``bench_NAME(quick, out_dir=None, *, plan=None, echo=print)``: ``quick`` picks
+the plan of the module docstring (``plan`` replaces it), tables and figures go
+to ``out_dir``, progress lines to ``echo`` (None: silent).
 
 Timings are compared with a floor measured on the same machine in the same
 process, never with a number from elsewhere: the floor of a sparse LU is

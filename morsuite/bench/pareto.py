@@ -280,13 +280,7 @@ def _floor_case(spec, fom, label, r, samples, repeat):
 # ---------------------------------------------------------------------------
 
 def bench_pareto(quick: bool = False, out_dir=None, *, plan: dict | None = None, echo=print) -> dict:
-    """Time against error for irka, bt, bt-vv (and irka-projected on a small DSMS); floors at r = 20.
-
-    ``quick`` picks the plan of the module docstring (``plan`` replaces it); tables and
-    figures go to ``out_dir`` (default :func:`~morsuite.bench.output.resolve_out_dir`),
-    progress lines to ``echo`` (None: silent). Returns plain data (``rows``, ``ratios``,
-    ``files``, ...).
-    """
+    """Time against error for irka, bt, bt-vv (and irka-projected on a small DSMS); floors at r = 20."""
     from .. import models
     from ..analysis import freq_grid
 

@@ -247,13 +247,7 @@ def _first_order_peer(spec, fom, r, omega, H, ours, timeout_s=None):
 
 
 def bench_peers(quick: bool = False, out_dir=None, *, plan: dict | None = None, echo=print) -> dict:
-    """pyMOR's IRKA (first-order descriptor), SOR-IRKA and SOBTv (dense Pi-projected) against ours.
-
-    ``quick`` picks the plan of the module docstring (``plan`` replaces it); tables and
-    figures go to ``out_dir`` (default :func:`~morsuite.bench.output.resolve_out_dir`),
-    progress lines to ``echo`` (None: silent). Returns plain data (``rows``, ``ratios``,
-    ``files``, ...).
-    """
+    """pyMOR's IRKA (first-order descriptor), SOR-IRKA and SOBTv (dense Pi-projected) against ours."""
     from .. import models
     from ..analysis import freq_grid
 

@@ -228,13 +228,7 @@ def write_outputs(result: dict, out_dir) -> list[Path]:
 
 
 def bench_scaling(quick: bool = False, out_dir=None, *, plan: dict | None = None, echo=print) -> dict:
-    """Time and peak memory of irka, bt (r = 20) and the full response against n1 up to 1e6.
-
-    ``quick`` picks the plan of the module docstring (``plan`` replaces it); tables and
-    figures go to ``out_dir`` (default :func:`~morsuite.bench.output.resolve_out_dir`),
-    progress lines to ``echo`` (None: silent). Returns plain data (``rows``, ``ratios``,
-    ``files``, ...).
-    """
+    """Time and peak memory of irka, bt (r = 20) and the full response against n1 up to 1e6."""
     plan = dict(plan or _plan(quick))
     out = resolve_out_dir(out_dir)
     code_start = code_state()
