@@ -10,7 +10,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from morsuite import bench
-from morsuite.bench_pareto import REST, StackProfiler, _compare, standalone_time
+from morsuite.bench.pareto import _compare, standalone_time
+from morsuite.bench.profiler import REST, StackProfiler
 from morsuite.linalg.dense import orth
 
 
@@ -85,7 +86,7 @@ def test_pareto_quick_through_bench_run(tmp_path):
     assert all(np.isfinite(r["value"]) for r in res["ratios"].values())
     assert {v["matched_on"] for v in data["verdicts"]} == {"states", "r"}
     # derived tables can be recomputed from the JSON without measuring again
-    from morsuite.bench_pareto import rewrite
+    from morsuite.bench.pareto import rewrite
 
     rewrite(tmp_path)
     again = json.loads((tmp_path / "pareto.json").read_text())

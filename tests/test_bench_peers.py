@@ -8,7 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from morsuite import bench, bench_peers
+from morsuite.bench import peers as bench_peers
+from morsuite.bench.output import json_default, write_json
 
 
 def test_peers_without_pymor_records_the_reason(tmp_path, monkeypatch):
@@ -18,7 +19,7 @@ def test_peers_without_pymor_records_the_reason(tmp_path, monkeypatch):
     assert res["rows"] == [] and res["ratios"] == {}
     assert "not run" in (tmp_path / "peers.md").read_text()
     assert (tmp_path / "peers.png").stat().st_size > 0
-    json.dumps(res, default=bench._json_default)
+    json.dumps(res, default=json_default)
 
 
 def test_peers_quick_against_pymor(tmp_path):
@@ -34,6 +35,6 @@ def test_peers_quick_against_pymor(tmp_path):
     assert all(np.isfinite(r["value"]) for r in res["ratios"].values())
     # same transfer function: the dense projected model the peers use matches the full one
     assert res["models"]["dsms:g=60"]["projected_model_rel_difference"] < 1e-10
-    bench._write_json(tmp_path / "peers.json", res)
+    write_json(tmp_path / "peers.json", res)
     bench_peers.rewrite(tmp_path)
     assert json.loads((tmp_path / "peers.json").read_text())["ratios"].keys() == res["ratios"].keys()

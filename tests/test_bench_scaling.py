@@ -10,8 +10,10 @@ import pandas as pd
 import pytest
 
 from morsuite import bench
-from morsuite.bench_scaling import (MemoryProbe, bench_scaling, fit_exponent, resolve_out_dir, run_case,
-                                    _run_isolated)
+from morsuite.bench.memory import MemoryProbe
+from morsuite.bench.output import json_default, resolve_out_dir, write_json
+from morsuite.bench.scaling import bench_scaling, fit_exponent
+from morsuite.bench.scaling_case import run_case, run_isolated
 
 
 def test_fit_exponent_recovers_planted_exponent():
@@ -62,7 +64,7 @@ def test_run_case_reports_guard_and_isolated_child():
     row = run_case({"model": "dsms", "size": 300, "task": "irka-projected", "r": 4,
                     "options": {"memory_budget_gib": 1e-6}})
     assert row["status"] == "refused by memory guard" and "memory_budget_gib" in row["message"]
-    row = _run_isolated({"model": "dsms", "size": 200, "task": "freqresp", "r": 4, "nfreq": 20,
+    row = run_isolated({"model": "dsms", "size": 200, "task": "freqresp", "r": 4, "nfreq": 20,
                          "nfreq_measured": 10}, timeout_s=120, rss_limit_gib=4)
     assert row["status"] == "ok", row
     assert row["scaled"] and row["nfreq_measured"] == 10
@@ -75,7 +77,7 @@ def test_scaling_quick_writes_finite_results(tmp_path):
     for name in ("scaling.csv", "scaling.md", "scaling_fits.csv", "scaling_fits.md", "scaling.png"):
         assert (tmp_path / name).stat().st_size > 0, name
     assert not (tmp_path / "scaling.partial.json").exists()
-    json.dumps(res, default=bench._json_default)  # what bench.run writes
+    json.dumps(res, default=json_default)  # what bench.run writes
     df = pd.read_csv(tmp_path / "scaling.csv")
     ok = df[df["status"] == "ok"]
     assert set(ok["task"]) >= {"irka", "bt", "freqresp", "irka-projected"}
@@ -89,16 +91,16 @@ def test_scaling_quick_writes_finite_results(tmp_path):
     assert "time_exponent" in md and "dsms" in md
     assert all(np.isfinite(r["value"]) for r in res["ratios"].values())
     assert res["code"]["digest"] and all(r.get("code_digest") for r in res["rows"] if r["status"] == "ok")
-    from morsuite.bench_scaling import rewrite
+    from morsuite.bench.scaling import rewrite
 
-    bench._write_json(tmp_path / "scaling.json", res)
+    write_json(tmp_path / "scaling.json", res)
     rewrite(tmp_path)
     again = json.loads((tmp_path / "scaling.json").read_text())
     assert again["ratios"].keys() == res["ratios"].keys()
 
 
 def test_write_readme_summarises_every_json(tmp_path):
-    from morsuite.bench_scaling import write_readme
+    from morsuite.bench.readme import write_readme
 
     (tmp_path / "irka.json").write_text(json.dumps({
         "benchmark": "irka", "quick": False, "wall_time_s": 3.0, "finished": "now",

@@ -116,13 +116,16 @@ def plot(figdata: FigureData, *, ax=None):
     return fig, ax
 
 
-def save(fig, path_stem, formats=("png", "pdf")) -> list[Path]:
-    """Write ``path_stem``.png and .pdf (or ``formats``) atomically; return the paths."""
+def save(fig, path_stem, formats=("png", "pdf"), dpi: int = 150) -> list[Path]:
+    """Write ``path_stem``.png and .pdf (or ``formats``) atomically; return the paths.
+
+    ``dpi`` applies to the raster formats (PNG).
+    """
     out = []
     for ext in formats:
         path = Path(f"{path_stem}.{ext}")
         with atomic_path(path, suffix=f".{ext}") as tmp:
-            fig.savefig(tmp, format=ext, dpi=150 if ext == "png" else None)
+            fig.savefig(tmp, format=ext, dpi=dpi if ext == "png" else None)
         out.append(path)
     return out
 

@@ -1,17 +1,19 @@
-r"""Benchmark: the explicit :math:`\Pi`-projected dense IRKA against the projector-free IRKA.
+r"""Benchmark ``projected``: the explicit :math:`\Pi`-projected dense IRKA against the projector-free IRKA.
 
-Both reducers start from the same r real shifts (log-spaced over the model's
+Both reducers start from the same r = 20 real shifts (log-spaced over the
 band, ``init="given"``) and run exactly ``maxit`` iterations (``tol`` tiny,
-cycle detection off), so they do the same IRKA work on the same shifts and
-produce the same reduced models (checked: the relative difference of their
-transfer functions is reported). What differs is the price of one basis:
-a sparse LU of the :math:`(n_1+n_2)` saddle-point matrix for ``"irka"``, a
-dense LU of the projected :math:`(n_1-n_2)` pencil for ``"irka-projected"``,
-plus the latter's one-off setup (form :math:`\Pi`, split it, project).
+cycle detection off), so they do the same IRKA work and return the same reduced
+model (the relative difference of their transfer functions on 50 frequencies is
+reported). What differs is the price of one basis: a sparse LU of the
+:math:`(n_1+n_2)` saddle-point matrix for ``"irka"``, a dense LU of the projected
+:math:`(n_1-n_2)` pencil for ``"irka-projected"``, plus its one-off setup (form
+:math:`\Pi`, split it, project). DSMS g = 1000, 2000, 4000, 3 iterations; ratio
+``irka_over_projected_gG`` = time of ``"irka"`` / time of ``"irka-projected"``,
+target 1; the exponents of ratio and times against g are fitted
+(:func:`~morsuite.bench.scaling.fit_exponent`).
 
-The result is plain data; ``ratios`` follows the :mod:`morsuite.bench`
-convention (lower is better, ``value <= target`` passes): the time of
-``"irka"`` over that of ``"irka-projected"``, target 1.
+``quick``: g = 250, 500, 1000, 2 iterations (seconds). Writes ``projected.json``
+(through :func:`morsuite.bench.run`).
 """
 
 from __future__ import annotations
@@ -22,23 +24,18 @@ import warnings
 
 import numpy as np
 
-from .bench import benchmark
+from . import benchmark
+from .output import THREAD_ENV_VARS
+from .scaling import fit_exponent
 
 __all__ = ["bench_projected"]
 
-_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-
-
-def _fit_exponent(g, t):
-    """Least-squares slope of log t against log g (t ~ g^slope)."""
-    g, t = np.asarray(g, float), np.asarray(t, float)
-    if g.size < 2 or np.any(t <= 0):
-        return float("nan")
-    return float(np.polyfit(np.log(g), np.log(t), 1)[0])
+#: the thread variables recorded in ``settings``
+_THREAD_VARS = THREAD_ENV_VARS[:3]
 
 
 def _run(name, fom, r, opts):
-    from . import reducers
+    from .. import reducers
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # not converging is the point: maxit is fixed
@@ -75,7 +72,7 @@ def bench_projected(quick: bool = False, *, sizes=None, r: int = 20, maxit: int 
         ratio ~ g^p and of each time), ``ratios`` (morsuite.bench format),
         ``settings``.
     """
-    from . import models
+    from .. import models
 
     sizes = tuple(sizes) if sizes is not None else ((250, 500, 1000) if quick else (1000, 2000, 4000))
     maxit = int(maxit) if maxit is not None else (2 if quick else 3)
@@ -126,12 +123,10 @@ def bench_projected(quick: bool = False, *, sizes=None, r: int = 20, maxit: int 
                   f"{pi['lu_count']:>4}/{ii['lu_count']:<3} {diff:>9.1e}", flush=True)
         del proj, irka, irka_runs, fom
     gs = [row["g"] for row in rows]
-    fit = {"ratio": _fit_exponent(gs, [row["ratio"] for row in rows]),
-           "ratio_per_iteration": _fit_exponent(gs, [row["ratio_per_iteration"] for row in rows]),
-           "time_projected": _fit_exponent(gs, [row["time_projected_s"] for row in rows]),
-           "setup_projected": _fit_exponent(gs, [row["setup_projected_s"] for row in rows]),
-           "per_iteration_projected": _fit_exponent(gs, [row["per_iteration_projected_s"] for row in rows]),
-           "time_irka": _fit_exponent(gs, [row["time_irka_s"] for row in rows])}
+    fit = {key: fit_exponent(gs, [row[col] for row in rows])["exponent"]
+           for key, col in (("ratio", "ratio"), ("ratio_per_iteration", "ratio_per_iteration"),
+                            ("time_projected", "time_projected_s"), ("setup_projected", "setup_projected_s"),
+                            ("per_iteration_projected", "per_iteration_projected_s"), ("time_irka", "time_irka_s"))}
     if verbose:
         print("fitted exponents (t ~ g^p): " + ", ".join(f"{k} {v:.2f}" for k, v in fit.items()), flush=True)
     ratios = {f"irka_over_projected_g{row['g']}": {
@@ -144,8 +139,3 @@ def bench_projected(quick: bool = False, *, sizes=None, r: int = 20, maxit: int 
                          "threads": {v: os.environ.get(v) for v in _THREAD_VARS},
                          "blas_threads_in_reduce": rows[0]["blas_threads"] if rows else None}}
 
-
-if __name__ == "__main__":  # pragma: no cover
-    import sys
-
-    bench_projected(quick="--quick" in sys.argv)

@@ -1,20 +1,23 @@
-"""Benchmark of balanced truncation (``bt``) against its floor, and of a sweep over r.
+"""Benchmark ``bt``: balanced truncation against its floor, and a sweep over r against one r.
 
-Two ratios, each the median over repetitions that time the run, its floor and the
-sweep back to back in the same process (the machine is shared):
+``bt`` (default options: first-order square-root BT; two LR-ADI runs in lock
+step, the SVD, the projection) at r = 20, fresh reducer, on dsms(6000) and
+tcom(2000). Floor (:func:`~morsuite.bench.floor.bare_lu_floor`): ``lu_count``
+bare LUs with the right solve (all inputs) and transposed solve (all outputs) at
+the run's ADI shifts (the LU of :math:`S(-p)` per shift :math:`p`). Ratios, each
+the median over repetitions (5 on the DSMS, 3 on the TCOM) that time the run, its
+floor and the sweep back to back:
 
-``bt dsms(6000) r=20 / floor``
-    Wall time of a fresh ``bt`` reducer at r = 20 (two LR-ADI runs in lock step,
-    the SVD, the projection) over ``lu_count`` times the floor: the median time
-    of one LU of the saddle-point matrix at the run's shifts plus its right
-    solve (all inputs) and transposed solve (all outputs). Target <= 1.5.
-``bt sweep r=2..40 / single r``
-    ``reduce(r)`` for r = 2, 4, ..., 40 on one reducer over the time of one
-    fresh ``reduce(20)``: the Gramians are computed once, so the target is 1.5.
+- ``bt MODEL r=20 / floor``: wall time over the floor, target 1.5;
+- ``bt MODEL sweep r=2..40 / single r`` (DSMS only): ``reduce(r)`` for
+  r = 2, 4, ..., 40 on one reducer over one fresh ``reduce(20)``, target 1.5
+  (the Gramians are computed once).
 
-The whole ``bt`` on dsms(6000) is also compared with the 0.6 s of the
-independent implementation quoted in ``models.md`` (a number from elsewhere,
-reported, not a ratio target).
+The DSMS wall time is also printed next to the 0.6 s of the independent
+implementation quoted in ``models.md`` (reported, not a target).
+
+``quick``: dsms(600) and tcom(200), 3 and 2 repetitions; not judged. Writes
+``bt.json`` (through :func:`morsuite.bench.run`).
 """
 
 from __future__ import annotations
@@ -24,10 +27,19 @@ import warnings
 
 import numpy as np
 
-from .bench import bare_lu_floor, benchmark
-from .utils import blas_threads
+from . import benchmark
+from .floor import adi_lu_shifts, median_run, run_against_floor
 
 __all__ = ["bench_bt"]
+
+
+def _fresh_run(fom):
+    """(wall time, info) of a fresh ``bt`` reducer at r = 20, construction included."""
+    from .. import reducers
+
+    t0 = time.perf_counter()
+    info = reducers.make("bt", fom).reduce(20).info
+    return time.perf_counter() - t0, info
 
 
 @benchmark("bt")
@@ -46,8 +58,8 @@ def bench_bt(quick: bool = False) -> dict:
         ``rows`` (one per timed run) and ``ratios`` (name -> value, target,
         pass, what), the format of :mod:`morsuite.bench`.
     """
-    from . import models, reducers
-    from .reducers.base import BLAS_THREADS, as_complex
+    from .. import models, reducers
+    from ..reducers.base import BLAS_THREADS
 
     spec = "dsms:g=600" if quick else "dsms:g=6000"
     fom = models.parse(spec)
@@ -60,23 +72,16 @@ def bench_bt(quick: bool = False) -> dict:
         warnings.simplefilter("ignore")  # RankWarnings of the sweep's large r are expected
         reducers.make("bt", fom).reduce(20)  # warm-up: imports, first-call overheads
         for _ in range(reps):
-            t0 = time.perf_counter()
-            single = reducers.make("bt", fom).reduce(20)
-            t_single = time.perf_counter() - t0
-            info = single.info
-            # the LU of a shift p serves both equations at s = -p (one per real p or conjugate pair)
-            shifts = [-p for p in as_complex(info["adi"]["controllability"]["shifts"]) if p.imag >= 0]
-            lus = info["lu_count"]
-            with blas_threads(BLAS_THREADS):
-                floor = bare_lu_floor(fom, shifts, lus)
+            fr = run_against_floor(fom, lambda: _fresh_run(fom), adi_lu_shifts, threads=BLAS_THREADS)
+            info, lus = fr.info, fr.info["lu_count"]
             red = reducers.make("bt", fom)
             t0 = time.perf_counter()
             sweep = [red.reduce(r) for r in rs]
             t_sweep = time.perf_counter() - t0
-            r_floors.append(t_single / floor)
-            r_sweeps.append(t_sweep / t_single)
-            t_singles.append(t_single)
-            floors.append(floor)
+            r_floors.append(fr.ratio)
+            r_sweeps.append(t_sweep / fr.time_s)
+            t_singles.append(fr.time_s)
+            floors.append(fr.floor_s)
             t_sweeps.append(t_sweep)
     r_floor, r_sweep = float(np.median(r_floors)), float(np.median(r_sweeps))
     t_single, floor, t_sweep = (float(np.median(x)) for x in (t_singles, floors, t_sweeps))
@@ -98,22 +103,16 @@ def bench_bt(quick: bool = False) -> dict:
     # the same floor ratio on the TCOM, whose ADI needs ~1200 iterations per Gramian (no sweep)
     tspec = "tcom:nc=200" if quick else "tcom:nc=2000"
     tfom = models.parse(tspec)
-    t_ratios = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        for _ in range(2 if quick else 3):
-            t0 = time.perf_counter()
-            tinfo = reducers.make("bt", tfom).reduce(20).info
-            t_run = time.perf_counter() - t0
-            shifts = [-p for p in as_complex(tinfo["adi"]["controllability"]["shifts"]) if p.imag >= 0]
-            with blas_threads(BLAS_THREADS):
-                t_floor = bare_lu_floor(tfom, shifts, tinfo["lu_count"])
-            t_ratios.append((t_run / t_floor, t_run, t_floor))
-    t_ratios.sort()
-    tr, t_run, t_floor = t_ratios[len(t_ratios) // 2]
+        t_runs = [run_against_floor(tfom, lambda: _fresh_run(tfom), adi_lu_shifts, threads=BLAS_THREADS)
+                  for _ in range(2 if quick else 3)]
+    med = median_run(t_runs)
+    tr, t_run, t_floor, tinfo = med.ratio, med.time_s, med.floor_s, med.info
     rows.append({"model": tspec, "run": "single r=20", "time_s": t_run, "lu_count": tinfo["lu_count"],
                  "floor_s": t_floor, "adi_iterations": tinfo["adi_iterations"], "ratio": tr,
-                 "ratios": [x[0] for x in t_ratios], **{f"t_{k}": v for k, v in tinfo["time_breakdown"].items()}})
+                 "ratios": sorted(x.ratio for x in t_runs),
+                 **{f"t_{k}": v for k, v in tinfo["time_breakdown"].items()}})
     ratios[f"bt {tspec} r=20 / floor"] = {"value": tr, "target": 1.5, "pass": None if quick else tr <= 1.5,
                                          "what": "bt wall time / bare floor (LUs x (splu + right and transposed "
                                                  "solves) at the run's shifts)"}
@@ -124,6 +123,3 @@ def bench_bt(quick: bool = False) -> dict:
           f"{floor:.3f} s; the independent implementation: about 0.6 s at g = 6000)")
     return {"rows": rows, "ratios": ratios}
 
-
-if __name__ == "__main__":  # pragma: no cover
-    bench_bt()

@@ -1,34 +1,28 @@
-r"""Benchmark "peers": morsuite against pyMOR on the same models, grid, error measure and r.
+r"""Benchmark ``peers``: morsuite against pyMOR on the same models, grid, error measure and r.
 
-pyMOR (optional extra ``peers``: ``pip install morsuite[peers]``) has no
-index-3 second-order model class, so it is given what it can take:
+pyMOR (optional extra ``peers``) has no index-3 second-order model class, so it
+gets what it can take:
 
-``pymor-irka-fo``
-    ``IRKAReductor`` on the sparse first-order descriptor realization
-    ``fom.first_order()`` (:math:`E` singular, size :math:`2n_1 + n_2`) with
-    **2r** first-order states, against our ``irka`` at r (2r states). If the
-    default options fail, ``projection="biorth"`` and ``force_sigma_in_rhp``
-    are tried and every attempt is recorded; the ratio uses the first that
-    returned a model.
-``pymor-sor-irka``
-    ``SORIRKAReductor`` on the dense :math:`\Pi`-projected second-order model
-    (``IRKAProjected(fom).projected_model()``: :math:`\tilde M, \tilde D,
-    \tilde K, \tilde F, \tilde L` of order :math:`n_1 - n_2`), order r, against
-    our ``irka`` at r.
-``pymor-sobt-v``
-    ``SOBTvReductor`` (velocity Gramians) on the same dense model, order r,
-    against our ``bt`` with ``form="vv"`` at r (a fresh reducer: Gramians
-    included).
+- ``pymor-irka-fo``: ``IRKAReductor`` on the sparse descriptor realization
+  ``fom.first_order()`` (:math:`E` singular, :math:`2n_1 + n_2` states) with 2r
+  states, against our ``irka`` at r; on failure the options of
+  :data:`IRKA_FO_ATTEMPTS` are tried in turn, every attempt recorded;
+- ``pymor-sor-irka``: ``SORIRKAReductor`` at order r on the dense
+  :math:`\Pi`-projected model (order :math:`n_1 - n_2`), against our ``irka``;
+- ``pymor-sobt-v``: ``SOBTvReductor`` at order r on that model, against our
+  ``bt`` with ``form="vv"`` (fresh reducer, Gramians included).
 
-The dense peers need the projected model, whose cost (forming :math:`\Pi`,
-splitting, projecting) is reported separately (``projection_setup_s``) and
-in ``time_ratio_with_setup``. Error: max over the same 200 log-spaced
-frequencies of :math:`\sigma_{\max}(T - T_r)`, with the full response
-computed once per model. Everything runs with one BLAS thread (as
-``morsuite.reducers`` does). ``time_ratio`` is our time over theirs,
-``error_ratio`` our error over theirs: below 1 is better for us. A peer that
-raises, does not converge or returns an unstable model is a result and is
-recorded as such.
+Models: dense peers on dsms(1000) and tcom(334), the first-order peer also on
+dsms(6000) and tcom(2000); r = 10, 20; error :math:`\max_\omega
+\sigma_{\max}(T - T_r)` on 200 log-spaced frequencies; one BLAS thread for
+everyone; each peer in a forked child with a 900 s limit. ``time_ratio`` (ours /
+theirs) and ``error_ratio``: below 1 is better for us; the projection's cost is
+``projection_setup_s`` (``time_ratio_with_setup`` adds it to theirs). A peer
+that raises, does not converge or returns an unstable model is a result.
+
+``quick``: dsms(60), r = 4, 50 frequencies. Without pyMOR the reason is recorded
+and nothing runs. Writes ``peers.json`` (through :func:`morsuite.bench.run`),
+``peers.csv/.md``, ``peers_compact.md`` and ``peers.png``.
 """
 
 from __future__ import annotations
@@ -39,9 +33,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .bench import benchmark
-from .utils import atomic_write_text
-from .bench_scaling import code_state, new_figure, resolve_out_dir, save_png, write_table
+from . import benchmark
+from ..utils import atomic_write_text
+from .output import code_state, new_figure, resolve_out_dir, rewrite_derived, save_png, write_table
 
 __all__ = ["bench_peers", "pymor_available"]
 
@@ -66,7 +60,7 @@ def _plan(quick: bool) -> dict:
 
 
 def _max_error(H, Hr) -> float:
-    from .analysis import sigma_max
+    from ..analysis import sigma_max
 
     return float(np.max(sigma_max(H - Hr)))
 
@@ -162,7 +156,7 @@ def _peer_record(fn, omega, H):
 
 
 def _ours(label, fom, r, omega, H):
-    from . import reducers
+    from .. import reducers
 
     name, opts = {"irka": ("irka", {}), "bt-vv": ("bt", {"form": "vv"})}[label]
     with warnings.catch_warnings():
@@ -223,18 +217,11 @@ def _ratios(rows) -> dict:
 def rewrite(out_dir="results/bench") -> list[Path]:
     """Recompute the derived columns and ratios of ``out_dir``/peers.json with this code; rewrite it
     and the CSV, Markdown and PNG (the measurements are not repeated)."""
-    import json
+    def derive(res):
+        res["rows"] = [_derive(dict(x)) for x in res["rows"]]
+        res["ratios"] = _ratios(res["rows"])
 
-    from .bench import _write_json
-
-    out = Path(out_dir)
-    res = json.loads((out / "peers.json").read_text())
-    res["rows"] = [_derive(dict(x)) for x in res["rows"]]
-    res["ratios"] = _ratios(res["rows"])
-    files = write_outputs(res, out)
-    res["files"] = [str(p) for p in files]
-    _write_json(out / "peers.json", res)
-    return files
+    return rewrite_derived(out_dir, "peers", derive, write_outputs)
 
 
 def _first_order_peer(spec, fom, r, omega, H, ours, timeout_s=None):
@@ -261,8 +248,8 @@ def _first_order_peer(spec, fom, r, omega, H, ours, timeout_s=None):
 
 def bench_peers(quick: bool = False, out_dir=None, *, plan: dict | None = None, echo=print) -> dict:
     """pyMOR's IRKA (first-order descriptor), SOR-IRKA and SOBTv (dense Pi-projected) against ours."""
-    from . import models
-    from .analysis import freq_grid
+    from .. import models
+    from ..analysis import freq_grid
 
     plan = dict(plan or _plan(quick))
     out = resolve_out_dir(out_dir)
@@ -284,7 +271,7 @@ def bench_peers(quick: bool = False, out_dir=None, *, plan: dict | None = None, 
     from pymor.reductors.sobt import SOBTvReductor
     from pymor.reductors.sor_irka import SORIRKAReductor
 
-    from .reducers.irka_projected import IRKAProjected
+    from ..reducers.irka_projected import IRKAProjected
 
     rows, details = [], {}
     specs = list(dict.fromkeys(list(plan["dense_models"]) + list(plan["sparse_models"])))

@@ -1,0 +1,351 @@
+r"""Benchmark ``pareto``: wall time against error for every reducer, and each run against its LU floor.
+
+**Time against error.** Every method reduces each model to r = 2, 4, ..., 40 with
+one reducer per (model, method), so BT keeps its Gramians across r: ``irka``
+(2r first-order states), ``bt`` (first-order square-root BT, r states), ``bt-vv``
+(``bt`` with ``form="vv"``, 2r states) on dsms(6000) and tcom(2000), and also
+``irka-projected`` (2r states, :math:`O(n_1^3)`) on dsms(1000). Error:
+:math:`\max_\omega \sigma_{\max}(T(j\omega) - T_r(j\omega))` on 200 log-spaced
+frequencies of the band, the full response computed once per model. Time:
+``time_standalone_s``, the cost of the ROM from scratch (:func:`standalone_time`).
+The paper's claim (IRKA more accurate and faster than BT) is judged pairwise at
+equal numbers of first-order states, and at equal r (:data:`COMPARISONS`).
+
+**The floor.** At r = 20 on dsms(6000) and tcom(2000) a fresh ``irka``, ``bt`` and
+``bt-vv`` run is timed against ``lu_count`` x the median of one bare LU with its
+right and transposed solve at the run's own shifts
+(:func:`~morsuite.bench.floor.lu_floor`, 8 shifts x 3); target 1.5. A profiled
+repeat (:func:`~morsuite.bench.profiler.profile_categories`) says where the rest
+goes.
+
+``quick``: dsms(200) and tcom(20), r = 2, 4, 50 frequencies: seconds. Writes
+``pareto.json`` and the tables and figures of :mod:`~morsuite.bench.pareto_report`;
+:func:`rewrite` recomputes the verdicts from a saved ``pareto.json``.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from . import benchmark
+from .floor import adi_lu_shifts, lu_floor, upper_half
+from .output import code_state, resolve_out_dir, rewrite_derived
+from .pareto_report import write_outputs
+from .profiler import profile_categories
+
+__all__ = ["bench_pareto", "derive_verdicts", "rewrite", "standalone_time", "METHODS"]
+
+#: method label -> (registry name, options, what r means)
+METHODS = {
+    "irka": ("irka", {}, "second-order, r x r (2r states)"),
+    "bt": ("bt", {}, "first-order square-root BT (r states)"),
+    "bt-vv": ("bt", {"form": "vv"}, "second-order velocity-velocity BT (2r states)"),
+    "irka-projected": ("irka-projected", {}, "second-order, dense Pi-projected (2r states)"),
+}
+
+
+def _plan(quick: bool) -> dict:
+    if quick:
+        return {"models": [("dsms:g=200", ("irka", "bt", "bt-vv", "irka-projected")),
+                           ("tcom:nc=20", ("irka", "bt"))],
+                "r": (2, 4), "nfreq": 50, "floor_models": ("dsms:g=200",),
+                "floor_methods": ("irka", "bt"), "floor_r": 4, "floor_samples": 2, "floor_repeat": 1}
+    return {"models": [("dsms:g=6000", ("irka", "bt", "bt-vv")),
+                       ("tcom:nc=2000", ("irka", "bt", "bt-vv")),
+                       ("dsms:g=1000", ("irka", "bt", "bt-vv", "irka-projected"))],
+            "r": tuple(range(2, 41, 2)), "nfreq": 200, "floor_models": ("dsms:g=6000", "tcom:nc=2000"),
+            "floor_methods": ("irka", "bt", "bt-vv"), "floor_r": 20, "floor_samples": 8, "floor_repeat": 3}
+
+
+# ---------------------------------------------------------------------------
+# sweep
+# ---------------------------------------------------------------------------
+
+def standalone_time(info: dict) -> float:
+    """``time_s`` plus the once-per-reducer work a reused reducer did not pay in this call."""
+    t = float(info["time_s"])
+    if not info.get("setup_reused"):
+        return t
+    tb = info.get("time_breakdown") or {}
+    for key, cost in (info.get("setup_cost") or {}).items():
+        t += max(0.0, float(cost) - float(tb.get(key, 0.0) or 0.0))
+    return t
+
+
+def _sweep(spec, fom, methods, rs, omega, H, echo):
+    from .. import reducers
+    from ..analysis import errors
+
+    rows = []
+    for label in methods:
+        name, opts, meaning = METHODS[label]
+        try:
+            red = reducers.make(name, fom, **opts)
+        except Exception as exc:
+            rows.append({"model": spec, "method": label, "status": f"error: {type(exc).__name__}: {exc}"[:300]})
+            continue
+        for r in rs:
+            row = {"model": spec, "method": label, "r_requested": int(r)}
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                try:
+                    res = red.reduce(int(r))
+                except Exception as exc:
+                    row["status"] = f"error: {type(exc).__name__}: {exc}"[:300]
+                    rows.append(row)
+                    continue
+            info = res.info
+            err = errors(fom, res.rom, omega, H_full=H)
+            nominal = int(r) if (label == "bt") else 2 * int(r)
+            row.update({
+                "status": "ok", "r": info["r"], "states": info["states"], "states_nominal": nominal,
+                "kind": info["kind"], "converged": bool(info.get("converged", True)),
+                "stable": bool(info.get("stable", True)), "iterations": info.get("iterations"),
+                "lu_count": info.get("lu_count"),
+                "lu_count_standalone": info.get("lu_count_gramians", info.get("lu_count")),
+                "time_s": info["time_s"], "time_standalone_s": standalone_time(info),
+                "max_abs_error": float(err["abs_error"].max()),
+                "max_rel_error": float(err["rel_error"].max()),
+                "error_bound": info.get("error_bound"),
+                "warnings": len(caught)})
+            rows.append(row)
+        if echo:
+            ok = [x for x in rows if x["method"] == label and x.get("status") == "ok"]
+            if ok:
+                echo(f"pareto: {spec:<13} {label:<15} r = {rs[0]}..{rs[-1]}: time "
+                     f"{min(x['time_standalone_s'] for x in ok):.3g}..{max(x['time_standalone_s'] for x in ok):.3g} s, "
+                     f"error {min(x['max_abs_error'] for x in ok):.2e}..{max(x['max_abs_error'] for x in ok):.2e}",
+                     flush=True)
+        del red
+    return rows
+
+
+def _noise_floor(H) -> float:
+    from ..analysis import sigma_max
+
+    return 1e3 * np.finfo(float).eps * float(np.max(sigma_max(H)))
+
+
+#: comparisons of the claim: (label, other method, matched on); "states": equal nominal numbers
+#: of first-order states (the fair one), "r": equal r (IRKA then has twice the states of
+#: first-order BT: the reading most favourable to IRKA)
+COMPARISONS = (("bt", "bt", "states"), ("bt-vv", "bt-vv", "states"), ("bt (equal r)", "bt", "r"))
+
+
+def _compare(rows, spec, other, noise, tie=1.05, match="states", label=None) -> tuple[list, dict]:
+    """IRKA against ``other`` at equal nominal first-order state counts (or equal r)."""
+    key = "states_nominal" if match == "states" else "r_requested"
+    irka = {x[key]: x for x in rows if x["method"] == "irka" and x.get("status") == "ok"}
+    oth = {x[key]: x for x in rows if x["method"] == other and x.get("status") == "ok"}
+    label = label or other
+    pairs = []
+    for s in sorted(set(irka) & set(oth)):
+        a, b = irka[s], oth[s]
+        ea, eb = a["max_abs_error"], b["max_abs_error"]
+        ta, tb = a["time_standalone_s"], b["time_standalone_s"]
+        if max(ea, eb) <= noise:
+            acc = "tie (both at roundoff)"
+        elif max(ea, eb) <= tie * min(ea, eb):
+            acc = "tie (within 5%)"
+        else:
+            acc = "irka" if ea < eb else other
+        fast = "tie (within 5%)" if max(ta, tb) <= tie * min(ta, tb) else ("irka" if ta < tb else other)
+        pairs.append({"model": spec, "against": label, "matched_on": match, "states": a["states_nominal"],
+                      "other_states": b["states_nominal"], "irka_r": a["r_requested"],
+                      "other_r": b["r_requested"], "irka_states_returned": a.get("states"),
+                      "other_states_returned": b.get("states"), "irka_error": ea, "other_error": eb,
+                      "error_ratio": ea / eb if eb > 0 else float("inf"),
+                      "irka_time_s": ta, "other_time_s": tb, "time_ratio": ta / tb if tb > 0 else float("inf"),
+                      "more_accurate": acc, "faster": fast,
+                      "claim_holds": bool(acc == "irka" and fast == "irka"),
+                      "irka_converged": a["converged"], "irka_stable": a["stable"], "other_stable": b["stable"]})
+    n = len(pairs)
+    summ = {"model": spec, "against": label, "matched_on": match, "pairs": n,
+            "irka_more_accurate": sum(p["more_accurate"] == "irka" for p in pairs),
+            "other_more_accurate": sum(p["more_accurate"] == other for p in pairs),
+            "accuracy_ties": sum(p["more_accurate"].startswith("tie") for p in pairs),
+            "irka_faster": sum(p["faster"] == "irka" for p in pairs),
+            "other_faster": sum(p["faster"] == other for p in pairs),
+            "claim_holds": sum(p["claim_holds"] for p in pairs)}
+    if n:
+        summ["median_time_ratio"] = float(np.median([p["time_ratio"] for p in pairs]))
+        summ["median_error_ratio"] = float(np.median([p["error_ratio"] for p in pairs]))
+        verdict = ("holds" if summ["claim_holds"] == n else "refuted" if summ["claim_holds"] == 0
+                   else "holds in part")
+        what = "state counts" if match == "states" else "values of r (IRKA: 2r states, bt: r)"
+        summ["verdict"] = (f"claim {verdict}: IRKA more accurate at {summ['irka_more_accurate']}/{n} {what} "
+                           f"({other} at {summ['other_more_accurate']}, ties {summ['accuracy_ties']}), faster at "
+                           f"{summ['irka_faster']}/{n} ({other} at {summ['other_faster']}); both at "
+                           f"{summ['claim_holds']}/{n}; median time ratio irka/{other} "
+                           f"{summ['median_time_ratio']:.3g}, median error ratio {summ['median_error_ratio']:.3g}")
+    else:
+        summ["verdict"] = "no comparable pairs"
+    return pairs, summ
+
+
+def derive_verdicts(rows, noise: dict) -> tuple[list, list]:
+    """All pairs and verdicts of :data:`COMPARISONS` from the sweep rows; ``noise``: model -> roundoff level."""
+    pairs, verdicts = [], []
+    for spec in dict.fromkeys(x["model"] for x in rows):
+        mrows = [x for x in rows if x["model"] == spec]
+        methods = {x["method"] for x in mrows}
+        for label, other, match in COMPARISONS:
+            if other in methods and "irka" in methods:
+                p, s = _compare(mrows, spec, other, noise.get(spec, 0.0), match=match, label=label)
+                pairs += p
+                verdicts.append(s)
+    return pairs, verdicts
+
+
+def rewrite(out_dir="results/bench") -> list[Path]:
+    """Recompute the derived tables (pairs, verdicts, their ratios) of ``out_dir``/pareto.json with
+    this code, and rewrite the JSON and every output file; the measurements are not repeated."""
+    from .. import models
+    from ..analysis import freq_grid
+
+    def derive(res):
+        noise = {}
+        for spec, info in res["full_response"].items():
+            if "noise_floor" not in info:  # older files: recompute from the full response
+                fom = models.parse(spec)
+                info["noise_floor"] = _noise_floor(fom.freqresp(freq_grid(fom.band, info["nfreq"])))
+            noise[spec] = info["noise_floor"]
+        res["pairs"], res["verdicts"] = derive_verdicts(res["rows"], noise)
+        floor_ratios = {k: v for k, v in res["ratios"].items() if k.startswith("floor ")}
+        res["ratios"] = {**_verdict_ratios(res["verdicts"]), **floor_ratios}
+
+    return rewrite_derived(out_dir, "pareto", derive, write_outputs)
+
+
+def _verdict_ratios(verdicts) -> dict:
+    ratios = {}
+    for s in verdicts:
+        if s["pairs"]:
+            what = "equal-state" if s.get("matched_on", "states") == "states" else "equal-r"
+            ratios[f"{s['model']} irka/{s['against']} time (median)"] = {
+                "value": s["median_time_ratio"], "target": 1.0,
+                "what": f"median over {s['pairs']} {what} pairs of IRKA time / {s['against']} time "
+                        f"(standalone); the paper claims < 1"}
+            ratios[f"{s['model']} irka/{s['against']} error (median)"] = {
+                "value": s["median_error_ratio"], "target": 1.0,
+                "what": f"median over {s['pairs']} {what} pairs of IRKA max abs error / {s['against']}'s; "
+                        f"the paper claims < 1"}
+    return ratios
+
+
+# ---------------------------------------------------------------------------
+# floor
+# ---------------------------------------------------------------------------
+
+def _floor_shifts(label, info):
+    if label.startswith("irka"):  # LUs at the final shifts alpha (one per conjugate pair)
+        return upper_half(info["shifts"])
+    return adi_lu_shifts(info)
+
+
+def _floor_case(spec, fom, label, r, samples, repeat):
+    from .. import reducers
+
+    name, opts, _ = METHODS[label]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = reducers.make(name, fom, **opts).reduce(r)
+        info = res.info
+        shifts = _floor_shifts(label, info)
+        # IRKA solves one tangential column each way; LR-ADI solves m and p columns
+        widths = (fom.m, fom.p) if label.startswith("bt") else (1, 1)
+        fl = lu_floor(fom, shifts, widths=widths, samples=samples, repeat=repeat)
+        res_p, cats = profile_categories(lambda: reducers.make(name, fom, **opts).reduce(r))
+        t_prof = cats["wall_s"]
+    lu = int(info["lu_count"])
+    t = float(info["time_s"])
+    floor_total = lu * fl["median_s"]
+    row = {"model": spec, "method": label, "r": int(r), "r_used": info["r"], "states": info["states"],
+           "converged": info.get("converged"), "iterations": info.get("iterations"), "lu_count": lu,
+           "time_s": t, "lu_floor_s": fl["median_s"], "lu_floor_via_solver_s": fl["solver_median_s"],
+           "floor_total_s": floor_total, "ratio": t / floor_total,
+           "ratio_via_solver": t / (lu * fl["solver_median_s"]),
+           "rest_s": t - floor_total, "profiled_time_s": t_prof, "profile_overhead": t_prof / t,
+           "profiled_lu_count": int(res_p.info["lu_count"]),
+           "time_breakdown": info.get("time_breakdown"), "floor": fl, "profile": cats}
+    return row
+
+
+# ---------------------------------------------------------------------------
+# the benchmark
+# ---------------------------------------------------------------------------
+
+def bench_pareto(quick: bool = False, out_dir=None, *, plan: dict | None = None, echo=print) -> dict:
+    """Time against error for irka, bt, bt-vv (and irka-projected on a small DSMS); floors at r = 20."""
+    from .. import models
+    from ..analysis import freq_grid
+
+    plan = dict(plan or _plan(quick))
+    out = resolve_out_dir(out_dir)
+    code_start = code_state()
+    rows, pairs, verdicts, resp = [], [], [], {}
+    for spec, methods in plan["models"]:
+        fom = models.parse(spec)
+        omega = freq_grid(fom.band, plan["nfreq"])
+        t0 = time.perf_counter()
+        H = fom.freqresp(omega)
+        resp[spec] = {"time_s": time.perf_counter() - t0, "n1": fom.n1, "n2": fom.n2, "band": list(fom.band),
+                      "nfreq": int(omega.size)}
+        resp[spec]["noise_floor"] = _noise_floor(H)
+        mrows = _sweep(spec, fom, methods, list(plan["r"]), omega, H, echo)
+        rows += mrows
+        mp, mv = derive_verdicts(mrows, {spec: resp[spec]["noise_floor"]})
+        pairs += mp
+        verdicts += mv
+        for s in mv if echo else ():
+            other = s["against"]
+            how = "equal first-order states" if s["matched_on"] == "states" else "equal r"
+            echo(f"pareto: {spec}: IRKA vs {other} at {how}: {s['verdict']}", flush=True)
+            for q in (q for q in mp if q["against"] == other):
+                echo(f"    irka {q['states']:>3} states, {other} {q['other_states']:>3}: error irka "
+                     f"{q['irka_error']:.2e} {other} {q['other_error']:.2e} -> {q['more_accurate']}; time irka "
+                     f"{q['irka_time_s']:.3g} s {other} {q['other_time_s']:.3g} s -> {q['faster']}", flush=True)
+        del fom, H
+    floor = []
+    for spec in plan["floor_models"]:
+        fom = models.parse(spec)
+        for label in plan["floor_methods"]:
+            row = _floor_case(spec, fom, label, plan["floor_r"], plan["floor_samples"], plan["floor_repeat"])
+            floor.append(row)
+            if echo:
+                g = row["profile"]["groups_s"]
+                tot = max(row["profile"]["total_s"], 1e-300)
+                echo(f"pareto floor: {spec} {label} r = {plan['floor_r']}: {row['time_s']:.3g} s, "
+                     f"{row['lu_count']} LUs x {1e3 * row['lu_floor_s']:.3g} ms -> ratio {row['ratio']:.2f}; "
+                     + ", ".join(f"{k} {100 * v / tot:.0f}%" for k, v in g.items()), flush=True)
+        del fom
+    ratios = _verdict_ratios(verdicts)
+    for x in floor:
+        ratios[f"floor {x['model']} {x['method']} r={x['r']}"] = {
+            "value": x["ratio"], "target": 1.5,
+            "what": f"{x['method']} wall time / ({x['lu_count']} LUs x {1e3 * x['lu_floor_s']:.3g} ms one LU "
+                    f"with its right and transposed solve)"}
+    note = ("time_standalone_s: cost of the ROM from scratch (a reused BT reducer's Gramians and "
+            "irka-projected's projection added back); states_nominal: first-order states asked for "
+            "(irka, bt-vv, irka-projected: 2r; bt: r); states: what the reducer returned (it caps r where "
+            f"the model does not support it). Error: max over {plan['nfreq']} log-spaced frequencies of the "
+            "band of sigma_max(T - T_r).")
+    result = {"plan": {k: ([list(m) if isinstance(m, tuple) else m for m in v] if isinstance(v, (list, tuple)) else v)
+                       for k, v in plan.items()},
+              "methods": {k: {"reducer": v[0], "options": v[1], "order": v[2]} for k, v in METHODS.items()},
+              "code_start": code_start, "code": code_state(),
+              "full_response": resp, "rows": rows, "pairs": pairs, "verdicts": verdicts, "floor": floor,
+              "ratios": ratios, "note": note}
+    files = write_outputs(result, out)
+    result["files"] = [str(p) for p in files]
+    return result
+
+
+@benchmark("pareto")
+def _registered(quick: bool) -> dict:
+    """Wall time against error for irka/bt/bt-vv (irka-projected on g=1000), r = 2..40; LU floors at r = 20."""
+    return bench_pareto(quick, resolve_out_dir())

@@ -1,0 +1,182 @@
+r"""One case of the ``scaling`` benchmark: a reduction or a full response, its time and memory.
+
+:func:`run_case` runs one case in this process: ``model`` ("dsms" | "tcom") at
+``size`` (g or nc), ``task`` ("irka" | "bt" | "freqresp" | "irka-projected"),
+``r``, ``nfreq``, ``nfreq_measured``, ``options``, ``trace``. It records wall
+and CPU time, the LU count, and the memory of :class:`~morsuite.bench.memory.MemoryProbe`
+against the :math:`8 n_1^2` bytes of one dense :math:`n_1 \times n_1` array
+(``peak_over_dense_square``). A failure, or the memory guard of
+``irka-projected`` refusing, is a result.
+
+:func:`run_isolated` runs a case in a child process (``python -m morsuite.bench
+--case JSON``) with a time limit and an RSS watchdog, so that one case cannot take
+the machine's memory and its memory is measured from a clean state.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+
+import numpy as np
+
+from ..errors import MemoryBudgetError, OptionError
+from .memory import MIB, MemoryProbe
+from .output import code_state
+
+__all__ = ["run_case", "run_isolated", "derive_row", "CASE_RESULT_TAG"]
+
+#: the line of the child's stdout that carries its result
+CASE_RESULT_TAG = "MORSUITE_CASE_RESULT "
+
+
+def _load_average():
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except (AttributeError, OSError):  # pragma: no cover
+        return None
+
+
+def _model(family: str, size: int):
+    from .. import models
+
+    if family == "dsms":
+        return models.dsms(int(size))
+    if family == "tcom":
+        return models.tcom(int(size))
+    raise OptionError(f"scaling case: unknown 'model' {family!r}; expected 'dsms' or 'tcom'")
+
+
+def run_case(case: dict) -> dict:
+    """Run one scaling case in this process; plain-data result.
+
+    ``case``: ``model`` ("dsms" | "tcom"), ``size`` (g or nc), ``task``
+    ("irka" | "bt" | "freqresp" | "irka-projected"), ``r``, ``nfreq`` (grid
+    size of the response), ``nfreq_measured`` (frequencies actually solved,
+    every k-th of the grid), ``options`` (reducer options), ``trace``
+    (tracemalloc on).
+    """
+    from .. import reducers
+    from ..analysis import freq_grid
+
+    t0 = time.perf_counter()
+    fom = _model(case["model"], case["size"])
+    build = time.perf_counter() - t0
+    task, r = case["task"], int(case.get("r", 20))
+    row = {"model": case["model"], "size": int(case["size"]), "n1": fom.n1, "n2": fom.n2, "task": task,
+           "r": r, "model_build_s": build, "load_average": _load_average(),
+           "code_digest": code_state(git=False)["digest"],
+           "dense_square_mb": 8.0 * fom.n1 ** 2 / MIB}
+    opts = dict(case.get("options") or {})
+    probe = MemoryProbe(trace=bool(case.get("trace", True)))
+    status, info = "ok", {}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            if task == "freqresp":
+                nfreq = int(case.get("nfreq", 200))
+                omega = freq_grid(fom.band, nfreq)
+                k = int(case.get("nfreq_measured") or nfreq)
+                step = max(1, int(round(nfreq / k)))
+                sub = omega[::step]
+                with probe:
+                    t1, c1 = time.perf_counter(), time.process_time()
+                    H = fom.freqresp(sub)
+                    elapsed, cpu = time.perf_counter() - t1, time.process_time() - c1
+                row.update(nfreq=nfreq, nfreq_measured=int(sub.size), time_per_freq_s=elapsed / sub.size,
+                           time_s=elapsed * nfreq / sub.size, time_measured_s=elapsed,
+                           cpu_s=cpu * nfreq / sub.size,
+                           scaled=bool(sub.size < nfreq), lu_count=int(nfreq),  # LUs that time_s stands for
+                           finite=bool(np.all(np.isfinite(H))))
+            else:
+                red = reducers.make(task, fom, **opts)  # irka-projected's guard may refuse here
+                with probe:
+                    t1, c1 = time.perf_counter(), time.process_time()
+                    res = red.reduce(r)
+                    elapsed, cpu = time.perf_counter() - t1, time.process_time() - c1
+                info = res.info
+                row.update(time_s=elapsed, cpu_s=cpu, reducer_time_s=info["time_s"], lu_count=info.get("lu_count"),
+                           iterations=info.get("iterations"), converged=info.get("converged"),
+                           r_used=info.get("r"), states=info.get("states"), stable=info.get("stable"))
+        except MemoryBudgetError as exc:
+            status = "refused by memory guard"
+            row["message"] = str(exc)
+        except Exception as exc:  # a failure is a result too
+            status = f"error: {type(exc).__name__}"
+            row["message"] = str(exc)[:500]
+    row["warnings"] = sorted({f"{w.category.__name__}: {str(w.message)[:160]}" for w in caught})[:8]
+    row["status"] = status
+    if status == "ok":
+        row.update(probe.as_dict())
+    derive_row(row)
+    if task == "irka-projected":
+        from ..reducers.irka_projected import memory_estimate
+
+        row["memory_estimate_gib"] = memory_estimate(fom.n1, fom.n2)["peak_gib"]
+    return row
+
+
+def derive_row(row: dict) -> dict:
+    """Quantities computed from a case's measurements (also re-derived by ``scaling.rewrite``)."""
+    if row.get("status") != "ok":
+        return row
+    peak = np.nanmax([row.get("tracemalloc_peak_mb", np.nan), row.get("rss_delta_mb", np.nan)])
+    row["peak_over_dense_square"] = float(peak / row["dense_square_mb"]) if row.get("dense_square_mb") else None
+    lus = row.get("nfreq") if row.get("task") == "freqresp" else row.get("lu_count")
+    if lus:
+        row["lu_count"] = int(lus)
+        row["time_per_lu_s"] = row["time_s"] / lus
+        if row.get("cpu_s") is not None:
+            row["cpu_per_lu_s"] = row["cpu_s"] / lus
+    return row
+
+
+def run_isolated(case: dict, timeout_s: float, rss_limit_gib: float) -> dict:
+    """Run ``case`` in a child process with a time limit and an RSS watchdog."""
+    cmd = [sys.executable, "-m", "morsuite.bench", "--case", json.dumps(case)]
+    try:
+        import psutil
+    except ImportError:  # pragma: no cover
+        psutil = None
+    limit = rss_limit_gib * 2 ** 30
+    t0 = time.perf_counter()
+    peak_seen = 0
+    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+        proc = subprocess.Popen(cmd, stdout=out, stderr=err, text=True)
+        killed = None
+        handle = psutil.Process(proc.pid) if psutil else None
+        while proc.poll() is None:
+            time.sleep(0.25)
+            if handle is not None:
+                try:
+                    rss = handle.memory_info().rss
+                    peak_seen = max(peak_seen, rss)
+                    if rss > limit:
+                        killed = f"killed: RSS {rss / 2**30:.2f} GiB above the limit {rss_limit_gib:g} GiB"
+                except psutil.Error:
+                    pass
+            if time.perf_counter() - t0 > timeout_s:
+                killed = f"timeout: killed after {timeout_s:.0f} s"
+            if killed:
+                proc.kill()
+                proc.wait()
+                break
+        out.seek(0)
+        err.seek(0)
+        stdout, stderr = out.read(), err.read()
+    wall = time.perf_counter() - t0
+    for line in stdout.splitlines()[::-1]:
+        if line.startswith(CASE_RESULT_TAG):
+            row = json.loads(line[len(CASE_RESULT_TAG):])
+            row["process_wall_s"] = wall
+            row["watchdog_peak_rss_mb"] = peak_seen / MIB
+            return row
+    row = {"model": case["model"], "size": case["size"], "task": case["task"], "r": case.get("r"),
+           "status": killed or f"error: child exited with code {proc.returncode}",
+           "message": stderr[-500:], "process_wall_s": wall, "watchdog_peak_rss_mb": peak_seen / MIB}
+    return row
