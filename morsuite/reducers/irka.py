@@ -55,7 +55,7 @@ delta of a raw solution can turn the weakest basis direction by delta/6e-13):
   reduced model built entirely in long double. A working-precision residual
   does not reduce the forward error (measured: no gain).
 * ``orthonormalization``: column-pivoted Gram-Schmidt with reorthogonalisation
-  (:func:`_gram_schmidt`). The raw solutions are localised (on the DSMS they
+  (:func:`~morsuite.linalg.orthonormal.gram_schmidt`). The raw solutions are localised (on the DSMS they
   fall from 0.6 at the chain ends to 1e-91 in its middle); Householder QR
   spreads rounding of size eps over every entry, and the reduced model then
   has errors 1.7e-11 to 6e-11 at r = 20 where Gram-Schmidt gives 1.8e-12.
@@ -110,6 +110,8 @@ from ..errors import (ConvergenceWarning, InputError, ModelError, MorsuiteWarnin
                       StabilityWarning)
 from ..analysis.response import sigma_max
 from ..linalg.dense import UnstableError, cholesky_qr2, dense_bt, orth, shift_distance
+from ..linalg.orthonormal import gram_schmidt
+from ..linalg.refine import SaddleOperator, refined_solve
 from ..rom import SecondOrderROM
 from .base import Option, Reducer, register
 
@@ -236,13 +238,13 @@ class IRKABase(Reducer):
         o = self.options
         how = o["orthonormalization"]
         if how == "gram-schmidt":
-            return (*_gram_schmidt(X, o["rank_tol"]), True)
+            return (*gram_schmidt(X, o["rank_tol"]), True)
         if how == "auto" and getattr(self, "_ill_conditioned", False):
             # the previous iteration's bases were ill-conditioned: these will be too
-            return (*_gram_schmidt(X, o["rank_tol"]), True)
+            return (*gram_schmidt(X, o["rank_tol"]), True)
         Q, s = orth(X, o["rank_tol"])
         if how == "auto" and Q.shape[1] and s[Q.shape[1] - 1] < o["ill_cond_tol"] * s[0]:
-            return (*_gram_schmidt(X, o["rank_tol"]), True)
+            return (*gram_schmidt(X, o["rank_tol"]), True)
         return Q, s, False
 
     def _rom_from_raw(self, Vraw, Wraw, left):
@@ -562,69 +564,6 @@ def _relax(alpha, bdir, cdir, new_alpha, new_b, new_c, w):
     return a[order], b[order], c[order]
 
 
-def _gram_schmidt(X, rank_tol, pivot=True):
-    """Orthonormal basis of the numerical range of X by column-pivoted modified
-    Gram-Schmidt with one reorthogonalisation of every accepted vector.
-
-    Columns are scaled to unit norm; at each step the remaining column with the
-    largest residual norm is accepted unless that norm is at most ``rank_tol``
-    (``pivot=False``: the columns in their order, dropping those whose residual
-    is at most ``rank_tol``). Returns (Q, s), s the residual norms of the
-    accepted columns (a rank-revealing stand-in for the singular values).
-
-    Why not Householder: the saddle-point solutions of a chain are strongly
-    localised (on the DSMS entries fall from 1 to 1e-90 along the chain); a
-    Householder reflector spreads rounding of size eps over all n1 entries,
-    Gram-Schmidt keeps each entry's rounding relative to the entries it
-    combines. On dsms(600) at the r = 20 shifts (basis singular values down to
-    6e-13), from the same raw solutions (exact to rounding), the reduced model
-    from Householder bases (QR + SVD, :func:`~morsuite.linalg.dense.orth`) has
-    error 5.7e-11 (4.0e-10 at another shift set), from Gram-Schmidt bases
-    1.7e-12, the same as from bases orthonormalised in np.longdouble.
-    """
-    n, k = X.shape
-    if k == 0:
-        return X[:, :0].copy(), np.zeros(0)
-    norms = np.linalg.norm(X, axis=0)
-    norms[norms == 0] = 1.0
-    R = np.asfortranarray(X / norms)  # columns m: are the residuals still to be taken
-    Q = np.empty((n, k), order="F")
-    tmp = np.empty(n)
-    s = []
-    m = 0
-    while m < k:
-        res = np.sqrt(np.einsum("ij,ij->j", R[:, m:k], R[:, m:k]))
-        j = m + int(np.argmax(res)) if pivot else m
-        rj = res[j - m]
-        if rj <= rank_tol:
-            if pivot:
-                break
-            R[:, m:k - 1] = R[:, m + 1:k].copy()  # drop column m, keep the order of the rest
-            k -= 1
-            continue
-        if j != m:
-            R[:, [m, j]] = R[:, [j, m]]
-        q = R[:, m] / rj
-        q -= Q[:, :m] @ (Q[:, :m].T @ q)  # the reorthogonalisation
-        q /= np.linalg.norm(q)
-        Q[:, m] = q
-        s.append(rj)
-        m += 1
-        if m < k:
-            _remove_direction(R, q, m, k, tmp)
-    return Q[:, :m], np.asarray(s)
-
-
-def _remove_direction(R, q, m, k, tmp):
-    """R[:, m:k] -= outer(q, q @ R[:, m:k]), a column at a time through the n-buffer tmp:
-    the same products and differences as with np.outer, bit for bit (tested), without
-    the n x (k - m) temporary; 2x faster on the dsms(6000) bases (6000 x 20)."""
-    c = q @ R[:, m:k]
-    for j in range(m, k):
-        np.multiply(q, c[j - m], out=tmp)
-        np.subtract(R[:, j], tmp, out=R[:, j])
-
-
 def _normalize_rows(X):
     n = np.linalg.norm(X, axis=1, keepdims=True)
     n[n == 0] = 1.0
@@ -716,6 +655,7 @@ class IRKA(IRKABase):
 
     def _setup(self):
         self._solver = self.fom.new_solver(cache_size=0, pivot_tol=self.options["pivot_tol"])
+        self._refiner = SaddleOperator(self._solver.pattern)
         G = self.fom.G
         # the orthogonal projector onto null(G), X - G^T (G G^T)^{-1} G X, through a sparse LU
         # of the n2 x n2 matrix G G^T (well conditioned: checked when the model was built);
@@ -742,33 +682,8 @@ class IRKA(IRKABase):
         steps = self.options["refine"] if self._refining() else 0
         if steps == 0:
             return lu.solve(rhs, trans=trans)
-        x = lu.solve(rhs, trans=trans, full=True).reshape(-1)
-        ext = self.options["refine_precision"] == "extended"
-        ft = np.longdouble if ext else float
-        n1 = self.fom.n1
-        apply = self._refine_operator(a, trans, ext)
-        # real and imaginary parts held apart (see _refine_operator: the same bits, faster)
-        b = np.asarray(rhs).reshape(-1)
-        cplx = np.iscomplexobj(x) or np.iscomplexobj(b) or complex(a).imag != 0
-        br = np.zeros(x.size, dtype=ft)
-        br[:n1] = b.real
-        bi = None
-        if cplx:
-            bi = np.zeros(x.size, dtype=ft)
-            bi[:n1] = b.imag
-        xr, xi = x.real.astype(ft), (x.imag.astype(ft) if cplx else None)
-        for _ in range(steps):
-            yr, yi = apply(xr, xi)
-            r = (br - yr).astype(float)
-            if cplx:
-                r = r + 1j * (bi - yi).astype(float)
-            # the correction needs no accuracy check of its own: the refined solution is judged
-            d = lu._raw_solve(r[:, None], trans)[:, 0]
-            xr = xr + d.real.astype(ft)
-            if cplx:
-                xi = xi + d.imag.astype(ft)
-        out = xr[:n1].astype(float)
-        return out + 1j * xi[:n1].astype(float) if cplx else out.astype(complex)
+        return refined_solve(lu, rhs, trans, a, self._refiner, steps=steps,
+                             ext=self.options["refine_precision"] == "extended")
 
     def _refining(self) -> bool:
         o = self.options
@@ -778,57 +693,6 @@ class IRKA(IRKABase):
         if self.options["check_solves"] == "all" or lu.matrix is None:
             return lu
         return replace(lu, matrix=None)  # the same factors, unchecked
-
-    def _refine_operator(self, a, trans, ext):
-        """(xr, xi) -> S(a) x (``trans``: S(a)^T x) in the refinement precision, one sparse product.
-
-        x = xr + i xi is held as two real arrays (xi None: a real vector), and so is the
-        result. The entries of S(a) = [[a^2 M + a D + K, G^T], [G, 0]] on the solver's
-        fixed pattern are formed once per shift in that precision; the product is a
-        gather, a multiply and a segmented sum (scipy.sparse has no long double). The
-        real operations and their order are those of numpy's complex arithmetic on the
-        complex entries, so the result is bit for bit that of the complex product (tested);
-        measured on dsms(6000), forming S(a) and two products: 1.5x faster than in complex
-        long double for a complex shift, 3.9x for a real one (its vectors stay real)."""
-        cache = self.__dict__.setdefault("_refine_cache", {})
-        P = self._solver.pattern
-        ft = np.longdouble if ext else float
-        if cache.get("ext") is not ext:  # the pattern's entries in this precision, its CSR view: once
-            perm = P["_csr_perm"]
-            rowptr, colptr = np.asarray(P["_rowptr"]), np.asarray(P["_indptr"])
-            rows_ne, cols_ne = np.flatnonzero(np.diff(rowptr) > 0), np.flatnonzero(np.diff(colptr) > 0)
-            cache.clear()
-            cache.update(ext=ext, parts=tuple(P[k].astype(ft) for k in ("_m", "_d", "_k", "_g")), perm=perm,
-                         structure={False: (P["_cols"][perm], rowptr[rows_ne], rows_ne),  # row sums (CSR)
-                                    True: (P["_rows"], colptr[cols_ne], cols_ne)})  # column sums (CSC)
-        if cache.get("a") != complex(a):  # the entries of S(a): once per shift, for both solves
-            m, d, k, g = cache["parts"]
-            ar, ai = ft(complex(a).real), ft(complex(a).imag)
-            # (a a) m + a d + k + g, with a a = (ar ar - ai ai) + i (ar ai + ai ar)
-            dre = (((ar * ar - ai * ai) * m + ar * d) + k) + g
-            dim = (ar * ai + ai * ar) * m + ai * d if ai != 0 else None
-            perm = cache["perm"]
-            cache.update(a=complex(a), data={True: (dre, dim),
-                                             False: (dre[perm], None if dim is None else dim[perm])})
-        dre, dim = cache["data"][bool(trans)]
-        idx, starts, nonempty = cache["structure"][bool(trans)]
-
-        def segsum(v, n):
-            y = np.zeros(n, dtype=ft)
-            y[nonempty] = np.add.reduceat(v, starts)
-            return y
-
-        def apply(xr, xi=None):
-            n = xr.shape[0]
-            gr = xr[idx]
-            if xi is None:
-                return segsum(dre * gr, n), (None if dim is None else segsum(dim * gr, n))
-            gi = xi[idx]
-            if dim is None:
-                return segsum(dre * gr, n), segsum(dre * gi, n)
-            return segsum(dre * gr - dim * gi, n), segsum(dre * gi + dim * gr, n)
-
-        return apply
 
     def _restrict(self, X):
         r"""Lemma 1 puts the raw solutions in :math:`\mathrm{null}(G)` (to the solve
@@ -859,7 +723,7 @@ class IRKA(IRKABase):
                 return cholesky_qr2(X)[0]
             except np.linalg.LinAlgError:
                 pass
-        return _gram_schmidt(X, 1e-2, pivot=False)[0]
+        return gram_schmidt(X, 1e-2, pivot=False)[0]
 
     def _lu_count(self):
         return self._solver.stats.factorizations
