@@ -230,8 +230,9 @@ class MemoryProbe:
 
 #: modules whose content decides the timings; hashed into every result (colleagues edit the
 #: tree while benchmarks run: a result must say which code it measured)
-_KEY_MODULES = ("linalg/saddle.py", "linalg/lradi.py", "linalg/dense.py", "reducers/irka.py",
-                "reducers/bt.py", "reducers/irka_projected.py", "reducers/base.py", "models/index3.py", "rom.py")
+_KEY_MODULES = ("linalg/saddle.py", "linalg/lradi.py", "linalg/dense.py", "linalg/orthonormal.py",
+                "linalg/refine.py", "reducers/irka.py", "reducers/irka_engine.py", "reducers/shift_update.py",
+                "reducers/irka_safeguards.py", "reducers/bt.py", "reducers/irka_projected.py", "reducers/base.py", "models/index3.py", "rom.py")
 
 
 def code_state(git: bool = True) -> dict:

@@ -354,27 +354,27 @@ def test_residue_selection_hysteresis_keeps_a_pole_in_use():
     """Two real poles with near-equal H2 scores compete for one slot: without hysteresis the
     larger score wins; with it the pole whose mirror is a current shift stays, unless the
     other scores higher by more than the factor 1 + h."""
-    from morsuite.reducers.irka import _select_by_residue
+    from morsuite.reducers.shift_update import select_by_residue
 
     lam = np.array([-1.0, -2.0], dtype=complex)
     # scores |b||c| / sqrt(2 |Re lam|): pole 1 scores 2% above pole 0
     b = np.array([[1.0], [1.02 * np.sqrt(2.0)]], dtype=complex)
     c = np.ones((2, 1), dtype=complex)
-    assert list(_select_by_residue(lam, b, c, 1)) == [1]
-    assert list(_select_by_residue(lam, b, c, 1, current=np.array([1.0 + 0j]), hysteresis=0.3)) == [0]
-    assert list(_select_by_residue(lam, b, c, 1, current=np.array([1.0 + 0j]), hysteresis=0.01)) == [1]
+    assert list(select_by_residue(lam, b, c, 1)) == [1]
+    assert list(select_by_residue(lam, b, c, 1, current=np.array([1.0 + 0j]), hysteresis=0.3)) == [0]
+    assert list(select_by_residue(lam, b, c, 1, current=np.array([1.0 + 0j]), hysteresis=0.01)) == [1]
     # a current shift farther than the radius from every mirrored pole: no preference
-    assert list(_select_by_residue(lam, b, c, 1, current=np.array([1.2 + 0j]), hysteresis=0.3,
+    assert list(select_by_residue(lam, b, c, 1, current=np.array([1.2 + 0j]), hysteresis=0.3,
                                    radius=0.05)) == [1]
     # conjugate pairs stay whole
     lam = np.array([-1 + 3j, -1 - 3j, -0.5], dtype=complex)
     b = np.array([[2.0], [2.0], [1.0]], dtype=complex)  # scores 1.41, 1.41, 1
     c3 = np.ones((3, 1), dtype=complex)
-    assert sorted(_select_by_residue(lam, b, c3, 2)) == [0, 1]
+    assert sorted(select_by_residue(lam, b, c3, 2)) == [0, 1]
     # the favoured real pole takes the first slot; the pair does not fit in the one left
-    # and is not split (the update's _fill_odd_slot fills that slot)
-    assert list(_select_by_residue(lam, b, c3, 2, current=np.array([0.5 + 0j]), hysteresis=10.0)) == [2]
-    assert sorted(_select_by_residue(lam, b, c3, 3, current=np.array([0.5 + 0j]), hysteresis=10.0)) == [0, 1, 2]
+    # and is not split (the update's fill_odd_slot fills that slot)
+    assert list(select_by_residue(lam, b, c3, 2, current=np.array([0.5 + 0j]), hysteresis=10.0)) == [2]
+    assert sorted(select_by_residue(lam, b, c3, 3, current=np.array([0.5 + 0j]), hysteresis=10.0)) == [0, 1, 2]
 
 
 def test_irka_records_the_hysteresis_option():
