@@ -78,3 +78,28 @@ def test_package_command_line_writes_readme(tmp_path, capsys):
     data = json.loads((tmp_path / "irka.json").read_text())
     assert {row["model"] for row in data["rows"]} == {"dsms:g=600", "tcom:nc=200"}
     assert all(np.isfinite(r["value"]) and r["value"] > 0 for r in data["ratios"].values())
+
+
+def test_profile_categories_and_key_modules_name_existing_code():
+    """The profiler's categories and the code-state digest name morsuite files by path: after a
+    module is split or renamed they must follow, or time lands silently in "Python overhead"."""
+    import ast
+    from pathlib import Path
+
+    import morsuite
+    from morsuite.bench import output, profiler
+
+    pkg = Path(morsuite.__file__).resolve().parent
+    for rel in output._KEY_MODULES:
+        assert (pkg / rel).is_file(), f"_KEY_MODULES names a missing file {rel}"
+    for _group, category, matchers in profiler.CATEGORIES:
+        for where, func in matchers:
+            if where == "builtin" or not where.endswith(".py") or not where.startswith(("linalg/", "reducers/",
+                                                                                       "models/", "analysis/")):
+                continue
+            path = pkg / where
+            assert path.is_file(), f"category {category!r} names a missing file {where}"
+            if func != "*":
+                names = {n.name for n in ast.walk(ast.parse(path.read_text()))
+                         if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))}
+                assert func in names, f"category {category!r}: {where} has no function {func}"

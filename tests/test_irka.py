@@ -97,7 +97,7 @@ def test_refined_solves_and_gram_schmidt_reach_the_long_double_accuracy():
     shifts entirely in np.longdouble has error 1.7e-12 (measured offline); the
     LU's solutions without refinement or Householder bases lose a factor 10 or more.
     """
-    from morsuite.reducers.irka import _gram_schmidt
+    from morsuite.linalg.orthonormal import gram_schmidt
 
     fom = ms.models.dsms(600)
     omega = np.logspace(-2, 0, 60)
@@ -110,7 +110,7 @@ def test_refined_solves_and_gram_schmidt_reach_the_long_double_accuracy():
     red = ms.reducers.make("irka", fom, **given)
     red._setup()
     Vraw, _ = red._bases(a, b, c, True)
-    V = red._restrict(_gram_schmidt(Vraw, 1e-14)[0])
+    V = red._restrict(gram_schmidt(Vraw, 1e-14)[0])
     assert np.abs(fom.G @ V).max() < 1e-14 and np.allclose(V.T @ V, np.eye(V.shape[1]), atol=1e-13)
     errs = {}
     for name, opts in (("default", {"orthonormalization": "gram-schmidt"}),
@@ -134,7 +134,7 @@ def test_refinement_operator_in_long_double():
     for a in (0.3 + 0.7j, 0.05):
         S = red._solver.matrix(a)
         for trans in (False, True):
-            op = red._refine_operator(a, trans, True)
+            op = red._refiner.at(a, trans, True)
             yr, yi = op(x.real.astype(np.longdouble), x.imag.astype(np.longdouble))
             assert yr.dtype == yi.dtype == np.longdouble
             ref = (S.T if trans else S) @ x
@@ -146,11 +146,11 @@ def test_refinement_operator_in_long_double():
             assert (yi is None) == (np.imag(a) == 0)
             assert np.max(np.abs(got - ref)) <= 1e-14 * np.max(np.abs(ref))
             # the same bits as complex long double arithmetic on the complex entries
-            m, d, k, g = red._refine_cache["parts"]
+            m, d, k, g = red._refiner.cache["parts"]
             aa = np.clongdouble(a)
             data = (aa * aa) * m + aa * d + k + g
-            idx, starts, nonempty = red._refine_cache["structure"][trans]
-            data = data if trans else data[red._refine_cache["perm"]]
+            idx, starts, nonempty = red._refiner.cache["structure"][trans]
+            data = data if trans else data[red._refiner.cache["perm"]]
             xe = x.astype(np.clongdouble)
             ye = np.zeros(N, dtype=np.clongdouble)
             ye[nonempty] = np.add.reduceat(data * xe[idx], starts)
@@ -160,11 +160,11 @@ def test_refinement_operator_in_long_double():
 
 @pytest.mark.parametrize("pivot", [True, False])
 def test_gram_schmidt_column_updates_are_bit_identical_to_rank_one_updates(pivot):
-    """The column-at-a-time updates of _gram_schmidt give the bits of R -= outer(q, c), on localised,
+    """The column-at-a-time updates of gram_schmidt give the bits of R -= outer(q, c), on localised,
     ill-conditioned columns (entries down to 1e-90, one dependent column) like the DSMS bases;
     and the result is an orthonormal basis of the columns' span (against a dense SVD)."""
-    import morsuite.reducers.irka as irka_mod
-    from morsuite.reducers.irka import _gram_schmidt
+    import morsuite.linalg.orthonormal as orthonormal_mod
+    from morsuite.linalg.orthonormal import gram_schmidt
 
     def outer_update(R, q, m, k, tmp):  # the update as first written
         R[:, m:k] -= np.outer(q, q @ R[:, m:k])
@@ -174,10 +174,10 @@ def test_gram_schmidt_column_updates_are_bit_identical_to_rank_one_updates(pivot
     decay = np.exp(-np.linspace(0, 200, n))[:, None] ** rng.uniform(0.1, 1.0, k)
     X = (rng.standard_normal((n, k)) * decay) @ np.triu(rng.standard_normal((k, k)))
     X[:, 5] = X[:, 2] - 2 * X[:, 7]  # numerically dependent
-    Q, s = _gram_schmidt(X, 1e-14, pivot=pivot)
+    Q, s = gram_schmidt(X, 1e-14, pivot=pivot)
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(irka_mod, "_remove_direction", outer_update)
-        Q0, s0 = _gram_schmidt(X, 1e-14, pivot=pivot)
+        mp.setattr(orthonormal_mod, "_remove_direction", outer_update)
+        Q0, s0 = gram_schmidt(X, 1e-14, pivot=pivot)
     assert np.array_equal(Q, Q0) and np.array_equal(s, s0)
     assert Q.shape[1] == k - 1
     assert np.allclose(Q.T @ Q, np.eye(k - 1), atol=1e-14)
@@ -354,27 +354,27 @@ def test_residue_selection_hysteresis_keeps_a_pole_in_use():
     """Two real poles with near-equal H2 scores compete for one slot: without hysteresis the
     larger score wins; with it the pole whose mirror is a current shift stays, unless the
     other scores higher by more than the factor 1 + h."""
-    from morsuite.reducers.irka import _select_by_residue
+    from morsuite.reducers.shift_update import select_by_residue
 
     lam = np.array([-1.0, -2.0], dtype=complex)
     # scores |b||c| / sqrt(2 |Re lam|): pole 1 scores 2% above pole 0
     b = np.array([[1.0], [1.02 * np.sqrt(2.0)]], dtype=complex)
     c = np.ones((2, 1), dtype=complex)
-    assert list(_select_by_residue(lam, b, c, 1)) == [1]
-    assert list(_select_by_residue(lam, b, c, 1, current=np.array([1.0 + 0j]), hysteresis=0.3)) == [0]
-    assert list(_select_by_residue(lam, b, c, 1, current=np.array([1.0 + 0j]), hysteresis=0.01)) == [1]
+    assert list(select_by_residue(lam, b, c, 1)) == [1]
+    assert list(select_by_residue(lam, b, c, 1, current=np.array([1.0 + 0j]), hysteresis=0.3)) == [0]
+    assert list(select_by_residue(lam, b, c, 1, current=np.array([1.0 + 0j]), hysteresis=0.01)) == [1]
     # a current shift farther than the radius from every mirrored pole: no preference
-    assert list(_select_by_residue(lam, b, c, 1, current=np.array([1.2 + 0j]), hysteresis=0.3,
+    assert list(select_by_residue(lam, b, c, 1, current=np.array([1.2 + 0j]), hysteresis=0.3,
                                    radius=0.05)) == [1]
     # conjugate pairs stay whole
     lam = np.array([-1 + 3j, -1 - 3j, -0.5], dtype=complex)
     b = np.array([[2.0], [2.0], [1.0]], dtype=complex)  # scores 1.41, 1.41, 1
     c3 = np.ones((3, 1), dtype=complex)
-    assert sorted(_select_by_residue(lam, b, c3, 2)) == [0, 1]
+    assert sorted(select_by_residue(lam, b, c3, 2)) == [0, 1]
     # the favoured real pole takes the first slot; the pair does not fit in the one left
-    # and is not split (the update's _fill_odd_slot fills that slot)
-    assert list(_select_by_residue(lam, b, c3, 2, current=np.array([0.5 + 0j]), hysteresis=10.0)) == [2]
-    assert sorted(_select_by_residue(lam, b, c3, 3, current=np.array([0.5 + 0j]), hysteresis=10.0)) == [0, 1, 2]
+    # and is not split (the update's fill_odd_slot fills that slot)
+    assert list(select_by_residue(lam, b, c3, 2, current=np.array([0.5 + 0j]), hysteresis=10.0)) == [2]
+    assert sorted(select_by_residue(lam, b, c3, 3, current=np.array([0.5 + 0j]), hysteresis=10.0)) == [0, 1, 2]
 
 
 def test_irka_records_the_hysteresis_option():

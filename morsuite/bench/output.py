@@ -76,8 +76,11 @@ def machine_info() -> dict:
 
 #: modules whose content decides the timings; hashed into every result (the tree may be
 #: edited while a long benchmark runs)
-_KEY_MODULES = ("linalg/saddle.py", "linalg/lradi.py", "linalg/dense.py", "reducers/irka.py",
-                "reducers/bt.py", "reducers/irka_projected.py", "reducers/base.py", "models/index3.py", "rom.py")
+_KEY_MODULES = ("linalg/saddle.py", "linalg/saddle_lu.py", "linalg/lradi.py", "linalg/adi_iteration.py",
+                "linalg/adi_shifts.py", "linalg/manifold.py", "linalg/system.py", "linalg/dense.py",
+                "linalg/orthonormal.py", "linalg/refine.py", "reducers/irka.py", "reducers/irka_engine.py",
+                "reducers/shift_update.py", "reducers/irka_safeguards.py", "reducers/bt.py",
+                "reducers/irka_projected.py", "reducers/base.py", "models/index3.py", "rom.py")
 
 
 def code_state(git: bool = True) -> dict:

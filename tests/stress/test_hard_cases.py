@@ -174,7 +174,7 @@ def _check_cycle_outcome(res, W):
 
 def test_a_forced_two_cycle_is_detected_and_the_best_iterate_returned(monkeypatch):
     """Roundoff-independent: the shift update alternates between two sets, so IRKA must stop on a cycle."""
-    from morsuite.reducers import irka as irka_mod
+    from morsuite.reducers import irka_engine
 
     fom = ms.models.dsms(100)
     sets = [np.array([0.02, 0.3 - 0.2j, 0.3 + 0.2j], dtype=complex),
@@ -187,7 +187,7 @@ def test_a_forced_two_cycle_is_detected_and_the_best_iterate_returned(monkeypatc
         ones = np.ones((3, 1), dtype=complex)
         return alpha, ones, np.ones((3, 3), dtype=complex), {"update": how, "mirrored": 0, "hsv": None}
 
-    monkeypatch.setattr(irka_mod.IRKABase, "_update", alternate)
+    monkeypatch.setattr(irka_engine.IRKABase, "_update", alternate)
     res, W = _reduce("irka", fom, 3, init="given", init_shifts=sets[1], update="bt", maxit=50)
     _check_cycle_outcome(res, W)
     assert res.info["iterations"] <= 4
