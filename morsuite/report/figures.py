@@ -206,24 +206,29 @@ def _draw(figdata, fig, ax):
     return fig, ax
 
 
-def render(fig, fmt: str) -> bytes:
-    """The bytes of ``fig`` as a ``fmt`` file (report style, no creation date)."""
+def render(fig, fmt: str, dpi: int | None = None) -> bytes:
+    """The bytes of ``fig`` as a ``fmt`` file (report style, no creation date).
+
+    ``dpi`` applies to the raster formats (PNG; default :data:`DPI`).
+    """
+    dpi = (dpi or DPI[fmt]) if fmt in DPI else None
     buf = io.BytesIO()
     with style_context():
-        fig.savefig(buf, format=fmt, dpi=DPI.get(fmt), metadata=METADATA.get(fmt))
+        fig.savefig(buf, format=fmt, dpi=dpi, metadata=METADATA.get(fmt))
     return buf.getvalue()
 
 
-def save(fig, path_stem, formats=("png", "pdf")) -> list[Path]:
+def save(fig, path_stem, formats=("png", "pdf"), dpi: int = DPI["png"]) -> list[Path]:
     """Write ``path_stem``.png and .pdf (or ``formats``); return the paths.
 
-    Each file is written atomically, and not at all when it already holds these
-    bytes (:func:`~morsuite.report.files.write_bytes`).
+    ``dpi`` applies to the raster formats (PNG). Each file is written atomically,
+    and not at all when it already holds these bytes
+    (:func:`~morsuite.report.files.write_bytes`).
     """
     out = []
     for ext in formats:
         path = Path(f"{path_stem}.{ext}")
-        write_bytes(path, render(fig, ext))
+        write_bytes(path, render(fig, ext, dpi))
         out.append(path)
     return out
 

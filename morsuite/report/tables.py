@@ -104,10 +104,15 @@ def read_markdown(path_or_text) -> pd.DataFrame:
     return pd.DataFrame(data, columns=header, dtype=str)
 
 
-def write_table(df: pd.DataFrame, stem, *, title: str = "", note: str = "") -> list[Path]:
-    """Write ``stem``.csv and ``stem``.md atomically (each only if its bytes change); return both paths."""
+def write_table(df: pd.DataFrame, stem, *, title: str = "", note: str = "", md_columns=None) -> list[Path]:
+    """Write ``stem``.csv and ``stem``.md atomically (each only if its bytes change); return both paths.
+
+    The CSV has every column; the Markdown only ``md_columns`` (those present,
+    in that order) when given.
+    """
     csv, md = Path(f"{stem}.csv"), Path(f"{stem}.md")
     write_text(csv, df.to_csv(index=False))
+    shown = df[[c for c in md_columns if c in df]] if md_columns is not None else df
     head = (f"## {title}\n\n" if title else "") + (f"{note}\n\n" if note else "")
-    write_text(md, head + to_markdown(df))
+    write_text(md, head + to_markdown(shown))
     return [csv, md]
