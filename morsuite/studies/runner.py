@@ -212,7 +212,7 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
         hit = cache.get("fom", f.key)
         if hit is not None:
             arrays, meta = hit
-            foms[fid] = {**meta, "omega": arrays["omega"], "H": arrays["H"], "cached": True}
+            foms[fid] = {**meta, **arrays, "cached": True}
     reductions, missing = _lookup(cache, "reduction", plan.reduces, lambda arrays, meta: {
         **meta, "rom": {"kind": meta["rom_kind"], "arrays": arrays}, "cached": True})
     metrics, missing_metrics = _lookup(cache, "metrics", plan.metrics,
@@ -224,17 +224,18 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
     t_compute = time.perf_counter() - t0
 
     # -- assemble; on a remote cluster the workers could not write the cache: do it here
-    from ..analysis import sigma_max
-
     cache_root = str(cache.root) if choice.local_files else None
     for fid in plan.foms:
+        store = fid in computed and cache_root is None
         if fid in computed:
             foms[fid] = computed[fid]
-            if cache_root is None:
-                e = foms[fid]
-                cache.put("fom", e["key"], {"omega": e["omega"], "H": e["H"]},
-                          {k: v for k, v in e.items() if k not in ("omega", "H", "cached")})
-        foms[fid]["sigma_full"] = sigma_max(foms[fid]["H"])
+        e = foms[fid]
+        if "sigma_full" not in e:  # an entry from before sigma_full was stored with H: add it
+            from ..analysis import sigma_max
+            e["sigma_full"], store = sigma_max(e["H"]), True
+        if store:
+            cache.put("fom", e["key"], {k: e[k] for k in T.FOM_ARRAYS},
+                      {k: v for k, v in e.items() if k not in T.FOM_ARRAYS + ("cached",)})
     for gid in missing:
         for r, e in computed[gid].items():
             reductions[gid][r] = e
