@@ -24,18 +24,26 @@ from .errors import (  # noqa: E402
     SpecError,
     StabilityWarning,
 )
-from . import models, linalg, analysis  # noqa: E402,F401
 
 __all__ = ["models", "linalg", "analysis", "reducers", "rom", "MorsuiteError", "InputError",
            "ShapeError", "ModelError", "OptionError", "FileFormatError", "SpecError",
            "SingularShiftError", "MemoryBudgetError", "MorsuiteWarning", "ConvergenceWarning",
            "RankWarning", "StabilityWarning", "DtypeWarning", "__version__"]
 
+#: Subpackages imported on first attribute access: ``import morsuite`` stays cheap (no
+#: scipy.sparse, pandas, matplotlib, control or dask) so that a command pays only for
+#: what it uses, e.g. a fully cached ``morsuite run`` needs no model and draws nothing.
+_LAZY = ("models", "linalg", "analysis", "reducers", "rom", "studies", "report", "utils", "cli")
 
-def __getattr__(name):  # lazy: reducers and rom import control (slow)
-    if name in ("reducers", "rom", "studies", "report"):
+
+def __getattr__(name):
+    if name in _LAZY:
         import importlib
         mod = importlib.import_module(f".{name}", __name__)
         globals()[name] = mod
         return mod
     raise AttributeError(f"module 'morsuite' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))

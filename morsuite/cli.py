@@ -92,18 +92,25 @@ def _add_bench_parser(sub):
 
 def _add_run_parser(sub):
     """``morsuite run SPEC [SPEC ...] [--out DIR] [--jobs N | --scheduler ADDR] [--cache DIR]
-    [--no-cache] [--quiet] [--dry-run]`` (see morsuite.studies)."""
+    [--no-cache] [--rerender] [--quiet] [--dry-run]`` (see morsuite.studies)."""
 
     def cmd_run(args) -> int:
+        from pathlib import Path
+
         from .studies import build_plan, load_spec, run
-        studies = [load_spec(path) for path in args.specs]  # every spec is valid before anything runs
+        from .studies.cache import Cache
+        from .studies.memo import SpecMemo
+
+        cache = Cache(args.cache or Path(args.out) / ".cache", read=not args.no_cache)
+        memo = SpecMemo(cache)  # validated models/methods: a cached study builds no model
+        studies = [load_spec(path, memo=memo) for path in args.specs]  # every spec is valid before anything runs
         for study in studies:
             if args.dry_run:
                 print(f"{study.name} ({study.path}): {len(study.scenes)} scenes; would compute")
                 print("  " + "\n  ".join(build_plan(study).describe()))
                 continue
             run(study, out=args.out, cache_dir=args.cache, use_cache=not args.no_cache, jobs=args.jobs,
-                scheduler=args.scheduler, quiet=args.quiet)
+                scheduler=args.scheduler, quiet=args.quiet, rerender=args.rerender)
         return 0
 
     p = sub.add_parser("run", help="run study specs (TOML): figures, tables, manifest in OUT/NAME/")
@@ -114,6 +121,9 @@ def _add_run_parser(sub):
     p.add_argument("--scheduler", metavar="ADDRESS", help="dask.distributed scheduler, e.g. tcp://HOST:8786")
     p.add_argument("--cache", metavar="DIR", help="artifact cache (default: OUT/.cache)")
     p.add_argument("--no-cache", action="store_true", help="recompute everything (fresh entries replace the cache)")
+    p.add_argument("--rerender", action="store_true",
+                   help="draw every figure and write every table again, also those whose data did not change "
+                        "(default: reuse them; files whose bytes come out the same are never rewritten)")
     p.add_argument("--quiet", action="store_true", help="no progress bars or log lines")
     p.add_argument("--dry-run", action="store_true", help="validate the specs and print what would be computed")
     p.set_defaults(func=cmd_run)

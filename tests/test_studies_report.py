@@ -77,3 +77,31 @@ def test_markdown_round_trip(tmp_path):
     csv, mdp = write_table(df, tmp_path / "t", title="T")
     assert mdp.read_text().startswith("## T")
     assert len(read_markdown(mdp)) == 2 and len(pd.read_csv(csv)) == 2
+
+
+def test_drawing_is_deterministic_and_ignores_the_users_rc(tmp_path):
+    import matplotlib as mpl
+
+    fd = _fig()
+    formats = ("png", "pdf", "svg")
+    write_figure(fd, tmp_path / "a", formats)
+    with mpl.rc_context({"lines.linewidth": 5.0, "font.size": 20}):   # a user's style must not leak in
+        write_figure(fd, tmp_path / "b", formats)
+    for ext in formats:
+        a, b = (tmp_path / "a" / f"demo.{ext}").read_bytes(), (tmp_path / "b" / f"demo.{ext}").read_bytes()
+        assert a == b, ext
+    assert b"CreationDate" not in (tmp_path / "a" / "demo.pdf").read_bytes()
+
+
+def test_unchanged_files_are_not_rewritten(tmp_path):
+    fd = _fig()
+    files = write_figure(fd, tmp_path)
+    stamps = {p.name: p.stat().st_mtime_ns for p in files}
+    import os
+    for p in files:                                 # an old mtime: a rewrite would show
+        os.utime(p, ns=(1, 1))
+    write_figure(fd, tmp_path)
+    assert all(p.stat().st_mtime_ns == 1 for p in files), stamps
+    fd.curves[1].data.loc[0, "value"] = 2.0
+    write_figure(fd, tmp_path, only=["demo__irka.csv"])
+    assert {p.name for p in files if p.stat().st_mtime_ns != 1} == {"demo__irka.csv"}

@@ -1,32 +1,107 @@
 """Figures as data, then drawn: :class:`FigureData` -> matplotlib (PNG, PDF) and pgfplots.
 
-A figure is a list of :class:`Curve` (a DataFrame with an x column and a
-``value`` column, plus a legend label and a style). Plot functions draw only
-what they are given and return ``(fig, ax)`` so that tests can inspect the
-lines; nothing here computes a model quantity. Matplotlib is used through
-:class:`matplotlib.figure.Figure` (no pyplot state, Agg canvas).
+A figure is a list of :class:`Curve` (columns: an x column and ``value``, plus a
+legend label and a style). Plot functions draw only what they are given and
+return ``(fig, ax)`` so that tests can inspect the lines; nothing here computes a
+model quantity. Matplotlib is used through :class:`matplotlib.figure.Figure` (no
+pyplot state, Agg canvas) and imported only when a figure is drawn.
+
+Drawing is deterministic: the figures are drawn in matplotlib's default style plus
+:data:`STYLE_RC` (a user's matplotlibrc does not leak in), and the PDF and SVG
+files carry no creation date, so the same data gives the same bytes. A change of
+the look that the code does not show (a new rc setting, other margins) must bump
+:data:`STYLE_VERSION`; the study runner keys each figure by :func:`style` and
+re-draws it when that changes.
 """
 
 from __future__ import annotations
 
+import contextlib
+import csv
+import io
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
-from ..utils import atomic_path, atomic_write_text
+from .files import write_bytes, write_text
 
-__all__ = ["Curve", "FigureData", "plot", "save", "pgfplots_tex"]
+__all__ = ["Curve", "FigureData", "CsvSource", "plot", "render", "save", "pgfplots_tex", "style", "style_context",
+           "STYLE_VERSION", "STYLE_RC"]
 
 STYLES = ("line", "points", "paper", "full")
+
+#: Bump when the look of the figures changes in a way their data and :func:`style` do not show.
+STYLE_VERSION = 1
+#: rc settings on top of matplotlib's defaults; the SVG salt fixes the ids that would be random.
+STYLE_RC = {"svg.hashsalt": "morsuite"}
+FIGSIZE = (6.4, 4.2)
+MARGINS = {"left": 0.15, "right": 0.97, "bottom": 0.12, "top": 0.92}
+DPI = {"png": 150}
+#: No creation dates: a re-drawn figure is byte-identical to the last one.
+METADATA = {"pdf": {"CreationDate": None}, "svg": {"Date": None}}
+
+
+def style() -> dict:
+    """Everything besides the data and matplotlib's version that decides a figure's pixels."""
+    return {"version": STYLE_VERSION, "rc": STYLE_RC, "figsize": FIGSIZE, "margins": MARGINS, "dpi": DPI,
+            "metadata": {k: sorted(v) for k, v in METADATA.items()}}
+
+
+@contextlib.contextmanager
+def style_context():
+    """matplotlib's default rc plus :data:`STYLE_RC`, restored on exit."""
+    import matplotlib as mpl
+
+    with mpl.rc_context():
+        mpl.rcdefaults()  # the style-blacklisted keys (backend, ...) are kept
+        mpl.rcParams.update(STYLE_RC)
+        yield
+
+
+def _columns(data) -> list:
+    return list(data.columns) if hasattr(data, "columns") else list(data)
+
+
+class CsvSource:
+    """Curve data in a CSV file (columns ``X,value``), read only when needed.
+
+    The paper's figure data are overlaid as such curves: a study knows the file's
+    digest (:meth:`digest`) and columns without parsing it, and parses it (with
+    pandas, once) only when the figure is drawn or its CSV written. ``x`` renames the
+    first non-``value`` column.
+    """
+
+    def __init__(self, path, x: str):
+        self.path, self.x = Path(path), x
+        with open(self.path, newline="", encoding="utf-8-sig") as fh:
+            header = next(csv.reader(fh), None) or []
+        others = [c for c in header if c != "value"]
+        self._xcol = others[0] if others else None
+        self.columns = [x, "value"] if (self._xcol is not None and "value" in header) else header
+        self._frame = None
+
+    def digest(self) -> str:
+        import hashlib
+        return hashlib.sha256(self.path.read_bytes()).hexdigest()
+
+    def frame(self):
+        if self._frame is None:
+            import pandas as pd
+            df = pd.read_csv(self.path)
+            self._frame = df.rename(columns={self._xcol: self.x})[[self.x, "value"]]
+        return self._frame
+
+    def __getitem__(self, col):
+        return self.frame()[col]
 
 
 @dataclass
 class Curve:
     """One curve: ``data[x]`` against ``data['value']``.
 
-    ``name`` is file-safe (it becomes part of the CSV name); ``label`` is the
+    ``data`` is a mapping of column name -> 1-D values (what studies produce), a
+    DataFrame, or a :class:`CsvSource`. ``name`` is file-safe (it becomes part of the CSV name); ``label`` is the
     legend text (mathtext allowed, it is also valid LaTeX); ``style`` is "line",
     "full" (the full-order model: a thick black line under the reduced ones),
     "points" (markers joined by a thin line, e.g. a Pareto front) or "paper"
@@ -35,7 +110,7 @@ class Curve:
 
     name: str
     label: str
-    data: pd.DataFrame
+    data: object           # mapping of columns, DataFrame or CsvSource
     x: str = "omega"
     style: str = "line"
     annotate: str | None = None   # a column whose values label the points (e.g. r on a Pareto plot)
@@ -43,9 +118,17 @@ class Curve:
     def __post_init__(self):
         if self.style not in STYLES:
             raise ValueError(f"curve style must be one of {STYLES}; got {self.style!r}")
+        cols = _columns(self.data)
         for col in (self.x, "value"):
-            if col not in self.data.columns:
-                raise ValueError(f"curve {self.name!r}: data has no column {col!r} ({list(self.data.columns)})")
+            if col not in cols:
+                raise ValueError(f"curve {self.name!r}: data has no column {col!r} ({cols})")
+
+    def frame(self):
+        """The data as a DataFrame (what its CSV file holds)."""
+        if isinstance(self.data, CsvSource):
+            return self.data.frame()
+        import pandas as pd
+        return self.data if isinstance(self.data, pd.DataFrame) else pd.DataFrame(dict(self.data))
 
 
 @dataclass
@@ -68,16 +151,23 @@ def _positive(y):
 
 
 def plot(figdata: FigureData, *, ax=None):
-    """Draw ``figdata``; return ``(fig, ax)``."""
-    from matplotlib.figure import Figure
+    """Draw ``figdata``; return ``(fig, ax)``.
 
+    A new figure is drawn in the report style (:func:`style_context`); into a given
+    ``ax`` the curves are drawn in the caller's style.
+    """
     if ax is None:
-        # fixed margins: a layout engine would double the drawing time of these simple plots
-        fig = Figure(figsize=(6.4, 4.2))
-        fig.subplots_adjust(left=0.15, right=0.97, bottom=0.12, top=0.92)
-        ax = fig.subplots()
-    else:
-        fig = ax.figure
+        from matplotlib.figure import Figure
+
+        with style_context():
+            # fixed margins: a layout engine would double the drawing time of these simple plots
+            fig = Figure(figsize=FIGSIZE)
+            fig.subplots_adjust(**MARGINS)
+            return _draw(figdata, fig, fig.subplots())
+    return _draw(figdata, ax.figure, ax)
+
+
+def _draw(figdata, fig, ax):
     colors = {}
     for c in figdata.curves:
         x = np.asarray(c.data[c.x], dtype=float)
@@ -116,16 +206,29 @@ def plot(figdata: FigureData, *, ax=None):
     return fig, ax
 
 
-def save(fig, path_stem, formats=("png", "pdf"), dpi: int = 150) -> list[Path]:
-    """Write ``path_stem``.png and .pdf (or ``formats``) atomically; return the paths.
+def render(fig, fmt: str, dpi: int | None = None) -> bytes:
+    """The bytes of ``fig`` as a ``fmt`` file (report style, no creation date).
 
-    ``dpi`` applies to the raster formats (PNG).
+    ``dpi`` applies to the raster formats (PNG; default :data:`DPI`).
+    """
+    dpi = (dpi or DPI[fmt]) if fmt in DPI else None
+    buf = io.BytesIO()
+    with style_context():
+        fig.savefig(buf, format=fmt, dpi=dpi, metadata=METADATA.get(fmt))
+    return buf.getvalue()
+
+
+def save(fig, path_stem, formats=("png", "pdf"), dpi: int = DPI["png"]) -> list[Path]:
+    """Write ``path_stem``.png and .pdf (or ``formats``); return the paths.
+
+    ``dpi`` applies to the raster formats (PNG). Each file is written atomically,
+    and not at all when it already holds these bytes
+    (:func:`~morsuite.report.files.write_bytes`).
     """
     out = []
     for ext in formats:
         path = Path(f"{path_stem}.{ext}")
-        with atomic_path(path, suffix=f".{ext}") as tmp:
-            fig.savefig(tmp, format=ext, dpi=dpi if ext == "png" else None)
+        write_bytes(path, render(fig, ext, dpi))
         out.append(path)
     return out
 
@@ -174,5 +277,5 @@ def pgfplots_tex(figdata: FigureData, csv_files: dict) -> str:
 
 
 def write_pgfplots(figdata: FigureData, csv_files: dict, path) -> Path:
-    atomic_write_text(path, pgfplots_tex(figdata, csv_files))
+    write_text(path, pgfplots_tex(figdata, csv_files))
     return Path(path)

@@ -11,18 +11,23 @@ A figure NAME becomes
 - ``NAME.png`` and ``NAME.pdf`` (matplotlib, Agg);
 - ``NAME.tex``: a pgfplots picture reading the CSVs.
 
-A table NAME becomes ``NAME.csv`` and ``NAME.md``. Every write is atomic.
+A table NAME becomes ``NAME.csv`` and ``NAME.md``. Every write is atomic, and a
+file that already holds the new bytes is not touched (:mod:`.files`).
+
+:func:`figure_files` and :func:`table_files` name the files without making them, so
+a caller can check which exist; ``only=`` makes just those (a figure is drawn only
+when an image is among them, and then only in the formats asked for).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from ..utils import atomic_write_text
-from .figures import FigureData, plot, save, write_pgfplots
-from .tables import write_table
+from .figures import FigureData, plot, render, write_pgfplots
+from .files import write_bytes, write_text
+from .tables import TableData, write_table
 
-__all__ = ["write_figure", "write_table_data", "csv_names"]
+__all__ = ["write_figure", "write_table_data", "csv_names", "figure_files", "table_files"]
 
 
 def csv_names(figdata: FigureData) -> dict:
@@ -32,22 +37,41 @@ def csv_names(figdata: FigureData) -> dict:
             for c in figdata.curves}
 
 
-def write_figure(figdata: FigureData, outdir, formats=("png", "pdf")) -> list[Path]:
-    """CSV per curve, PNG, PDF (``formats``; none: skip drawing) and pgfplots .tex in ``outdir``."""
+def figure_files(figdata: FigureData, formats=("png", "pdf")) -> list[str]:
+    """Names of the files :func:`write_figure` makes: CSVs, images, the .tex."""
+    names = csv_names(figdata)
+    return [names[c.name] for c in figdata.curves] + [f"{figdata.name}.{ext}" for ext in formats] + \
+        [f"{figdata.name}.tex"]
+
+
+def write_figure(figdata: FigureData, outdir, formats=("png", "pdf"), *, only=None) -> list[Path]:
+    """CSV per curve, PNG, PDF (``formats``; none: skip drawing) and pgfplots .tex in ``outdir``.
+
+    ``only``: the file names (of :func:`figure_files`) to make; default all.
+    Returns the paths of all the figure's files.
+    """
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     names = csv_names(figdata)
-    files = []
+    wanted = set(figure_files(figdata, formats) if only is None else only)
     for c in figdata.curves:
-        path = outdir / names[c.name]
-        atomic_write_text(path, c.data.to_csv(index=False))
-        files.append(path)
-    if formats:
+        if names[c.name] in wanted:
+            write_text(outdir / names[c.name], c.frame().to_csv(index=False))
+    images = [ext for ext in formats if f"{figdata.name}.{ext}" in wanted]
+    if images:
         fig, _ = plot(figdata)
-        files += save(fig, outdir / figdata.name, formats)
-    files.append(write_pgfplots(figdata, names, outdir / f"{figdata.name}.tex"))
-    return files
+        for ext in images:
+            write_bytes(outdir / f"{figdata.name}.{ext}", render(fig, ext))
+    if f"{figdata.name}.tex" in wanted:
+        write_pgfplots(figdata, names, outdir / f"{figdata.name}.tex")
+    return [outdir / n for n in figure_files(figdata, formats)]
 
 
-def write_table_data(table, outdir) -> list[Path]:
-    return write_table(table.df, Path(outdir) / table.name, title=table.title)
+def table_files(table: TableData) -> list[str]:
+    """Names of the files :func:`write_table_data` makes."""
+    return [f"{table.name}.csv", f"{table.name}.md"]
+
+
+def write_table_data(table: TableData, outdir, *, only=None) -> list[Path]:
+    """``NAME.csv`` and ``NAME.md`` of ``table`` in ``outdir`` (both: they come from one DataFrame)."""
+    return write_table(table.frame(), Path(outdir) / table.name, title=table.title, note=table.note)

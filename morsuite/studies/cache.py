@@ -7,6 +7,9 @@ version and a digest of morsuite's numerical source files (see :func:`code_diges
 written atomically and the JSON last, so an entry exists only when complete: an
 interrupted run leaves whole entries and resumes from them. A cached entry keeps
 the timing (and host) of the run that made it.
+
+Entries without arrays (the spec memo of :mod:`.memo`) are a JSON file alone:
+:meth:`Cache.get_json`, :meth:`Cache.put_json`.
 """
 
 from __future__ import annotations
@@ -23,14 +26,28 @@ from .. import __version__
 from ..utils import atomic_path, atomic_write_text
 from .spec import plain
 
-__all__ = ["Cache", "cache_key"]
+__all__ = ["Cache", "cache_key", "code_digest", "source_digest"]
 
 
 #: The numerical part of morsuite: a change in any of these files changes every cache key.
 _NUMERICAL_SOURCES = ("models", "linalg", "reducers", "analysis", "rom.py", "errors.py")
 
 
-@functools.lru_cache(maxsize=1)
+@functools.lru_cache(maxsize=None)
+def source_digest(*names: str) -> str:
+    """SHA-256 of the named parts of morsuite's source (folders: every ``*.py`` in them),
+    relative to the package, e.g. ``source_digest("report")``."""
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for name in names:
+        p = root / name
+        for f in sorted(p.rglob("*.py")) if p.is_dir() else [p]:
+            if f.is_file():
+                h.update(str(f.relative_to(root)).encode())
+                h.update(f.read_bytes())
+    return h.hexdigest()
+
+
 def code_digest() -> str:
     """SHA-256 of morsuite's numerical source files.
 
@@ -39,15 +56,7 @@ def code_digest() -> str:
     edited reducer never serves a stale cache entry. Studies, reports and the CLI
     are not part of it: they do not change what a reduction returns.
     """
-    root = Path(__file__).resolve().parents[1]
-    h = hashlib.sha256()
-    for name in _NUMERICAL_SOURCES:
-        p = root / name
-        for f in sorted(p.rglob("*.py")) if p.is_dir() else [p]:
-            if f.is_file():
-                h.update(str(f.relative_to(root)).encode())
-                h.update(f.read_bytes())
-    return h.hexdigest()
+    return source_digest(*_NUMERICAL_SOURCES)
 
 
 def cache_key(kind: str, **material) -> str:
@@ -98,6 +107,21 @@ class Cache:
             with open(tmp, "wb") as fh:
                 np.savez(fh, **{k: np.asarray(v) for k, v in arrays.items()})
         atomic_write_text(js, json.dumps(plain({**meta, "key": key}), sort_keys=True))
+
+    def get_json(self, kind: str, key: str):
+        """The JSON entry ``kind``/``key`` (a dict) or None when absent, unreadable or not for this key."""
+        if not self.read:
+            return None
+        js = self._paths(kind, key)[1]
+        try:
+            meta = json.loads(js.read_text())
+        except (OSError, ValueError):
+            return None
+        return meta if isinstance(meta, dict) and meta.get("key") == key else None
+
+    def put_json(self, kind: str, key: str, meta: dict) -> None:
+        if self.write:
+            atomic_write_text(self._paths(kind, key)[1], json.dumps(plain({**meta, "key": key}), sort_keys=True))
 
     def has(self, kind: str, key: str) -> bool:
         npz, js = self._paths(kind, key)

@@ -32,8 +32,9 @@ class SchedulerChoice:
         return self.name != "distributed"
 
     def describe(self) -> dict:
-        import dask
-        d = {"name": self.name, "workers": self.workers, "dask": dask.__version__}
+        import importlib.metadata
+        # the version from the metadata: a run that computes nothing does not import dask
+        d = {"name": self.name, "workers": self.workers, "dask": importlib.metadata.version("dask")}
         if self.name == "distributed":
             import distributed
             d["address"] = str(self.address)

@@ -8,7 +8,11 @@ one thing share one artifact:
 - a reducer group per (model, reducer, options): ONE reducer instance runs every
   r that some scene needs, in increasing order (Gramians or a projector are
   formed once per group);
-- a metrics group per (model, grid, reducer, options): reduced responses and errors.
+- a metrics group per (model, grid, reducer, options): reduced responses and errors,
+  cached per r (keyed by the response's and the reduction's keys);
+- an output per scene (a figure or a table) and the summary table: the last
+  nodes of the graph, keyed by their content once their inputs exist (see
+  :mod:`morsuite.studies.outputs`).
 
 Nothing outside what :func:`morsuite.studies.scenes.needs` returns for the
 study's scenes is planned.
@@ -18,10 +22,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .cache import cache_key
+from .cache import cache_key, source_digest
 from .scenes import needs
 
-__all__ = ["Plan", "FomArtifact", "ReduceGroup", "MetricsGroup", "build_plan"]
+__all__ = ["Plan", "FomArtifact", "ReduceGroup", "MetricsGroup", "OutputArtifact", "build_plan", "SUMMARY"]
+
+#: Name of the summary table (``summary.csv``, ``summary.md``): every reduction of the run.
+SUMMARY = "summary"
 
 
 @dataclass
@@ -49,7 +56,16 @@ class MetricsGroup:
     fom: str               # FomArtifact id
     reduce: str            # ReduceGroup id
     rs: list
+    keys: dict = field(default_factory=dict)     # r -> cache key
     aliases: set = field(default_factory=set)
+
+
+@dataclass
+class OutputArtifact:
+    id: str                # "figure/NAME" or "table/NAME"
+    kind: str              # "figure" or "table"
+    scene: str | None      # the scene's name; None for the summary table
+    inputs: list           # ids of the artifacts it reads ("reduce-.../r4", "metrics-.../r4", "fom-...")
 
 
 @dataclass
@@ -60,6 +76,7 @@ class Plan:
     fom_of: dict           # (model alias, grid) -> fom id
     reduce_of: dict        # (model alias, method alias) -> reduce id
     metrics_of: dict       # (model alias, grid, method alias) -> metrics id
+    outputs: dict = field(default_factory=dict)  # id -> OutputArtifact, in scene order, the summary last
 
     def describe(self) -> list[str]:
         lines = []
@@ -72,6 +89,9 @@ class Plan:
         for g in self.metrics.values():
             lines.append(f"metrics              {self.reduces[g.reduce].model.name} "
                          f"{self.reduces[g.reduce].method.reducer} r = {g.rs}")
+        for o in self.outputs.values():
+            lines.append(f"{o.kind:<20} {o.scene or SUMMARY} (from {len(o.inputs)} artifacts; "
+                         f"reused when its data did not change)")
         return lines
 
 
@@ -79,9 +99,14 @@ def _reduction_key(model, method, r):
     return cache_key("reduction", model=model.model_id, reducer=method.reducer, options=method.full_options, r=int(r))
 
 
+def _metrics_key(fom_key, reduction_key):
+    # tasks.py computes the metrics: a change there must not serve stale numbers
+    return cache_key("metrics", fom=fom_key, reduction=reduction_key, tasks=source_digest("studies/tasks.py"))
+
+
 def build_plan(study) -> Plan:
     """The artifacts the study's scenes need, deduplicated by content."""
-    foms, reduces, metrics = {}, {}, {}
+    foms, reduces, metrics, outputs = {}, {}, {}, {}
     fom_of, reduce_of, metrics_of = {}, {}, {}
 
     def reduce_group(model_alias, method_alias, r):
@@ -99,10 +124,11 @@ def build_plan(study) -> Plan:
         return g
 
     for scene in study.scenes:
+        inputs = []
         for need in needs(scene):
             if need[0] == "reduce":
                 _, model_alias, method_alias, r = need
-                reduce_group(model_alias, method_alias, r)
+                inputs.append(f"{reduce_group(model_alias, method_alias, r).id}/r{r}")
                 continue
             _, model_alias, grid, method_alias, r = need
             model = study.models[model_alias]
@@ -121,6 +147,14 @@ def build_plan(study) -> Plan:
                 mg = metrics[mid] = MetricsGroup(mid, fid, g.id, [])
             if r not in mg.rs:
                 mg.rs = sorted(mg.rs + [r])
+                mg.keys[r] = _metrics_key(fkey, g.keys[r])
             mg.aliases.add((model_alias, grid, method_alias))
             metrics_of[(model_alias, grid, method_alias)] = mid
-    return Plan(foms, reduces, metrics, fom_of, reduce_of, metrics_of)
+            inputs += [fid, f"{g.id}/r{r}", f"{mid}/r{r}"]
+        kind = "table" if scene.kind == "table" else "figure"
+        outputs[f"{kind}/{scene.name}"] = OutputArtifact(f"{kind}/{scene.name}", kind, scene.name,
+                                                         sorted(set(inputs)))
+    everything = [f"{g.id}/r{r}" for g in reduces.values() for r in g.rs] + \
+        [f"{m.id}/r{r}" for m in metrics.values() for r in m.rs]
+    outputs[f"table/{SUMMARY}"] = OutputArtifact(f"table/{SUMMARY}", "table", None, sorted(everything))
+    return Plan(foms, reduces, metrics, fom_of, reduce_of, metrics_of, outputs)

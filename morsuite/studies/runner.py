@@ -5,11 +5,18 @@ is wrong), plans the artifacts its scenes need, takes what the cache holds,
 computes the rest as a Dask graph (synchronous by default), and writes
 ``OUT/NAME/``: a CSV per curve, PNG, PDF and pgfplots per figure, tables,
 ``summary.csv``/``summary.md`` (every reduction computed) and ``manifest.json``.
+
+Nothing is done twice: computed artifacts come from the cache when their key is
+there (a fully cached study builds no Dask graph and no model: see
+:mod:`.memo`), and a figure or table whose content did not change is neither
+drawn nor written (:mod:`.outputs`); matplotlib, pandas and dask are imported
+only when something needs them.
 """
 
 from __future__ import annotations
 
 import datetime
+import functools
 import json
 import sys
 import time
@@ -17,15 +24,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
-from .. import __version__
+from ..report.tables import TableData
 from ..utils import atomic_write_text
 from . import tasks as T
 from .cache import Cache
 from .execute import choose, compute, progress_enabled
-from .plan import build_plan
-from .scenes import TableData, build
+from .memo import SpecMemo
+from .outputs import previous_records, realize
+from .plan import SUMMARY, build_plan
+from .scenes import build
 from .spec import Study, load_spec, plain
 
 __all__ = ["run", "RunResult", "SUMMARY_COLUMNS", "H2_NOTE"]
@@ -51,12 +59,18 @@ LONG_RESPONSE = 200
 
 @dataclass
 class RunResult:
+    """What :func:`run` made: ``summary`` is the summary table as a DataFrame (built on first use)."""
+
     study: Study
     outdir: Path
     manifest: dict
-    summary: pd.DataFrame
+    summary_table: TableData
     files: list
     notes: list
+
+    @functools.cached_property
+    def summary(self):
+        return self.summary_table.frame()
 
 
 class Results:
@@ -106,7 +120,7 @@ class Results:
         return row
 
 
-def _summary(study, plan, res) -> pd.DataFrame:
+def _summary(study, plan, res) -> TableData:
     rows = []
     grids_of = {}
     for (model, grid, method) in plan.metrics_of:
@@ -116,10 +130,8 @@ def _summary(study, plan, res) -> pd.DataFrame:
             grids = [g for g in sorted(grids_of.get((model, method), [])) if res.metrics(model, g, method, r)]
             for grid in grids or [None]:  # one row per grid with errors, or one without
                 rows.append(res.summary_row(model, method, r, grid))
-    df = pd.DataFrame(rows, columns=SUMMARY_COLUMNS)
-    for col in ("r", "states", "iterations", "lu_count"):
-        df[col] = df[col].astype("Int64")
-    return df
+    return TableData(SUMMARY, f"{study.title}: every reduction of this run", rows, columns=list(SUMMARY_COLUMNS),
+                     int_columns=("r", "states", "iterations", "lu_count"), note=H2_NOTE + "\n\n" + TIME_NOTE)
 
 
 def _strict(x):
@@ -138,23 +150,24 @@ def _log(quiet, msg):
         print(msg, file=sys.stderr)
 
 
-def _remove_stale(outdir: Path, keep: set):
-    """Delete files an earlier run of this study wrote that this run did not rewrite."""
-    old = outdir / "manifest.json"
-    if not old.is_file():
-        return
+def _old_manifest(outdir: Path) -> dict:
     try:
-        files = json.loads(old.read_text()).get("files", [])
+        old = json.loads((outdir / "manifest.json").read_text())
     except (OSError, ValueError):
-        return
-    for name in files:
+        return {}
+    return old if isinstance(old, dict) else {}
+
+
+def _remove_stale(outdir: Path, old: dict, keep: set):
+    """Delete files an earlier run of this study wrote that this run did not write or keep."""
+    for name in old.get("files", []):
         p = outdir / name
         if name not in keep and p.is_file() and p.parent == outdir:
             p.unlink()
 
 
 def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: int = 1, scheduler=None,
-        quiet: bool = False, formats=("png", "pdf")) -> RunResult:
+        quiet: bool = False, formats=("png", "pdf"), rerender: bool = False) -> RunResult:
     """Run a study.
 
     Parameters
@@ -167,42 +180,144 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
     scheduler : address of a dask.distributed scheduler (``tcp://HOST:PORT``) or a Client
     quiet : no progress bars, no log lines
     formats : figure files to draw (default PNG and PDF; () writes CSV, pgfplots and tables only)
+    rerender : draw every figure and write every table again, even those whose data, style and
+        software did not change since the last run (default False: those are reused, their
+        files left untouched). Files whose bytes come out the same are not rewritten either way.
+
+    Cost: one sparse LU per frequency of each full-order response and the reducers' own
+    LUs, for what the cache does not hold; nothing for a fully cached study.
     """
     t_start = time.perf_counter()
     started = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
-    study = spec if isinstance(spec, Study) else load_spec(spec)
+    out = Path(out)
+    cache = Cache(cache_dir if cache_dir is not None else out / ".cache", read=use_cache, write=True)
+    study = spec if isinstance(spec, Study) else load_spec(spec, memo=SpecMemo(cache))
     choice = choose(jobs, scheduler)
     formats = tuple(formats)
     bad = [f for f in formats if f not in FIGURE_FORMATS]
     if bad:
         from ..errors import OptionError
         raise OptionError(f"formats: unknown figure format(s) {bad}; valid: {', '.join(FIGURE_FORMATS)}")
+    if study.memo is not None:
+        study.memo.flush()
     plan = build_plan(study)
-    out = Path(out)
     outdir = out / study.name
-    cache = Cache(cache_dir if cache_dir is not None else out / ".cache", read=use_cache, write=True)
     bars = progress_enabled(quiet)
     t_validated = time.perf_counter()
     _log(quiet, f"morsuite run {study.name} ({study.path or 'spec'}): plan\n  " + "\n  ".join(plan.describe()))
 
     # -- cache lookup: what is already there is never recomputed
-    foms, reductions, missing = {}, {}, {}
+    foms = {}
     for fid, f in plan.foms.items():
         hit = cache.get("fom", f.key)
         if hit is not None:
             arrays, meta = hit
-            foms[fid] = {**meta, "omega": arrays["omega"], "H": arrays["H"], "cached": True}
-    for gid, g in plan.reduces.items():
-        reductions[gid] = {}
+            foms[fid] = {**meta, **arrays, "cached": True}
+    reductions, missing = _lookup(cache, "reduction", plan.reduces, lambda arrays, meta: {
+        **meta, "rom": {"kind": meta["rom_kind"], "arrays": arrays}, "cached": True})
+    metrics, missing_metrics = _lookup(cache, "metrics", plan.metrics,
+                                       lambda arrays, meta: {**meta, **arrays, "cached": True})
+
+    # -- the graph: only what is missing (nothing at all, and no dask, for a cached study)
+    t0 = time.perf_counter()
+    computed = _compute_missing(plan, cache, choice, bars, study.name, foms, reductions, missing, missing_metrics)
+    t_compute = time.perf_counter() - t0
+
+    # -- assemble; on a remote cluster the workers could not write the cache: do it here
+    cache_root = str(cache.root) if choice.local_files else None
+    for fid in plan.foms:
+        store = fid in computed and cache_root is None
+        if fid in computed:
+            foms[fid] = computed[fid]
+        e = foms[fid]
+        if "sigma_full" not in e:  # an entry from before sigma_full was stored with H: add it
+            from ..analysis import sigma_max
+            e["sigma_full"], store = sigma_max(e["H"]), True
+        if store:
+            cache.put("fom", e["key"], {k: e[k] for k in T.FOM_ARRAYS},
+                      {k: v for k, v in e.items() if k not in T.FOM_ARRAYS + ("cached",)})
+    for gid in missing:
+        for r, e in computed[gid].items():
+            reductions[gid][r] = e
+            if cache_root is None and "error" not in e:
+                cache.put("reduction", e["key"], e["rom"]["arrays"],
+                          {**{k: v for k, v in e.items() if k not in ("rom", "cached")}, "rom_kind": e["rom"]["kind"]})
+    for mid in missing_metrics:
+        for r, e in computed[mid].items():
+            metrics[mid][r] = {**e, "cached": False}
+            if "error" not in e:  # metrics are cheap and come back here anyway: the driver stores them
+                cache.put("metrics", plan.metrics[mid].keys[r], {k: e[k] for k in METRIC_ARRAYS},
+                          {k: v for k, v in e.items() if k not in METRIC_ARRAYS})
+    res = Results(study, plan, foms, reductions, metrics)
+
+    # -- outputs: figures and tables, each reused when its content did not change
+    t1 = time.perf_counter()
+    outdir.mkdir(parents=True, exist_ok=True)
+    old = _old_manifest(outdir)
+    previous = previous_records(old)
+    files, notes, records = [], [], []
+    for scene in study.scenes:
+        item = build(scene, study, res)
+        notes += item.notes
+        if not isinstance(item, TableData) and not item.curves:
+            notes.append(f"scene {scene.name!r}: nothing to draw; no figure written")
+        output = plan.outputs[f"{'table' if isinstance(item, TableData) else 'figure'}/{scene.name}"]
+        records.append(realize(output, item, outdir, formats, previous, rerender))
+    summary = _summary(study, plan, res)
+    records.append(realize(plan.outputs[f"table/{SUMMARY}"], summary, outdir, formats, previous, rerender))
+    files += [outdir / name for rec in records for name in rec["files"]]
+    for gid, entries in reductions.items():
+        g = plan.reduces[gid]
+        who = f"{'/'.join(sorted({a[1] for a in g.aliases}))} ({g.method.reducer}) on {g.model.name}"
+        for r, e in sorted(entries.items()):
+            if "error" in e:
+                notes.append(f"{who} at r = {r} failed: {e['error']}")
+            elif not e["info"].get("converged", True):
+                notes.append(f"{who} at r = {r} did not converge ({e['info'].get('iterations')} iterations; "
+                             f"best iterate returned)")
+    t_report = time.perf_counter() - t1
+
+    from .manifest import manifest as make_manifest
+
+    manifest = make_manifest(study, plan, choice, cache, foms, reductions, metrics, records, files, outdir, notes,
+                             started, {"validate_s": t_validated - t_start, "compute_s": t_compute,
+                                       "report_s": t_report, "total_s": time.perf_counter() - t_start}, rerender)
+    keep = {str(p.relative_to(outdir)) for p in files} | {"manifest.json"}
+    _remove_stale(outdir, old, keep)
+    atomic_write_text(outdir / "manifest.json", json.dumps(_strict(plain(manifest)), indent=1, allow_nan=False))
+    files.append(outdir / "manifest.json")
+    for n in notes:
+        _log(quiet, "note: " + n)
+    drawn = sum(1 for rec in records if rec["rendered"])
+    _log(quiet, f"morsuite run {study.name}: {len(files)} files in {outdir} ({drawn} of {len(records)} figures "
+                f"and tables made, the others unchanged; {manifest['timing']['total_s']:.1f} s, computing "
+                f"{t_compute:.1f} s)")
+    return RunResult(study, outdir, manifest, summary, files, notes)
+
+
+def _lookup(cache, kind, groups, entry):
+    """``({id: {r: entry(arrays, meta)}}, {id: [r, ...]})``: what the cache holds of each
+    group's per-r artifacts (``group.keys[r]``), and what it lacks."""
+    found, missing = {}, {}
+    for gid, g in groups.items():
+        found[gid] = {}
         for r in g.rs:
-            hit = cache.get("reduction", g.keys[r])
+            hit = cache.get(kind, g.keys[r])
             if hit is None:
                 missing.setdefault(gid, []).append(r)
-                continue
-            arrays, meta = hit
-            reductions[gid][r] = {**meta, "rom": {"kind": meta["rom_kind"], "arrays": arrays}, "cached": True}
+            else:
+                found[gid][r] = entry(*hit)
+    return found, missing
 
-    # -- the graph: only what is missing, plus the (cheap) metrics
+
+#: The per-frequency arrays of a metrics entry (stored as npz; the rest as JSON).
+METRIC_ARRAYS = ("sigma_rom", "abs_error", "rel_error")
+
+
+def _compute_missing(plan, cache, choice, bars, desc, foms, reductions, missing, missing_metrics) -> dict:
+    """Build and compute the Dask graph of what the cache lacks; {} (and no dask import) when nothing does."""
+    if not (missing or missing_metrics or len(foms) < len(plan.foms)):
+        return {}
     from dask import delayed
 
     cache_root = str(cache.root) if choice.local_files else None
@@ -218,136 +333,8 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
         graph[gid] = red_nodes[gid] = delayed(T.reduce_sweep, pure=False)(
             g.model.source, g.method.reducer, g.method.options, rs, {r: g.keys[r] for r in rs}, cache_root,
             choice.name, dask_key_name=gid)
-    for mid, mg in plan.metrics.items():
-        graph[mid] = delayed(T.metrics, pure=False)(fom_nodes[mg.fom], mg.rs, reductions[mg.reduce],
+    for mid, rs in missing_metrics.items():
+        mg = plan.metrics[mid]
+        graph[mid] = delayed(T.metrics, pure=False)(fom_nodes[mg.fom], rs, reductions[mg.reduce],
                                                    red_nodes.get(mg.reduce, {}), dask_key_name=mid)
-    t0 = time.perf_counter()
-    computed = compute(graph, choice, progress=bars, desc=study.name)
-    t_compute = time.perf_counter() - t0
-
-    # -- assemble; on a remote cluster the workers could not write the cache: do it here
-    from ..analysis import sigma_max
-
-    for fid in plan.foms:
-        if fid in computed:
-            foms[fid] = computed[fid]
-            if cache_root is None:
-                e = foms[fid]
-                cache.put("fom", e["key"], {"omega": e["omega"], "H": e["H"]},
-                          {k: v for k, v in e.items() if k not in ("omega", "H", "cached")})
-        foms[fid]["sigma_full"] = sigma_max(foms[fid]["H"])
-    for gid in missing:
-        for r, e in computed[gid].items():
-            reductions[gid][r] = e
-            if cache_root is None and "error" not in e:
-                cache.put("reduction", e["key"], e["rom"]["arrays"],
-                          {**{k: v for k, v in e.items() if k not in ("rom", "cached")}, "rom_kind": e["rom"]["kind"]})
-    metrics = {mid: computed[mid] for mid in plan.metrics}
-    res = Results(study, plan, foms, reductions, metrics)
-
-    # -- outputs
-    from ..report.writer import write_figure, write_table_data
-
-    t1 = time.perf_counter()
-    outdir.mkdir(parents=True, exist_ok=True)
-    files, notes = [], []
-    for scene in study.scenes:
-        item = build(scene, study, res)
-        notes += item.notes
-        if isinstance(item, TableData):
-            files += write_table_data(item, outdir)
-        elif not item.curves:
-            notes.append(f"scene {scene.name!r}: nothing to draw; no figure written")
-        else:
-            files += write_figure(item, outdir, formats)
-    summary = _summary(study, plan, res)
-    from ..report.tables import write_table
-    files += write_table(summary, outdir / "summary", title=f"{study.title}: every reduction of this run",
-                         note=H2_NOTE + "\n\n" + TIME_NOTE)
-    for gid, entries in reductions.items():
-        g = plan.reduces[gid]
-        who = f"{'/'.join(sorted({a[1] for a in g.aliases}))} ({g.method.reducer}) on {g.model.name}"
-        for r, e in sorted(entries.items()):
-            if "error" in e:
-                notes.append(f"{who} at r = {r} failed: {e['error']}")
-            elif not e["info"].get("converged", True):
-                notes.append(f"{who} at r = {r} did not converge ({e['info'].get('iterations')} iterations; "
-                             f"best iterate returned)")
-    t_report = time.perf_counter() - t1
-
-    manifest = _manifest(study, plan, choice, cache, foms, reductions, metrics, files, outdir, notes,
-                         started, {"validate_s": t_validated - t_start, "compute_s": t_compute,
-                                   "report_s": t_report, "total_s": time.perf_counter() - t_start})
-    keep = {str(p.relative_to(outdir)) for p in files} | {"manifest.json"}
-    _remove_stale(outdir, keep)
-    atomic_write_text(outdir / "manifest.json", json.dumps(_strict(plain(manifest)), indent=1, allow_nan=False))
-    files.append(outdir / "manifest.json")
-    for n in notes:
-        _log(quiet, "note: " + n)
-    _log(quiet, f"morsuite run {study.name}: wrote {len(files)} files to {outdir} "
-                f"({manifest['timing']['total_s']:.1f} s, computing {t_compute:.1f} s)")
-    return RunResult(study, outdir, manifest, summary, files, notes)
-
-
-def _artifacts(plan, foms, reductions, metrics) -> list:
-    arts = []
-    for fid, f in plan.foms.items():
-        e = foms[fid]
-        arts.append({"id": fid, "kind": "fom_response", "model": f.model.name, "grid": list(f.bounds),
-                     "aliases": sorted(map(list, f.aliases)), "key": f.key, "cached": bool(e.get("cached")),
-                     "time_s": e.get("time_s"), "lu_count": e.get("lu_count"), "scheduler": e.get("scheduler"),
-                     "host": e.get("host"),
-                     "created": e.get("created")})
-    for gid, g in plan.reduces.items():
-        for r in g.rs:
-            e = reductions[gid].get(r, {})
-            info = e.get("info", {})
-            arts.append({"id": f"{gid}/r{r}", "kind": "reduction", "group": gid, "model": g.model.name,
-                         "reducer": g.method.reducer, "method_aliases": sorted({a[1] for a in g.aliases}),
-                         "options": g.method.full_options, "r_requested": r, "r": info.get("r"),
-                         "states": info.get("states"), "key": g.keys[r], "cached": bool(e.get("cached")),
-                         "time_s": e.get("time_s"), "time_standalone_s": e.get("time_standalone_s"),
-                         "wall_s": e.get("wall_s"), "call_index": e.get("call_index"),
-                         "converged": info.get("converged"), "iterations": info.get("iterations"),
-                         "lu_count": info.get("lu_count"), "time_breakdown": info.get("time_breakdown"),
-                         "warnings": info.get("warnings"), "error": e.get("error"), "scheduler": e.get("scheduler"),
-                         "host": e.get("host"),
-                         "created": e.get("created")})
-    for mid, mg in plan.metrics.items():
-        for r in mg.rs:
-            e = metrics[mid].get(r, {})
-            g = plan.reduces[mg.reduce]
-            arts.append({"id": f"{mid}/r{r}", "kind": "metrics", "model": g.model.name, "reducer": g.method.reducer,
-                         "r_requested": r, "grid": list(plan.foms[mg.fom].bounds), "fom": mg.fom,
-                         "reduction": f"{mg.reduce}/r{r}", "cached": False, "time_s": e.get("time_s"),
-                         "error": e.get("error")})
-    return arts
-
-
-def _manifest(study, plan, choice, cache, foms, reductions, metrics, files, outdir, notes, started, timing):
-    from .environment import environment
-
-    spec_text = study.path.read_text() if study.path is not None else None
-    import hashlib
-    return {
-        "study": study.name, "title": study.title, "description": study.description,
-        "spec": str(study.path) if study.path else None,
-        "spec_sha256": hashlib.sha256(spec_text.encode()).hexdigest() if spec_text else None,
-        "config_hash": study.config_hash, "morsuite": __version__, "started": started, "argv": sys.argv,
-        **environment(),
-        "scheduler": choice.describe(),
-        "cache": {"dir": str(cache.root), "read": cache.read, "write": cache.write},
-        "models": {a: {"spec": m.spec, "source": m.source, "model_id": m.model_id, "name": m.name,
-                       "n1": m.n1, "n2": m.n2, "band": list(m.band)} for a, m in study.models.items()},
-        "grids": {g.name: {"band": g.band, "n": g.n} for g in study.grids.values()},
-        "methods": {a: {"reducer": m.reducer, "label": m.label, "options_given": m.options,
-                        "options": m.full_options} for a, m in study.methods.items()},
-        "seeds": {a: m.full_options["seed"] for a, m in study.methods.items() if "seed" in m.full_options},
-        "scenes": [{"name": s.name, "kind": s.kind, "model": s.model, "methods": list(s.methods),
-                    "r": list(s.rs), "grid": s.grid, "params": s.params,
-                    "paper_csv": {k: str(v) for k, v in s.paper.items()}} for s in study.scenes],
-        "artifacts": _artifacts(plan, foms, reductions, metrics),
-        "files": sorted(str(p.relative_to(outdir)) for p in files),
-        "notes": notes, "definitions": {"h2_error_grid": H2_NOTE, "time": TIME_NOTE},
-        "timing": timing,
-    }
+    return compute(graph, choice, progress=bars, desc=desc)

@@ -24,16 +24,21 @@ and a method appears only when a scene names it.
 Curves against r use the x column ``r`` (the order of the reduced model, from
 ``info["r"]``) or ``states`` (first-order states: 2r for a second-order ROM), as
 the scene's ``axis`` says; the CSV files carry both and ``r_requested``.
+
+A scene's curves are plain columns (name -> values), no DataFrames: building a
+scene is cheap and imports neither pandas nor matplotlib, so that a study can key
+each figure by its data and skip the ones that did not change.
 """
 
 from __future__ import annotations
 
+import csv
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
 
-from ..report.figures import Curve, FigureData
+from ..report.figures import Curve, CsvSource, FigureData
+from ..report.tables import TableData
 
 __all__ = ["KINDS", "COMMON_KEYS", "Kind", "TableData", "needs", "build", "MEASURES", "AXES", "TIMES"]
 
@@ -97,14 +102,6 @@ TIME_LABEL = {"standalone": "time (s), reduction at this r alone",
               "call": "time (s) of reduce(r), shared work reused"}
 
 
-@dataclass
-class TableData:
-    name: str
-    title: str
-    df: pd.DataFrame
-    notes: list
-
-
 def needs(scene):
     """Artifacts the scene reads: ("metrics", model, grid, method, r) or ("reduce", model, method, r)."""
     kind = KINDS[scene.kind]
@@ -117,24 +114,44 @@ def needs(scene):
 
 
 # -- building --------------------------------------------------------------
+def _columns(records):
+    """List of dicts (same keys) -> dict of columns, in the first record's key order."""
+    return {k: [rec[k] for rec in records] for k in records[0]}
+
+
+def _check_csv(path):
+    """Why ``path`` is not a CSV table with a header (None if it is): the cases in
+    which pandas would refuse it, found without parsing numbers."""
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            rows = csv.reader(fh)
+            header = next(rows, None)
+            if not header:
+                return "no columns to parse from file"
+            for i, row in enumerate(rows, start=2):
+                if len(row) > len(header):
+                    return f"expected {len(header)} fields in line {i}, saw {len(row)}"
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        return str(exc)
+    return None
+
+
 def _paper_curves(scene, study, x, notes):
     out = []
     for curve, path in scene.paper.items():
         if not path.is_file():
             notes.append(f"scene {scene.name!r}: paper curve {str(path)!r} not found; overlay skipped")
             continue
-        try:
-            df = pd.read_csv(path)
-        except (OSError, ValueError) as exc:
-            notes.append(f"scene {scene.name!r}: paper curve {str(path)!r} unreadable ({exc}); overlay skipped")
+        bad = _check_csv(path)
+        if bad is not None:
+            notes.append(f"scene {scene.name!r}: paper curve {str(path)!r} unreadable ({bad}); overlay skipped")
             continue
-        if "value" not in df.columns or df.shape[1] < 2:
+        data = CsvSource(path, x)  # parsed only if the figure is drawn
+        if data.columns != [x, "value"]:
             notes.append(f"scene {scene.name!r}: paper curve {str(path)!r} lacks columns (x, value); skipped")
             continue
-        xcol = [c for c in df.columns if c != "value"][0]
-        df = df.rename(columns={xcol: x})[[x, "value"]]
         label = "full" if curve == "full" else study.methods[curve].label
-        out.append(Curve(name=f"paper_{curve}", label=f"paper ({label})", data=df, x=x, style="paper"))
+        out.append(Curve(name=f"paper_{curve}", label=f"paper ({label})", data=data, x=x, style="paper"))
     return out
 
 
@@ -154,8 +171,7 @@ def _freq_scene(scene, study, res):
     omega = fom["omega"]
     curves = []
     if scene.kind == "sigma":
-        curves.append(Curve("full", f"full ($n_1 = {model.n1}$)", pd.DataFrame({"omega": omega,
-                                                                                "value": fom["sigma_full"]}),
+        curves.append(Curve("full", f"full ($n_1 = {model.n1}$)", {"omega": omega, "value": fom["sigma_full"]},
                             style="full"))
         ylabel, col = YLABEL["sigma"], "sigma_rom"
         default = f"{model.name}: full and reduced models at r = {r}"
@@ -171,7 +187,7 @@ def _freq_scene(scene, study, res):
         red = res.reduction(scene.model, m, r)
         got = int(red["info"]["r"])
         label = f"{study.methods[m].label} ($r = {got}$" + (f", {r} requested)" if got != r else ")")
-        curves.append(Curve(m, label, pd.DataFrame({"omega": omega, "value": met[col]})))
+        curves.append(Curve(m, label, {"omega": omega, "value": met[col]}))
     curves += _paper_curves(scene, study, "omega", notes)
     return FigureData(scene.name, _title(scene, study, default), OMEGA, ylabel, curves, notes=notes)
 
@@ -224,9 +240,9 @@ def _against_r_scene(scene, study, res):
                 value = red["time_standalone_s"] if tmode == "standalone" else red["time_s"]
             recs.append(_r_frame(red, {"value": value}))
         if recs:
-            df = pd.DataFrame(recs)
-            df = df[[axis, "value"] + [c for c in df.columns if c not in (axis, "value")]]
-            curves.append(Curve(m, study.methods[m].label, df, x=axis, style="points"))
+            cols = _columns(recs)
+            cols = {k: cols[k] for k in [axis, "value"] + [c for c in cols if c not in (axis, "value")]}
+            curves.append(Curve(m, study.methods[m].label, cols, x=axis, style="points"))
     curves += _paper_curves(scene, study, axis, notes)
     return FigureData(scene.name, _title(scene, study, default), XLABEL[axis], ylabel, curves,
                       xscale="linear", notes=notes)
@@ -248,7 +264,7 @@ def _pareto_scene(scene, study, res):
             t = red["time_standalone_s"] if tmode == "standalone" else red["time_s"]
             recs.append({col: met[col], "value": t, **_r_frame(red, {})})
         if recs:
-            curves.append(Curve(m, study.methods[m].label, pd.DataFrame(recs), x=col, style="points",
+            curves.append(Curve(m, study.methods[m].label, _columns(recs), x=col, style="points",
                                 annotate="r"))
     return FigureData(scene.name, _title(scene, study, f"{model.name}: time against error, one point per r"),
                       YLABEL[measure], TIME_LABEL[tmode], curves, notes=notes)
@@ -267,7 +283,7 @@ def _convergence_scene(scene, study, res):
             if not hist:
                 _missing(notes, scene, m, r, "no convergence history (info['history']['measure'])")
                 continue
-            df = pd.DataFrame({"iteration": np.arange(1, len(hist) + 1), "value": np.asarray(hist, float)})
+            df = {"iteration": np.arange(1, len(hist) + 1), "value": np.asarray(hist, float)}
             conv = "converged" if pair[0]["info"].get("converged") else "not converged"
             curves.append(Curve(f"{m}_r{r}", f"{study.methods[m].label}, $r = {r}$ ({conv})", df, x="iteration"))
     return FigureData(scene.name, _title(scene, study, f"{model.name}: IRKA convergence"), "iteration",
@@ -290,7 +306,7 @@ def _hsv_scene(scene, study, res):
                 _missing(notes, scene, m, r, "the reducer reports no Hankel singular values (info['hsv'])")
                 continue
             hsv = np.asarray(hsv, dtype=float).ravel()[:count]
-            df = pd.DataFrame({"index": np.arange(1, hsv.size + 1), "value": hsv})
+            df = {"index": np.arange(1, hsv.size + 1), "value": hsv}
             curves.append(Curve(m, study.methods[m].label, df, x="index", style="points"))
     return FigureData(scene.name, _title(scene, study, f"{model.name}: Hankel singular values"), "index $k$",
                       r"Hankel singular value $\sigma_k$", curves, xscale="linear", notes=notes)
@@ -299,7 +315,7 @@ def _hsv_scene(scene, study, res):
 def _table_scene(scene, study, res):
     rows = [res.summary_row(scene.model, m, r, scene.grid) for m in scene.methods for r in scene.rs]
     title = _title(scene, study, f"{study.models[scene.model].name}: reductions")
-    return TableData(scene.name, title, pd.DataFrame(rows), [])
+    return TableData(scene.name, title, rows)
 
 
 _BUILDERS = {"sigma": _freq_scene, "error": _freq_scene, "compare": _freq_scene,

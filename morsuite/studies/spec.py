@@ -126,6 +126,8 @@ class Study:
     methods: dict
     scenes: list
     raw: dict
+    #: validated entries to keep in the cache once the study runs (:class:`~morsuite.studies.memo.SpecMemo`)
+    memo: object = field(default=None, repr=False, compare=False)
 
     def canonical(self) -> dict:
         """Plain-data form of the validated spec (defaults filled in, models identified)."""
@@ -196,9 +198,10 @@ def _name_ok(text):
 
 
 # -- models ----------------------------------------------------------------
-def _model_entry(ctx, alias, spec, root):
-    from ..models import catalog
+_MODEL_FIELDS = ("model_id", "name", "n1", "n2", "order", "band")
 
+
+def _model_entry(ctx, alias, spec, root, memo=None):
     where = f"models.{alias}"
     ctx.string(where, spec)
     if spec.endswith((".mat", ".npz")):
@@ -209,37 +212,60 @@ def _model_entry(ctx, alias, spec, root):
             ctx.fail(where, f"model file {str(path)!r} does not exist")
         source = str(path)
         model_id = "file:" + path.name + ":" + hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+        material = {"model_id": model_id}
     else:
+        source, material = spec, {"spec": spec}
+    hit = memo.lookup("model", material, "morsuite.models") if memo is not None else None
+    if hit is not None:
+        return ModelEntry(alias=alias, spec=spec, source=source, **{k: hit[k] for k in _MODEL_FIELDS[:-1]},
+                          band=tuple(hit["band"]))
+
+    from ..models import catalog
+
+    if not spec.endswith((".mat", ".npz")):
         name = spec.partition(":")[0]
         if name not in catalog.CATALOG:
             ctx.fail(where, f"unknown model {name!r}{_suggest(name, catalog.available())}; catalog models: "
                             f"{', '.join(catalog.available())} (or a .mat/.npz path)")
-        source = spec
         model_id = "catalog:" + catalog.canonical(spec)
     try:
         fom = catalog.parse(source)
     except InputError as exc:
         ctx.fail(where, f"model {spec!r} cannot be built: {exc}")
-    return ModelEntry(alias=alias, spec=spec, source=source, model_id=model_id, name=fom.name,
-                      n1=int(fom.n1), n2=int(fom.n2), order=int(fom.order), band=tuple(map(float, fom.band)))
+    entry = ModelEntry(alias=alias, spec=spec, source=source, model_id=model_id, name=fom.name,
+                       n1=int(fom.n1), n2=int(fom.n2), order=int(fom.order), band=tuple(map(float, fom.band)))
+    if memo is not None:
+        owner = "morsuite.models.io" if "model_id" in material else \
+            getattr(catalog.CATALOG[spec.partition(":")[0]], "__module__", "")
+        memo.store("model", material, {k: getattr(entry, k) for k in _MODEL_FIELDS}, owner)
+    return entry
 
 
 # -- methods ---------------------------------------------------------------
-def _method_entry(ctx, alias, table):
-    from .. import reducers
-
+def _method_entry(ctx, alias, table, memo=None):
     where = f"methods.{alias}"
     if table is None:
         table = {}
     ctx.keys(where, table, METHOD_KEYS)
     name = table.get("reducer", alias)
     ctx.string(f"{where}.reducer", name)
+    opts = table.get("options", {})
+    material = {"reducer": name, "options": opts}
+    hit = memo.lookup("method", material, "morsuite.reducers") if memo is not None else None
+    if hit is not None and isinstance(opts, dict):
+        label = table.get("label", alias)
+        ctx.string(f"{where}.label", label)
+        # stored as pairs: the declaration order of the options survives the JSON
+        return MethodEntry(alias=alias, reducer=name, options=dict(opts), full_options=dict(hit["full_options"]),
+                           label=label)
+
+    from .. import reducers
+
     avail = reducers.available()
     if name not in avail:
         ctx.fail(f"{where}.reducer", f"unknown reducer {name!r}{_suggest(name, avail)}; registered reducers: "
                                      f"{', '.join(avail)}")
     cls = reducers.get_class(name)
-    opts = table.get("options", {})
     ctx.keys(f"{where}.options", opts, tuple(cls.OPTIONS))
     full = {}
     from ..errors import OptionError
@@ -248,9 +274,12 @@ def _method_entry(ctx, alias, table):
             full[key] = opt.validate(cls.__name__, key, opts.get(key, opt.default))
         except OptionError as exc:
             ctx.fail(f"{where}.options.{key}", str(exc))
+    full = plain(full)
+    if memo is not None:
+        memo.store("method", material, {"full_options": list(full.items())}, getattr(cls, "__module__", ""))
     label = table.get("label", alias)
     ctx.string(f"{where}.label", label)
-    return MethodEntry(alias=alias, reducer=name, options=dict(opts), full_options=plain(full), label=label)
+    return MethodEntry(alias=alias, reducer=name, options=dict(opts), full_options=full, label=label)
 
 
 # -- grids and r -----------------------------------------------------------
@@ -370,8 +399,12 @@ def _scene_entry(ctx, i, table, study_models, grids, methods, root):
 
 
 # -- entry points ----------------------------------------------------------
-def study_from_dict(data: dict, *, path=None, source: str | None = None) -> Study:
-    """Validate a parsed TOML table. ``path`` (the spec file) anchors relative paths."""
+def study_from_dict(data: dict, *, path=None, source: str | None = None, memo=None) -> Study:
+    """Validate a parsed TOML table. ``path`` (the spec file) anchors relative paths.
+
+    ``memo`` (a :class:`~morsuite.studies.memo.SpecMemo`) serves model and method
+    entries validated before, so that neither models nor reducers are imported.
+    """
     path = Path(path) if path is not None else None
     ctx = _Ctx(source or (str(path) if path else "<dict>"))
     ctx.keys("top level", data, TOP_KEYS)
@@ -395,7 +428,7 @@ def study_from_dict(data: dict, *, path=None, source: str | None = None) -> Stud
             ctx.fail("top level", f"missing key {key!r}")
     if not isinstance(data["methods"], dict) or not data["methods"]:
         ctx.fail("methods", "expected a non-empty table of [methods.ALIAS] tables")
-    methods = {a: _method_entry(ctx, a, t) for a, t in data["methods"].items()}
+    methods = {a: _method_entry(ctx, a, t, memo) for a, t in data["methods"].items()}
     grids_raw = data.get("grids", {})
     if not isinstance(grids_raw, dict):
         ctx.fail("grids", "expected a table of NAME = { band = [lo, hi], n = N }")
@@ -418,18 +451,18 @@ def study_from_dict(data: dict, *, path=None, source: str | None = None) -> Stud
     for alias, spec in data["models"].items():
         if alias not in used:
             ctx.string(f"models.{alias}", spec)  # defined but unused: never built
-    models = {a: _model_entry(ctx, a, data["models"][a], root) for a in data["models"] if a in used}
+    models = {a: _model_entry(ctx, a, data["models"][a], root, memo) for a in data["models"] if a in used}
     for i, s in enumerate(scenes):
         order = models[s.model].order
         if s.rs[-1] > order:
             ctx.fail(f"scenes[{i}] ({s.name!r}).r", f"r = {s.rs[-1]} exceeds the order n1 - n2 = {order} "
                                                     f"of model {s.model!r} ({models[s.model].name})")
     return Study(name=name, title=title, description=description, path=path, root=root, models=models,
-                 grids=grids, methods=methods, scenes=scenes, raw=data)
+                 grids=grids, methods=methods, scenes=scenes, raw=data, memo=memo)
 
 
-def load_spec(path) -> Study:
-    """Read and validate a study TOML file."""
+def load_spec(path, *, memo=None) -> Study:
+    """Read and validate a study TOML file (``memo``: see :func:`study_from_dict`)."""
     path = Path(path)
     if not path.is_file():
         raise SpecError(f"study spec {str(path)!r} does not exist")
@@ -437,4 +470,4 @@ def load_spec(path) -> Study:
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as exc:
         raise SpecError(f"study spec {str(path)}: not valid TOML: {exc}") from exc
-    return study_from_dict(data, path=path)
+    return study_from_dict(data, path=path, memo=memo)

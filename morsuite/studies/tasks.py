@@ -27,7 +27,7 @@ import numpy as np
 
 from ..errors import MorsuiteError
 
-__all__ = ["fom_response", "standalone_time", "reduce_sweep", "metrics", "rom_payload", "rom_from_payload", "CAUGHT"]
+__all__ = ["FOM_ARRAYS", "fom_response", "standalone_time", "reduce_sweep", "metrics", "rom_payload", "rom_from_payload", "CAUGHT"]
 
 #: Failures of one r that are recorded (and reported) instead of aborting the study.
 #: Anything else is a bug and propagates.
@@ -56,21 +56,30 @@ def rom_from_payload(payload: dict):
     return cls(*(payload["arrays"][f] for f in cls._fields))
 
 
+#: The arrays of a full-order response entry (stored as npz; the rest as JSON).
+FOM_ARRAYS = ("omega", "H", "sigma_full")
+
+
 def fom_response(source: str, lo: float, hi: float, n: int, key: str, cache_root=None, progress=False,
                  run_by: str = "") -> dict:
-    """Full-order response on ``n`` log-spaced frequencies in [lo, hi] (rad/s)."""
+    r"""Full-order response ``H`` on ``n`` log-spaced frequencies ``omega`` in [lo, hi] (rad/s),
+    and ``sigma_full`` = :math:`\sigma_{\max}(H(j\omega))` (kept with it: a cached study then
+    needs no linear algebra)."""
+    from ..analysis import sigma_max
+
     fom = _model(source)
     omega = np.logspace(np.log10(lo), np.log10(hi), n)
     t0 = time.perf_counter()
     H = fom.freqresp(omega, progress=progress)
     elapsed = time.perf_counter() - t0
     stats = getattr(fom, "last_freqresp_stats", {}) or {}
-    out = {"kind": "fom", "key": key, "model": fom.name, "omega": omega, "H": H, "time_s": elapsed,
-           "lu_count": stats.get("factorizations"), "cached": False, "scheduler": run_by, **_stamp()}
+    out = {"kind": "fom", "key": key, "model": fom.name, "omega": omega, "H": H, "sigma_full": sigma_max(H),
+           "time_s": elapsed, "lu_count": stats.get("factorizations"), "cached": False, "scheduler": run_by,
+           **_stamp()}
     if cache_root is not None:
         from .cache import Cache
-        Cache(cache_root, read=False).put("fom", key, {"omega": omega, "H": H},
-                                          {k: v for k, v in out.items() if k not in ("omega", "H", "cached")})
+        Cache(cache_root, read=False).put("fom", key, {k: out[k] for k in FOM_ARRAYS},
+                                          {k: v for k, v in out.items() if k not in FOM_ARRAYS + ("cached",)})
     return out
 
 
