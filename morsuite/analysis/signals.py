@@ -236,8 +236,8 @@ def read_csv(path, *, m: int | None = None, resample: str = "linear", step: floa
 
     Resampling (``resample="linear"``, default): if the times are not equally spaced
     (to :data:`STEP_RTOL`), the samples are linearly interpolated onto the grid
-    ``k * h`` from 0 to the last time, ``h = step`` or, by default, the median
-    spacing of the file; linear interpolation is the rule the simulators apply
+    ``k * h``, k = 0, 1, ... up to the last time of the file, ``h = step`` or, by
+    default, the median spacing of the file; linear interpolation is the rule the simulators apply
     between samples anyway. ``resample="error"`` refuses non-uniform times.
     """
     if resample not in ("linear", "error"):
