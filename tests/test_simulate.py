@@ -272,6 +272,21 @@ def test_fallback_kernel_gives_the_same_samples(monkeypatch):
     np.testing.assert_allclose(y1, y2, rtol=0, atol=1e-12 * np.max(np.abs(y1)))
 
 
+@pytest.mark.parametrize("options", [{"scaling": "ruiz"}, {"scaling": "none"}, {"reuse_ordering": False},
+                                     {"backward_tol": 0.0}], ids=["ruiz", "none", "fresh-ordering", "unchecked"])
+def test_factorized_coordinates_under_every_scaling_and_ordering(options):
+    """Row and column scalings differ under Ruiz; the mapping to the factorized coordinates must
+    hold for each equilibration and ordering of the solver."""
+    fom = ms.models.random_constrained(30, 3, m=2, p=2, seed=2, mass_spread=3.0, stiffness_spread=3.0)
+    t = signals.time_grid(3.0, 0.01)
+    u = signals.chirp(t, omega0=0.5, omega1=5.0, m=2, direction=[1.0, 0.3])
+    y0 = simulate(fom, t, u)
+    y1 = simulate(fom, t, u, solver_options=options)
+    np.testing.assert_allclose(y1, y0, rtol=0, atol=1e-10 * np.max(np.abs(y0)))
+    with pytest.raises(OptionError, match="solver_options"):
+        simulate(fom, t, u, solver_options={"pivoting": 1})
+
+
 def test_same_scheme_measures_the_reduction_error_better():
     """y - y_r with both on the scheme is close to the exact error; a control ROM adds the
     full model's discretisation error."""

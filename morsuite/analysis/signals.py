@@ -136,7 +136,8 @@ class Impulse:
 
     (one sparse LU of the mass-constraint matrix), then zero input. A second-order
     reduced model starts from :math:`v(0^+) = \hat M^{-1} \hat F b`, a first-order one
-    from :math:`w(0^+) = E^{-1} B b`.
+    from :math:`w(0^+) = E^{-1} B b`; the term :math:`D b\,\delta(t)` that a
+    feedthrough D adds to y cannot be sampled and is left out.
     """
 
     direction: np.ndarray

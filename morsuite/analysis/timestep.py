@@ -51,7 +51,7 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
-from ..errors import SingularShiftError
+from ..errors import OptionError, SingularShiftError
 from ..utils import blas_threads
 
 __all__ = ["SCHEMES", "march_index3", "march_first_order"]
@@ -70,7 +70,7 @@ def _lu_view(f):
 
     ``SaddleLU`` factors ``(Dr S Dc)[q][:, q]`` (design.md: equilibration, reused
     ordering); solving in those coordinates saves a scaling, two permutations, a
-    finiteness and a backward-error pass per step (together 25-60% of a solve on
+    finiteness and a backward-error pass per step (together 20-60% of a solve on
     dsms(6000), measured). If the fields are not there (another solver layout),
     None: the caller then uses the public ``SaddleLU.solve``.
     """
@@ -110,7 +110,11 @@ def march_index3(fom, t, h, U, *, scheme="trapezoidal", impulse=None, return_sta
     n1, n2, nt = fom.n1, fom.n2, len(t)
     N = n1 + n2
     t0 = time.perf_counter()
-    solver = fom.new_solver(cache_size=0, **(solver_options or {}))
+    try:
+        solver = fom.new_solver(**{"cache_size": 0, **(solver_options or {})})
+    except TypeError as exc:  # an unknown keyword of SaddlePointSolver
+        raise OptionError(f"solver_options {solver_options!r} are not options of the saddle-point solver: "
+                          f"{exc}") from exc
     f = solver.factor(s)
     # one checked solve: a failed backward-error check refactors with a safer pivoting here,
     # before the unchecked per-step solves start
