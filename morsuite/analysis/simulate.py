@@ -141,7 +141,8 @@ def simulate(system, t, u, **options):
         ``options``, ``lu_count``, ``solves``, ``time_s`` (and its parts),
         ``growth`` (bool), ``unstable_poles``, ``growth_factor``
         (:math:`e^{T \max \mathrm{Re}\,\lambda}` over unstable poles, reduced models),
-        ``constraint_residual`` (full model: :math:`|G x|, |G v|` at the end, relative).
+        ``constraint_residual`` (full model, at the last step: :math:`\|G x\| / (\|G\| \|x\|)`
+        and :math:`\|G v\| / (\|G\| (\|v\| + s \|x\|))`, max-norms, :math:`s = 2/h`).
 
     Raises
     ------
