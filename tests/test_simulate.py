@@ -414,6 +414,8 @@ def test_options_and_info():
         assert key in info["options"]
     assert info["integrator"] == "trapezoidal" and info["lu_count"] == 1 and info["steps"] == 10
     assert info["solves"] == 11 and "x" not in info
+    # the fast path reads SaddleLU's fields; a renamed field would fall back (slower) silently
+    assert info["kernel"] == "factorized coordinates"
     with pytest.raises(OptionError, match="unknown option 'schem'"):
         simulate(fom, t, np.ones(t.size), schem="trapezoidal")
     with pytest.raises(OptionError, match="scheme"):
