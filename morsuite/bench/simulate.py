@@ -24,8 +24,8 @@ import tracemalloc
 
 import numpy as np
 
-from .bench import benchmark
-from .utils import blas_threads
+from . import benchmark
+from ..utils import blas_threads
 
 
 def _floor(fom, h, steps, rhs) -> float:
