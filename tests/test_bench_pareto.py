@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pandas as pd
+import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
@@ -43,7 +44,7 @@ def test_standalone_time_adds_back_reused_setup():
     assert standalone_time(fresh) == 2.0
     reused = {"time_s": 0.1, "setup_reused": True, "setup_cost": {"adi": 1.5, "products": 0.2, "svd": 0.05},
               "time_breakdown": {"adi": 0.0, "products": 0.0, "svd": 0.05}}
-    assert standalone_time(reused) == 0.1 + 1.5 + 0.2
+    assert standalone_time(reused) == pytest.approx(0.1 + 1.5 + 0.2, rel=1e-12)
 
 
 def test_compare_counts_wins_at_equal_states():

@@ -17,6 +17,7 @@ import pytest
 
 import morsuite as ms
 from morsuite.reducers.base import as_complex
+from support import assert_sets_close
 
 
 def _reduce(fom, r, **opts):
@@ -71,10 +72,11 @@ def test_dsms_r20_full_order_converged_accurate(dsms6000_freq):
     info = res.info
     assert info["converged"] and info["stable"] and info["r"] == 20 and not info["rank_capped"]
     df = ms.analysis.errors(fom, res.rom, omega, H_full=H)
-    # measured 1.8e-12 (g = 600, 1000, 6000, with other LU orderings alike); without the
-    # refined solves 3.6e-12 to 1.2e-10, and 4e-11 at order 18 before (Householder, rank loss).
-    # First-order BT with 20 states: 1.8e-12 (docs/models.md: 1.9e-12)
-    assert df.abs_error.max() <= 1e-11
+    # measured 1.8e-12 (g = 600, 1000, 6000, with other LU orderings alike), and 1.5e-12 to
+    # 3.2e-12 over eight BLAS kernel / thread / SIMD settings (the fixed point moves with the
+    # rounding at this level; 3 or 4 iterations); 4e-11 at order 18 before (Householder, rank
+    # loss). First-order BT with 20 states: 1.8e-12 (docs/models.md: 1.9e-12)
+    assert df.abs_error.max() <= 3e-11
 
 
 def test_dsms_r30_rank_loss_is_reported_and_accurate(dsms6000_freq):
@@ -82,11 +84,13 @@ def test_dsms_r30_rank_loss_is_reported_and_accurate(dsms6000_freq):
     with pytest.warns(ms.RankWarning, match="capped"):
         res = ms.reducers.make("irka", fom).reduce(30)
     info = res.info
-    assert info["rank_capped"] and info["r"] < 30 == info["r_requested"]
+    # the numerical order: 25 (26 with OpenBLAS's SkylakeX kernels, 24 before the Gram-Schmidt
+    # bases); where the cap falls depends on rounding, so a range, with the error below
+    assert info["rank_capped"] and 22 <= info["r"] < 30 == info["r_requested"]
     assert info["converged"] and info["stable"]
     assert any("RankWarning" in w for w in info["warnings"])
     df = ms.analysis.errors(fom, res.rom, omega, H_full=H)
-    # measured 4e-15 to 1.5e-14 (order 24); 4e-11 before (order 18)
+    # measured 2e-16 to 1.5e-14 (orders 24 to 26); 4e-11 before (order 18)
     assert df.abs_error.max() <= 1e-12
 
 
@@ -95,7 +99,10 @@ def test_refined_solves_and_gram_schmidt_reach_the_long_double_accuracy():
 
     Reference: the full model's response. A reduced model built from these
     shifts entirely in np.longdouble has error 1.7e-12 (measured offline); the
-    LU's solutions without refinement or Householder bases lose a factor 10 or more.
+    LU's solutions without refinement or Householder bases lose a factor 10 or more
+    (8.5 to 70 over eight BLAS kernel / thread / SIMD settings, while the default stays
+    at 1.70e-12 to 1.74e-12): the errors without an ingredient are rounding, so the
+    test asks for a factor 2, where an ingredient that did nothing would give about 1.
     """
     from morsuite.linalg.orthonormal import gram_schmidt
 
@@ -120,7 +127,7 @@ def test_refined_solves_and_gram_schmidt_reach_the_long_double_accuracy():
         errs[name] = ms.analysis.errors(fom, rom, omega, H_full=H).abs_error.max()
     assert errs["default"] < 5e-12, errs
     for name in ("householder", "no-refine", "working-refine"):
-        assert errs[name] > 3 * errs["default"], errs
+        assert errs[name] > 2 * errs["default"], errs
 
 
 def test_refinement_operator_in_long_double():
@@ -145,7 +152,10 @@ def test_refinement_operator_in_long_double():
             got = yr.astype(float) + (0 if yi is None else 1j * yi.astype(float))
             assert (yi is None) == (np.imag(a) == 0)
             assert np.max(np.abs(got - ref)) <= 1e-14 * np.max(np.abs(ref))
-            # the same bits as complex long double arithmetic on the complex entries
+            # complex long double arithmetic on the complex entries, summed in the same order: the op
+            # claims its bits, which hold where numpy's complex multiply has no fused multiply-add
+            # (x87 long double); allow a few units of the long double roundoff of each row's terms,
+            # far below the double precision roundoff that a product in double would leave
             m, d, k, g = red._refiner.cache["parts"]
             aa = np.clongdouble(a)
             data = (aa * aa) * m + aa * d + k + g
@@ -155,7 +165,10 @@ def test_refinement_operator_in_long_double():
             ye = np.zeros(N, dtype=np.clongdouble)
             ye[nonempty] = np.add.reduceat(data * xe[idx], starts)
             yr, yi = op(x.real.astype(np.longdouble), x.imag.astype(np.longdouble))
-            assert np.array_equal(yr, ye.real) and np.array_equal(yi, ye.imag)
+            size = np.zeros(N, dtype=np.longdouble)
+            size[nonempty] = np.add.reduceat(np.abs(data) * np.abs(xe[idx]), starts)
+            bound = 8 * np.finfo(np.longdouble).eps * size
+            assert np.all(np.abs(yr - ye.real) <= bound) and np.all(np.abs(yi - ye.imag) <= bound)
 
 
 @pytest.mark.parametrize("pivot", [True, False])
@@ -208,13 +221,14 @@ def test_galerkin_is_stable_and_interpolates_right():
 def test_given_init_and_random_seed_are_recorded():
     fom = ms.models.dsms(100)
     res = _reduce(fom, 4, init="given", init_shifts=[0.1, 0.2, 0.05 + 0.1j, 0.05 - 0.1j], maxit=1)
-    assert np.allclose(as_complex(res.info["history"]["shifts"][0]), [0.05 - 0.1j, 0.05 + 0.1j, 0.1, 0.2]) or \
-        np.allclose(np.sort_complex(as_complex(res.info["history"]["shifts"][0])),
-                    np.sort_complex(np.array([0.1, 0.2, 0.05 + 0.1j, 0.05 - 0.1j])))
+    # the given shifts are used as given, in any order
+    assert_sets_close(as_complex(res.info["history"]["shifts"][0]), [0.1, 0.2, 0.05 + 0.1j, 0.05 - 0.1j],
+                      rtol=1e-15, what="first shifts")
     a = _reduce(fom, 4, init="random", seed=3)
     b = _reduce(fom, 4, init="random", seed=3)
     assert a.info["options"]["seed"] == 3
-    assert np.allclose(as_complex(a.info["shifts"]), as_complex(b.info["shifts"]))
+    # two runs of one code path in this process: the same shifts (matched, in case of reordering)
+    assert_sets_close(as_complex(a.info["shifts"]), as_complex(b.info["shifts"]), rtol=1e-10, what="shifts")
 
 
 def test_nonconvergence_warns_and_returns_best():

@@ -32,6 +32,28 @@ def shifts(info_shifts):
     return np.array([complex(z["re"], z["im"]) for z in info_shifts])
 
 
+#: how closely the two IRKAs agree on a shift set (relative, optimally matched), and so on the
+#: convergence measure (a relative shift change) of each iteration
+AGREE = 1e-8
+
+
+def assert_same_course(a, b):
+    """The two runs take the same course: their convergence measures agree to AGREE at every
+    common iteration, and they stop at the same iteration, or one apart when the measure
+    that decides the stop is within AGREE of tol (then rounding decides, not the method);
+    their best iterates agree likewise. Measured: the deciding measures sit 1.3 to 10 times
+    below tol and agree to 1e-14 in eight BLAS kernel / thread / SIMD settings."""
+    tol = a.info["options"]["tol"]
+    ma, mb = (np.asarray(x.info["history"]["measure"]) for x in (a, b))
+    k = min(ma.size, mb.size)
+    assert np.allclose(ma[:k], mb[:k], rtol=0, atol=AGREE), (ma, mb)
+    if ma.size != mb.size:
+        assert abs(ma.size - mb.size) == 1 and abs(ma[k - 1] - tol) <= AGREE, (ma, mb, tol)
+    ba, bb = a.info["best_iteration"], b.info["best_iteration"]
+    if ba != bb:
+        assert abs(ma[ba - 1] - mb[bb - 1]) <= AGREE, (ba, bb, ma, mb)
+
+
 @pytest.mark.parametrize("make_fom", [lambda: ms.models.dsms(g=600), lambda: ms.models.tcom(nc=100)],
                          ids=["dsms600", "tcom100"])
 def test_projected_model_realizes_the_index3_transfer_function(make_fom):
@@ -98,17 +120,21 @@ def test_same_roms_as_irka_from_the_same_shifts(make_fom):
         for maxit in (1, 2, 3):
             a = ms.reducers.make("irka", fom, **init, maxit=maxit).reduce(r)
             b = ms.reducers.make("irka-projected", fom, **init, maxit=maxit).reduce(r)
-            assert a.info["iterations"] == b.info["iterations"] == maxit or a.info["converged"]
-            assert a.info["best_iteration"] == b.info["best_iteration"]
-            assert rel(b.rom.transfer_many(pts), a.rom.transfer_many(pts)) < 1e-8
+            assert a.info["iterations"] == maxit or a.info["converged"]
+            assert_same_course(a, b)
+            assert rel(b.rom.transfer_many(pts), a.rom.transfer_many(pts)) < AGREE
             for sa, sb in zip(a.info["history"]["shifts"], b.info["history"]["shifts"]):
-                assert shift_distance(shifts(sb), shifts(sa)) < 1e-8  # optimally matched
+                assert shift_distance(shifts(sb), shifts(sa)) < AGREE  # optimally matched
     a = ms.reducers.make("irka", fom).reduce(r)
     b = ms.reducers.make("irka-projected", fom).reduce(r)
     assert a.info["converged"] and b.info["converged"]
-    assert a.info["iterations"] == b.info["iterations"]
-    assert shift_distance(shifts(b.info["shifts"]), shifts(a.info["shifts"])) < 1e-8
-    assert b.info["lu_count"] == a.info["lu_count"]
+    assert_same_course(a, b)
+    assert shift_distance(shifts(b.info["shifts"]), shifts(a.info["shifts"])) < AGREE
+    # one LU per real shift or conjugate pair per iteration, in both; equal counts on the same course
+    for x in (a, b):
+        assert x.info["lu_count"] == sum(int(np.sum(shifts(h).imag >= 0)) for h in x.info["history"]["shifts"])
+    if a.info["iterations"] == b.info["iterations"]:
+        assert b.info["lu_count"] == a.info["lu_count"]
 
 
 def test_rom_from_projected_bases_equals_irka_rom_from_lifted_bases(tcom20):

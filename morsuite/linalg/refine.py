@@ -62,8 +62,9 @@ class SaddleOperator:
 
         x = xr + i xi is held as two real arrays (xi None: a real vector), and so is the
         result; ``ext``: np.longdouble, else float. The real operations and their order are
-        those of numpy's complex arithmetic on the complex entries, so the result is bit for
-        bit that of the complex product (tested); real vectors of a real shift stay real."""
+        those of numpy's complex arithmetic on the complex entries, so the result is that of
+        the complex product to a few long-double ulps (tested; bit for bit where numpy's complex
+        multiply uses no fused multiply-add); real vectors of a real shift stay real."""
         cache = self.cache
         P = self.pattern
         ft = np.longdouble if ext else float

@@ -1,0 +1,107 @@
+"""Assertions shared by the tests: sets of computed numbers compared by matching, not by sorting.
+
+Eigenvalues, poles, shifts and Hankel singular values come from different code paths
+(LAPACK drivers, BLAS kernels, thread counts) with different last bits. Sorting them
+and comparing index by index breaks when two values are close: ``np.sort_complex``
+orders the two members of a conjugate pair by the rounding of their real parts, which
+are equal in exact arithmetic. These helpers match the sets optimally
+(:func:`morsuite.linalg.dense.match_sets`) against tolerances that the caller scales by
+the conditioning of the problem (:func:`eig_tolerance` for eigenvalues).
+
+Import with ``from support import ...`` (pytest puts ``tests/`` on ``sys.path`` because
+``tests/conftest.py`` lives there; the stress tests import ``stress_support`` the same way).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+
+from morsuite.linalg.dense import match_sets
+
+EPS = np.finfo(float).eps
+
+
+def assert_sets_close(actual, desired, rtol=0.0, atol=0.0, what="values"):
+    r"""Assert that two sets agree after an optimal one-to-one matching.
+
+    Element :math:`j` of ``desired`` has the tolerance
+    :math:`\mathrm{atol}_j + \mathrm{rtol} |d_j|`; the assertion holds iff some
+    permutation matches every element of ``actual`` to an element of ``desired`` within
+    its tolerance (a bottleneck assignment decides it exactly). A conjugate pair is
+    matched to a conjugate pair when both sets are closed under conjugation.
+
+    Parameters
+    ----------
+    actual, desired : array_like
+        1-D sets of real or complex numbers, of equal size.
+    rtol : float
+        Relative tolerance: a documented multiple of the rounding the computation allows.
+    atol : float or array_like
+        Absolute tolerance, a scalar or one entry per element of ``desired`` (e.g. the
+        ``tol`` of :func:`eig_tolerance`, scaled by eigenvalue condition numbers).
+    what : str
+        What the numbers are, for the message ("poles", "shifts", "HSVs").
+
+    Returns
+    -------
+    perm : ndarray of int
+        ``desired[perm]`` is matched with ``actual``, for follow-up checks on pairs.
+
+    Raises
+    ------
+    AssertionError
+        If the sizes differ or the best matching leaves an element outside its
+        tolerance; the message gives the worst pair, its distance and tolerance, and how
+        many pairs fail.
+    """
+    a = np.ravel(np.asarray(actual))
+    d = np.ravel(np.asarray(desired))
+    if a.size != d.size:
+        raise AssertionError(f"{what}: {a.size} computed against {d.size} expected:\n  {a}\n  {d}")
+    tol = np.broadcast_to(np.asarray(atol, dtype=float), d.shape) + rtol * np.abs(d)
+    perm, dist = match_sets(a, d, scale=tol)
+    bad = dist > 1
+    if np.any(bad):
+        i = int(np.argmax(dist))
+        j = perm[i]
+        raise AssertionError(
+            f"{what}: {int(bad.sum())} of {a.size} not within tolerance after optimal matching; worst: "
+            f"{a[i]!r} against {d[j]!r}, |difference| {abs(a[i] - d[j]):.3e} > tolerance {tol[j]:.3e} "
+            f"(rtol {rtol:g}, atol {np.max(np.broadcast_to(atol, d.shape)):.3e})")
+    return perm
+
+
+def eig_tolerance(A, E=None, factor=10.0, balance=False):
+    r"""Eigenvalues of :math:`(A, E)` and a first-order bound of their rounding errors.
+
+    For a simple eigenvalue :math:`\lambda` with right and left eigenvectors :math:`x, y`,
+    a backward-stable solver (QR or QZ) perturbs :math:`A` and :math:`E` by about
+    :math:`\epsilon \|A\|` and :math:`\epsilon \|E\|`, which moves :math:`\lambda` by at most
+
+    .. math:: \epsilon \, \kappa \, (\|A\|_2 + |\lambda| \, \|E\|_2), \qquad
+              \kappa = \frac{\|x\| \, \|y\|}{|y^H E x|}
+
+    to first order (a standard problem, ``E = None``, has no :math:`|\lambda| \|E\|` term).
+    ``tol`` is ``factor`` times that (the constant of the backward error grows mildly with
+    the size). ``balance=True`` measures :math:`\kappa` and the norm on
+    the balanced matrix (``scipy.linalg.matrix_balance``, standard problems only), which is
+    what LAPACK's ``geev`` (``np.linalg.eigvals``) works on.
+
+    Returns
+    -------
+    lam, tol : ndarray
+        The eigenvalues (``scipy.linalg.eig``) and one absolute tolerance per eigenvalue.
+    """
+    A = np.asarray(A)
+    if balance:
+        if E is not None:
+            raise ValueError("eig_tolerance: balance=True is for standard problems (E = None)")
+        A = sla.matrix_balance(A, permute=True, separate=False)[0]
+    Em = np.eye(A.shape[0]) if E is None else np.asarray(E)
+    lam, yl, xr = sla.eig(A, None if E is None else Em, left=True, right=True)
+    gap = np.abs(np.einsum("ij,ij->j", yl.conj(), Em @ xr))
+    kappa = np.linalg.norm(xr, axis=0) * np.linalg.norm(yl, axis=0) / gap
+    norm_e = 0.0 if E is None else np.linalg.norm(Em, 2)
+    tol = factor * EPS * kappa * (np.linalg.norm(A, 2) + np.abs(lam) * norm_e)
+    return lam, tol
