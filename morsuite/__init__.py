@@ -9,6 +9,7 @@
 __version__ = "0.1.0"
 
 from .errors import (  # noqa: E402
+    AccuracyWarning,
     ConvergenceWarning,
     DtypeWarning,
     FileFormatError,
@@ -29,7 +30,7 @@ from . import models, linalg, analysis  # noqa: E402,F401
 __all__ = ["models", "linalg", "analysis", "reducers", "rom", "MorsuiteError", "InputError",
            "ShapeError", "ModelError", "OptionError", "FileFormatError", "SpecError",
            "SingularShiftError", "MemoryBudgetError", "MorsuiteWarning", "ConvergenceWarning",
-           "RankWarning", "StabilityWarning", "DtypeWarning", "__version__"]
+           "RankWarning", "StabilityWarning", "DtypeWarning", "AccuracyWarning", "__version__"]
 
 
 def __getattr__(name):  # lazy: reducers and rom import control (slow)

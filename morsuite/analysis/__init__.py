@@ -1,5 +1,8 @@
 """Frequency responses, errors and norms (data only, no plotting)."""
 
 from .response import errors, freq_grid, sigma_max
+from .h2 import h2_error, h2_norm, h2_rel_error
+from .hinf import hinf_error, hinf_norm, hinf_rel_error
 
-__all__ = ["sigma_max", "errors", "freq_grid"]
+__all__ = ["sigma_max", "errors", "freq_grid", "h2_norm", "h2_error", "h2_rel_error", "hinf_norm", "hinf_error",
+           "hinf_rel_error"]
