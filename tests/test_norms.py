@@ -105,13 +105,14 @@ def reduce(fom, method, r, **opts):
 
 MIMO = dict(n1=30, n2=3, m=3, p=3, seed=1, zeta=0.01)
 SHARP = dict(n1=30, n2=2, m=3, p=3, seed=3, zeta=0.002, damping="dashpots")
+MODELS = pytest.mark.parametrize("make", [lambda: ms.models.dsms(g=50), lambda: ms.models.tcom(nc=20),
+                                          lambda: ms.models.random_constrained(**MIMO),
+                                          lambda: ms.models.random_constrained(**SHARP)],
+                                 ids=["dsms50", "tcom20", "mimo", "sharp"])
 
 
 # -- ||T||_H2 -------------------------------------------------------------------------
-@pytest.mark.parametrize("make", [lambda: ms.models.dsms(g=50), lambda: ms.models.tcom(nc=20),
-                                  lambda: ms.models.random_constrained(**MIMO),
-                                  lambda: ms.models.random_constrained(**SHARP)],
-                         ids=["dsms50", "tcom20", "mimo", "sharp"])
+@MODELS
 def test_h2_norm_against_dense_lyapunov_and_slycot(make):
     fom = make()
     A, B, C = hidden_ss(fom)
@@ -241,10 +242,7 @@ def test_defective_rom_uses_the_quadrature():
 
 
 # -- Hinf ---------------------------------------------------------------------------------
-@pytest.mark.parametrize("make", [lambda: ms.models.dsms(g=50), lambda: ms.models.tcom(nc=20),
-                                  lambda: ms.models.random_constrained(**MIMO),
-                                  lambda: ms.models.random_constrained(**SHARP)],
-                         ids=["dsms50", "tcom20", "mimo", "sharp"])
+@MODELS
 def test_hinf_against_ab13dd(make):
     fom = make()
     ms.analysis.h2_norm(fom)  # the Gramian factors in the cache supply the model's resonances

@@ -14,9 +14,11 @@ a response rounded to double has lost all but four digits of the difference
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-__all__ = ["FomResponse"]
+__all__ = ["FomResponse", "refined_unit"]
 
 LD = np.longdouble
 CLD = np.clongdouble
@@ -80,6 +82,8 @@ class FomResponse:
         self._apply = None
         self._shift = None
         self.last_unit = refined_unit(0.0, self.refine)
+        #: the shifts at which an LU was made, in order (benchmarks time bare LUs at them)
+        self.shifts = []
 
     @property
     def lu_count(self) -> int:
@@ -92,17 +96,18 @@ class FomResponse:
             self._apply, self._shift = self._op(s), s
         return self._apply
 
-    def solve(self, s, rhs) -> np.ndarray:
-        """Primal block :math:`x` (n1, k) of :math:`S(s)[x; z] = [\\mathrm{rhs}; 0]`, refined: clongdouble
-        (complex128 with ``refine=0``)."""
-        fom = self.fom
+    def _first(self, s, rhs):
+        before = self.solver.stats.factorizations
         lu = self.solver.factor(s)
-        rhs = np.asarray(rhs)
-        rhs = rhs.reshape(fom.n1, -1)
-        x = lu.solve(rhs, full=True)
-        if self.refine == 0:
-            return np.asarray(x[: fom.n1], dtype=complex)
+        if self.solver.stats.factorizations > before:
+            self.shifts.append(complex(s))
+        return lu, lu.solve(rhs, full=True)
+
+    def _refined(self, s, lu, rhs, x) -> np.ndarray:
+        """``refine`` steps from the LU solution ``x`` (n1 + n2 rows): the primal block in clongdouble."""
+        fom = self.fom
         apply = self._operator(s)
+        unchecked = replace(lu, matrix=None)  # the corrections need no backward-error check of their own
         rho = 0.0
         n = fom.n1 + fom.n2
         out = np.empty((fom.n1, rhs.shape[1]), dtype=CLD)
@@ -115,7 +120,7 @@ class FomResponse:
             for step in range(self.refine):
                 yr, yi = apply(xr, xi)
                 r = (br - yr).astype(float) + 1j * (bi - yi).astype(float)
-                d = lu.solve(r, full=True)
+                d = unchecked.solve(r, full=True)
                 if step == 0:
                     size = np.max(np.abs(x[: fom.n1, j]))
                     rho = max(rho, float(np.max(np.abs(d[: fom.n1])) / size) if size > 0 else 0.0)
@@ -125,23 +130,50 @@ class FomResponse:
         self.last_unit = refined_unit(rho, self.refine)
         return out
 
-    def transfer(self, s, b=None) -> np.ndarray:
-        r""":math:`T(s)` (p, m), or :math:`T(s)b` (p, k) for a (m, k) or (m,) ``b``; clongdouble when refined."""
+    def solve(self, s, rhs) -> np.ndarray:
+        """Primal block :math:`x` (n1, k) of :math:`S(s)[x; z] = [\\mathrm{rhs}; 0]`, refined: clongdouble
+        (complex128 with ``refine=0``)."""
+        rhs = np.asarray(rhs).reshape(self.fom.n1, -1)
+        lu, x = self._first(s, rhs)
+        if self.refine == 0:
+            self.last_unit = refined_unit(0.0, 0)
+            return np.asarray(x[: self.fom.n1], dtype=complex)
+        return self._refined(s, lu, rhs, x)
+
+    def transfer(self, s, b=None, need=None) -> np.ndarray:
+        r""":math:`T(s)` (p, m), or :math:`T(s)b` (p, k) for a (m, k) or (m,) ``b``.
+
+        Refined (clongdouble) unless ``refine=0`` or ``need``, a callable given
+        the unrefined value (complex128), returns False: refinement costs about
+        as much as the solve and the LU's assembly together, and only matters
+        where the value is about to be subtracted from a nearly equal one.
+        """
         fom = self.fom
         B = fom.F if b is None else fom.F @ np.asarray(b).reshape(fom.m, -1)
-        X = self.solve(s, B)
-        if X.dtype == CLD:
-            L = fom.L.astype(LD)
-            return (L @ X.real) + 1j * (L @ X.imag).astype(CLD)
-        return fom.L @ X.real + 1j * (fom.L @ X.imag)
+        lu, x = self._first(s, B)
+        X = x[: fom.n1]
+        T0 = fom.L @ X.real + 1j * (fom.L @ X.imag)
+        if self.refine == 0 or (need is not None and not need(T0)):
+            self.last_unit = refined_unit(0.0, 0)
+            return T0
+        X = self._refined(s, lu, B, x)
+        L = fom.L.astype(LD)
+        return (L @ X.real) + 1j * (L @ X.imag).astype(CLD)
 
-    def transfer_and_derivative(self, s):
-        r""":math:`T(s)` (refined as ``transfer``) and :math:`T'(s) = -Y^T(2sM + D)X`
-        (:math:`S(s)^TY = [L^T; 0]`, double precision), one LU."""
+    def transfer_and_derivative(self, s, need=None):
+        r""":math:`T(s)` (refined as :meth:`transfer`, with ``need``) and
+        :math:`T'(s) = -Y^T(2sM + D)X` (:math:`S(s)^TY = [L^T; 0]`, double precision):
+        one LU, one plain and one transposed solve (plus the refinement)."""
         fom = self.fom
-        T = self.transfer(s)
-        lu = self.solver.factor(s)
-        X = lu.solve(fom.F.astype(complex))
+        lu, x = self._first(s, fom.F)
+        X = x[: fom.n1]
+        T = fom.L @ X.real + 1j * (fom.L @ X.imag)
+        if self.refine and (need is None or need(T)):
+            Xr = self._refined(s, lu, fom.F, x)
+            L = fom.L.astype(LD)
+            T = (L @ Xr.real) + 1j * (L @ Xr.imag).astype(CLD)
+        else:
+            self.last_unit = refined_unit(0.0, 0)
         Y = lu.solve(fom.L.T.astype(complex), trans=True)
         dT = -(Y.T @ ((2 * s) * (fom.M @ X) + fom.D @ X))
         return T, dT
