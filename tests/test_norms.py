@@ -174,7 +174,8 @@ def test_pole_residue_inner_product_against_dense_sylvester():
     (lambda: ms.models.random_constrained(**MIMO), "bt", {"form": "vv"}, 6),
     (lambda: ms.models.random_constrained(**MIMO), "irka", {}, 6),
     (lambda: ms.models.random_constrained(**SHARP), "bt", {}, 8),
-], ids=["dsms-bt", "tcom-irka", "tcom-vv", "mimo-vv", "mimo-irka", "sharp-bt"])
+    (lambda: ms.models.dsms(g=50), "irka-projected", {}, 3),
+], ids=["dsms-bt", "tcom-irka", "tcom-vv", "mimo-vv", "mimo-irka", "sharp-bt", "dsms-projected"])
 def test_h2_error_large_against_dense(make, method, opts, r):
     """Errors of 1e-3 .. 1 of ||T||: the dense references are reliable; agreement 1e-8."""
     fom = make()
