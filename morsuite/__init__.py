@@ -9,6 +9,7 @@
 __version__ = "0.1.0"
 
 from .errors import (  # noqa: E402
+    AccuracyWarning,
     ConvergenceWarning,
     DtypeWarning,
     FileFormatError,
@@ -28,7 +29,7 @@ from .errors import (  # noqa: E402
 __all__ = ["models", "linalg", "analysis", "reducers", "rom", "MorsuiteError", "InputError",
            "ShapeError", "ModelError", "OptionError", "FileFormatError", "SpecError",
            "SingularShiftError", "MemoryBudgetError", "MorsuiteWarning", "ConvergenceWarning",
-           "RankWarning", "StabilityWarning", "DtypeWarning", "__version__"]
+           "RankWarning", "StabilityWarning", "DtypeWarning", "AccuracyWarning", "__version__"]
 
 #: Subpackages imported on first attribute access: ``import morsuite`` stays cheap (no
 #: scipy.sparse, pandas, matplotlib, control or dask) so that a command pays only for

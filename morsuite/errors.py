@@ -61,5 +61,9 @@ class StabilityWarning(MorsuiteWarning):
     """A reduced model has (or had) poles in the closed right half-plane."""
 
 
+class AccuracyWarning(MorsuiteWarning):
+    """A computed quantity is less accurate than asked for (it is flagged, not returned as exact)."""
+
+
 class DtypeWarning(MorsuiteWarning):
     """An input was converted to real floating point."""

@@ -182,7 +182,7 @@ def test_second_order_levels_stable_or_say_why(model, dsms_bt, tcom_bt):
 
 # -- reuse, orders, options -------------------------------------------------------
 def test_sweep_reuses_gramians(dsms6000):
-    red = ms.reducers.make("bt", dsms6000)
+    red = ms.reducers.make("bt", dsms6000, gramian_cache="reducer")  # the model's cache has dsms_bt's
     first = red.reduce(4)
     assert not first.info["setup_reused"] and first.info["lu_count"] > 0
     infos = [red.reduce(r).info for r in (6, 8, 12)]

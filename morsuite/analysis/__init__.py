@@ -1,7 +1,10 @@
 """Frequency responses, errors and norms; time-domain simulation (data only, no plotting)."""
 
 from .response import errors, freq_grid, sigma_max
+from .h2 import h2_error, h2_norm, h2_rel_error
+from .hinf import hinf_error, hinf_norm, hinf_rel_error
 from .simulate import output_errors, simulate
 from . import signals
 
-__all__ = ["sigma_max", "errors", "freq_grid", "simulate", "output_errors", "signals"]
+__all__ = ["sigma_max", "errors", "freq_grid", "h2_norm", "h2_error", "h2_rel_error", "hinf_norm", "hinf_error",
+           "hinf_rel_error", "simulate", "output_errors", "signals"]

@@ -42,8 +42,8 @@ __all__ = ["bench_pareto", "derive_verdicts", "rewrite", "standalone_time", "MET
 #: method label -> (registry name, options, what r means)
 METHODS = {
     "irka": ("irka", {}, "second-order, r x r (2r states)"),
-    "bt": ("bt", {}, "first-order square-root BT (r states)"),
-    "bt-vv": ("bt", {"form": "vv"}, "second-order velocity-velocity BT (2r states)"),
+    "bt": ("bt", {"gramian_cache": "reducer"}, "first-order square-root BT (r states)"),
+    "bt-vv": ("bt", {"form": "vv", "gramian_cache": "reducer"}, "second-order velocity-velocity BT (2r states)"),
     "irka-projected": ("irka-projected", {}, "second-order, dense Pi-projected (2r states)"),
 }
 

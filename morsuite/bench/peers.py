@@ -158,7 +158,7 @@ def _peer_record(fn, omega, H):
 def _ours(label, fom, r, omega, H):
     from .. import reducers
 
-    name, opts = {"irka": ("irka", {}), "bt-vv": ("bt", {"form": "vv"})}[label]
+    name, opts = {"irka": ("irka", {}), "bt-vv": ("bt", {"form": "vv", "gramian_cache": "reducer"})}[label]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = reducers.make(name, fom, **opts).reduce(r)

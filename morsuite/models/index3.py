@@ -166,6 +166,9 @@ class Index3Model:
             if check_constraints:
                 self._check_constraint_rank()
         self._solver = None
+        #: quantities computed once per model and reused by later calls (e.g. the Gramian
+        #: factors of :func:`morsuite.linalg.gramians.gramian_factors`); ``cache.clear()`` drops them
+        self.cache = {}
 
     # -- sizes -----------------------------------------------------------
     @property

@@ -68,6 +68,11 @@ times the largest (tiny ones carry noise of the ADI residual, and the square
 root method divides by them); a :class:`RankWarning` and ``info["r"] <
 info["r_requested"]`` say so.
 
+The LR-ADI factors are kept in the model's cache (option ``gramian_cache``,
+:func:`~morsuite.linalg.gramians.gramian_factors`): every ``bt`` reducer of the
+same model object and ADI options, and :func:`morsuite.analysis.h2_norm` /
+``h2_error``, share one LR-ADI run.
+
 ``info`` holds ``adi`` (per equation: iterations, converged, residual history,
 shifts, rank), ``adi_iterations``, ``residual_history``, ``factor_ranks``,
 ``lu_count``, ``time_breakdown`` (adi, of which lu, solves, shifts; svd;
@@ -81,13 +86,12 @@ paid once per reducer).
 from __future__ import annotations
 
 import time
-import warnings
 from numbers import Integral
 
 import numpy as np
 
 from ..errors import ConvergenceWarning, InputError, OptionError, RankWarning, StabilityWarning
-from ..linalg.lradi import lradi_pair
+from ..linalg.gramians import gramian_factors
 from ..rom import FirstOrderROM, SecondOrderROM
 from .base import Option, Reducer, register
 
@@ -138,6 +142,11 @@ class BT(Reducer):
         "selection": Option("residual", "choice", "projection shifts chosen by their share of the current "
                             "residual or by Penzl's greedy rule on the ADI rational function",
                             choices=("residual", "gain")),
+        "gramian_cache": Option("model", "choice", "where the LR-ADI factors are kept: in the model's cache, "
+                                "shared with every bt reducer and analysis.h2_norm / h2_error on the same model "
+                                "object and ADI options (LR-ADI runs once per model), or on this reducer only (a "
+                                "fresh run per reducer, for benchmarks that time whole runs)",
+                                choices=("model", "reducer")),
         "hsv_tol": Option(1e-13, "float", "singular values below hsv_tol times the largest are never kept "
                           "(caps r)", low=0, high=1, open_high=True),
     }
@@ -179,14 +188,8 @@ class BT(Reducer):
         if self._gram is not None:
             return self._gram
         o = self.options
-        t0 = time.perf_counter()
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", ConvergenceWarning)
-            c, ob = lradi_pair(self.fom, tol=o["tol"], maxiter=o["maxiter"], shifts=o["shifts"],
-                               num_shifts=o["num_shifts"], selection=o["selection"])
-        for w in caught:  # re-issued by reduce() (recorded in info) on every call
-            if not issubclass(w.category, ConvergenceWarning):
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        gf = gramian_factors(self.fom, use_cache=o["gramian_cache"] == "model", **{k: o[k] for k in ADI_OPTIONS})
+        c, ob = gf.controllability, gf.observability
         t1 = time.perf_counter()
         fom = self.fom
         # the two products every form needs: Y_p^T Z_p and Y_v^T M Z_v (their sum is Y^T E Z)
@@ -194,7 +197,7 @@ class BT(Reducer):
         prods = {"pp": ob.position_unprojected.T @ c.position, "vv": ob.velocity.T @ (fom.M @ c.velocity)}
         t2 = time.perf_counter()
         self._gram = {"c": c, "o": ob, "prods": prods, "svd": {}, "svd_times": {}, "projected": {},
-                      "times": {"adi": t1 - t0, "products": t2 - t1}}
+                      "times": {"adi": gf.time_s, "products": t2 - t1}, "adi_computed": gf.computed}
         return self._gram
 
     def _svd(self, key):
@@ -228,6 +231,7 @@ class BT(Reducer):
     def _reduce(self, r):
         fresh = self._gram is None
         g = self._gramians()
+        adi_fresh = fresh and g["adi_computed"]  # False when the model's cache had the factors
         c, ob = g["c"], g["o"]
         form = self.options["form"]
         for res in (c, ob):
@@ -267,17 +271,17 @@ class BT(Reducer):
             "residual_history": {"controllability": c.residuals, "observability": ob.residuals},
             "adi": {"controllability": c.summary(history=False), "observability": ob.summary(history=False)},
             "factor_ranks": {"controllability": c.rank, "observability": ob.rank},
-            "lu_count": c.lu_count if fresh else 0,
+            "lu_count": c.lu_count if adi_fresh else 0,
             "lu_count_gramians": c.lu_count,
             "hsv": hsv, "stable": stable, **extra,
-            "time_breakdown": {"adi": times["adi"] if fresh else 0.0,
-                               "lu": st_c["factor"] if fresh else 0.0,
-                               "solves": (c.times["solve"] + ob.times["solve"]) if fresh else 0.0,
-                               "shifts": st_c["shifts"] if fresh else 0.0,
+            "time_breakdown": {"adi": times["adi"] if adi_fresh else 0.0,
+                               "lu": st_c["factor"] if adi_fresh else 0.0,
+                               "solves": (c.times["solve"] + ob.times["solve"]) if adi_fresh else 0.0,
+                               "shifts": st_c["shifts"] if adi_fresh else 0.0,
                                "products": times["products"] if fresh else 0.0,
                                "svd": svd_new, "projection": t1 - t0 - svd_new},
             # r-independent work paid once per reducer (studies add it back for 'standalone' times)
-            "setup_reused": not fresh,
+            "setup_reused": not adi_fresh,
             "setup_cost": {"adi": times["adi"], "products": times["products"],
                            "svd": sum(g["svd_times"].get(k, 0.0) for k in svd_keys)},
         }

@@ -1,0 +1,413 @@
+r"""Exact H2 norms of the full model and of the error of a reduced model.
+
+For a stable, strictly proper, real :math:`H`,
+:math:`\|H\|_{\mathcal H_2}^2 = \frac1{2\pi}\int_{-\infty}^\infty \|H(j\omega)\|_F^2\,d\omega
+= \frac1\pi\int_0^\infty \|H(j\omega)\|_F^2\,d\omega`.
+
+:func:`h2_norm`
+    :math:`\|T\|_{\mathcal H_2}^2 = \mathrm{tr}(CPC^T) = \|LZ_p\|_F^2` from the
+    controllability factor :math:`P \approx ZZ^T` of LR-ADI (shared with
+    balanced truncation through the model's cache,
+    :func:`~morsuite.linalg.gramians.gramian_factors`), plus the part the
+    factor misses, :math:`\mathrm{tr}(W^TQW) \approx \|Y^TW\|_F^2`
+    (:func:`~morsuite.linalg.gramians.h2_tail`; with it the value agrees with a
+    dense Lyapunov solution to 1e-14 relative even at ADI tolerance 1e-6).
+:func:`h2_error`
+    :math:`\|T - T_r\|_{\mathcal H_2}` by one of two routes, chosen by ``method``:
+
+    ``"pole-residue"``
+        :math:`\|T-T_r\|^2 = \|T\|^2 - 2\,\mathrm{Re}\langle T, T_r\rangle + \|T_r\|^2`
+        with, for :math:`T_r(s) = \sum_k c_kb_k^T/(s-\lambda_k)` (simple poles;
+        Gugercin, Antoulas, Beattie 2008),
+
+        .. math::
+
+            \langle T, T_r\rangle_{\mathcal H_2} = \sum_k c_k^T\,T(-\lambda_k)\,b_k,
+
+        (no conjugates: :math:`\langle H, G\rangle = \frac1{2\pi}\int\mathrm{tr}(H^*G)`,
+        residue theorem in the left half-plane), one saddle-point solve with
+        :math:`Fb_k` at :math:`s = -\lambda_k` per pole, a conjugate pair
+        sharing one LU (r LUs for a second-order model of order r), and
+        :math:`\|T_r\|^2 = \sum_{k,l}(c_k^Tc_l)(b_l^Tb_k)/(-\lambda_k-\lambda_l)`
+        from the same modal form, so that the rounding of that form enters
+        both terms alike. The three terms are of size :math:`\|T\|^2` and
+        cancel: the absolute error of :math:`\|T-T_r\|^2` is about
+        :math:`\varepsilon(\|T\|^2 + 2\sum_k|t_k| + \sum_{kl}|u_{kl}|)` plus the
+        Gramian's floor, so that relative accuracy is lost as
+        :math:`(\|T\|/\|T-T_r\|)^2`.
+    ``"quadrature"``
+        :math:`\frac1\pi\int_0^\infty\|T(j\omega)-T_r(j\omega)\|_F^2\,d\omega` by
+        adaptive Gauss-Kronrod quadrature on a mapped axis, cut at the
+        reduced model's pole frequencies and at the model's Ritz frequencies
+        (the LR-ADI shifts of cached Gramian factors), one sparse LU per node
+        (:mod:`morsuite.analysis._quad`). :math:`T(j\omega)` and
+        :math:`T_r(j\omega)` are refined with long-double residuals
+        (:class:`~morsuite.analysis._fom.FomResponse`,
+        :class:`~morsuite.analysis._rom.RomResponse`) and subtracted in long
+        double, so the difference is accurate to double precision even where
+        it is 1e-12 of :math:`T`. No cancellation; its cost is the node count.
+    ``"auto"`` (default)
+        The pole-residue value when its estimated relative accuracy is within
+        ``rtol`` (large errors: cheap) and the modal form is well conditioned,
+        else the quadrature.
+
+A value whose estimated relative accuracy is worse than both
+``TRUST_FACTOR * rtol`` and ``TRUST_REL`` (four significant digits) is
+flagged: an :class:`~morsuite.errors.AccuracyWarning` and
+``details["trusted"] = False``; ``details["rtol_met"]`` says whether ``rtol``
+itself was reached. An unstable reduced model, or one with a
+nonzero feedthrough, has an infinite error: ``inf`` with a warning
+(:class:`~morsuite.errors.StabilityWarning`) and ``details["reason"]``.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+
+import numpy as np
+
+from ..errors import AccuracyWarning, OptionError, StabilityWarning
+from ..linalg.gramians import cached_gramian_factors, gramian_factors, h2_tail
+from ..utils import blas_threads
+from ._common import adi_options, check_fom, infinite, validate_rom
+from ._fom import FomResponse
+from ._quad import integrate_half_axis
+from ._rom import RomResponse, modal_form
+
+__all__ = ["h2_norm", "h2_error", "h2_rel_error", "METHODS"]
+
+METHODS = ("auto", "pole-residue", "quadrature")
+EPS = np.finfo(float).eps
+#: a value whose estimated relative accuracy is worse than TRUST_FACTOR * rtol and TRUST_REL is flagged
+TRUST_FACTOR = 100.0
+TRUST_REL = 1e-4
+#: eigenvector condition number above which the pole-residue route is not used by "auto"
+KAPPA_MAX = 1e8
+
+
+def _norm_squared(fom, adi):
+    """||T||^2 (corrected), its absolute floor, and the record of how it was obtained."""
+    t0 = time.perf_counter()
+    gf = gramian_factors(fom, **adi)
+    cache = getattr(fom, "cache", None)
+    key = ("h2_norm_squared", tuple(sorted(gf.options.items())))
+    if cache is not None and key in cache and not gf.computed:
+        value, floor, rec = cache[key]
+        return value, floor, {**rec, "gramian_cached": True, "gramian_lu_count": 0, "gramian_time_s": 0.0,
+                              "time_s": time.perf_counter() - t0}, gf
+    c, o = gf.controllability, gf.observability
+    raw = float(np.sum((fom.L @ c.position) ** 2))
+    tail = h2_tail(gf, fom)
+    value = raw + tail
+    # the tail estimate misses about tail * (observability residual); the factor's rounding, measured
+    # against long-double quadratures of |T(jw)|^2 (dsms(60), random MIMO models: 2e-16 .. 7e-16 relative,
+    # factor ranks 28 .. 258), is bounded with margin by 2 eps sqrt(rank)
+    floor = 10.0 * tail * max(o.residual, EPS) + 2.0 * EPS * np.sqrt(max(c.rank, 1)) * value
+    if not gf.converged:
+        floor = max(floor, tail)
+    rec = {"method": "gramian", "uncorrected": float(np.sqrt(raw)), "tail": tail,
+           "factor_rank": c.rank, "adi_converged": gf.converged,
+           "adi_residuals": {"controllability": c.residual, "observability": o.residual},
+           "gramian_cached": not gf.computed, "gramian_lu_count": gf.lu_count if gf.computed else 0,
+           "gramian_time_s": gf.time_s if gf.computed else 0.0, "adi_options": dict(gf.options),
+           "time_s": time.perf_counter() - t0}
+    if cache is not None:  # products with the whole factors: once per model (230 MB of them on tcom(2000))
+        cache[key] = (value, floor, rec)
+    return value, floor, rec, gf
+
+
+def h2_norm(fom, *, adi=None, details: bool = False):
+    r"""Exact :math:`\|T\|_{\mathcal H_2}` of the index-3 model from its Gramian factor.
+
+    .. math::
+
+        \|T\|_{\mathcal H_2}^2 = \mathrm{tr}(LP_{pp}L^T) = \|LZ_p\|_F^2 + \mathrm{tr}(W^TQW),
+
+    :math:`Z_p` the position block of the LR-ADI controllability factor on
+    the hidden manifold, the second term the ADI truncation estimated by
+    :math:`\|Y^TW\|_F^2` (module docstring).
+
+    Parameters
+    ----------
+    fom : Index3Model
+    adi : dict, optional
+        LR-ADI options (default those of ``bt``: tol 1e-12, projection shifts,
+        :data:`~morsuite.linalg.gramians.ADI_DEFAULTS`); the factors are
+        computed once per model and options and shared with ``bt``.
+    details : bool
+        Also return a dict: ``method``, ``lu_count`` (LUs made by this call:
+        those of LR-ADI unless cached), ``floor`` (estimated absolute
+        accuracy), ``rel_floor``, ``trusted``, the ADI record.
+
+    Returns
+    -------
+    float, or (float, dict)
+
+    Notes
+    -----
+    Cost: one lock-step LR-ADI run for both Gramians (one LU per shift) on
+    the first call per model and options, nothing afterwards.
+    """
+    check_fom(fom)
+    with blas_threads(1):
+        v2, floor2, rec, gf = _norm_squared(fom, adi_options(adi))
+    value = float(np.sqrt(v2))
+    rel = 0.5 * floor2 / v2 if v2 > 0 else np.inf
+    trusted = bool(rel <= 1e-6)
+    if not trusted:
+        warnings.warn(f"h2_norm: LR-ADI did not converge (residuals {rec['adi_residuals']}); ||T||_H2 = "
+                      f"{value:.6e} is accurate to about {rel:.1e} relative only", AccuracyWarning, stacklevel=2)
+    if not details:
+        return value
+    return value, {**rec, "lu_count": rec["gramian_lu_count"], "floor": rel * value, "rel_floor": rel,
+                   "trusted": trusted}
+
+
+def _pole_residue(fom, arrays, rom, norm2, floor2, refine):
+    """||T - Tr||^2 by the pole-residue formula, its absolute floor, and a record."""
+    modal = modal_form(*arrays, rom=rom)
+    if not np.isfinite(modal.kappa):
+        return None, np.inf, {"kappa": np.inf, "lu_count": 0, "reason": "defective reduced model"}
+    idx, weight, paired = modal.pairs()
+    # no refinement: the cancellation of the three terms, not the solves, limits this route
+    ev = FomResponse(fom, refine=0)
+    cross = 0.0 + 0.0j
+    cross_abs = 0.0
+    for k, wk in zip(idx, weight):
+        Tb = ev.transfer(-modal.poles[k], modal.B[k])[:, 0]
+        t = complex(np.sum(modal.C[:, k] * Tb))  # in long double, then rounded
+        cross += wk * (t.real if paired else t)
+        cross_abs += wk * abs(t)
+    cross = complex(cross)
+    self2, self_abs = modal.self_inner()
+    e2 = norm2 - 2.0 * cross.real + self2
+    e_est = np.sqrt(max(e2, 0.0))
+    tr = np.sqrt(max(self2, 0.0))
+    # rounding of the three sums (measured errors are 30-160x below this on dsms(60) and random models),
+    # and the modal form's perturbation of the reduced model, seen through both of its terms alike
+    floor = floor2 + 2.0 * EPS * (norm2 + 2.0 * cross_abs + self_abs) + 2.0 * EPS * modal.kappa * tr * max(e_est, 1e-300)
+    rec = {"value": float(e_est), "squared": float(e2), "cross": cross.real, "cross_imag": cross.imag,
+           "rom_norm": float(tr), "kappa": modal.kappa, "poles": int(modal.poles.size),
+           "solves": int(idx.size), "lu_count": ev.lu_count, "lu_shifts": list(ev.shifts),
+           "floor_squared": float(floor)}
+    return e2, floor, rec
+
+
+def breakpoints(lam) -> np.ndarray:
+    r"""Frequencies at which to cut the axis for poles ``lam``: resonances that stand apart.
+
+    A pole :math:`\lambda = -\delta + j\omega_p` (:math:`\omega_p > \delta`) makes a
+    peak of width about :math:`\delta` at :math:`\omega_p`. Peaks closer than their
+    widths form one feature and get one cut, and further cuts at
+    :math:`\omega_p \pm 4^k\delta` up to half-way to the next feature.
+    """
+    lam = np.asarray(lam, dtype=complex)
+    lam = lam[np.isfinite(lam) & (lam.imag >= 0)]
+    om, de = np.abs(lam.imag), np.abs(lam.real)
+    keep = om > de
+    order = np.argsort(om[keep])
+    kept = []
+    for w, d in zip(om[keep][order], de[keep][order]):
+        if kept and w - kept[-1][0] <= max(d, kept[-1][1]):
+            if d < kept[-1][1]:  # one cut per cluster, at its sharpest peak
+                kept[-1] = (w, d)
+            continue
+        kept.append((w, d))
+    out = []
+    for i, (w, d) in enumerate(kept):
+        out.append(w)
+        left = w - kept[i - 1][0] if i else w
+        right = kept[i + 1][0] - w if i + 1 < len(kept) else np.inf
+        # a sharp peak: cuts graded geometrically (ratio 4) away from it, up to half-way to the next one,
+        # so that each piece sees the pole at a fixed relative distance (QK15 then converges to 1e-14
+        # per piece) instead of bisecting down to its width
+        step = d
+        while step < 0.5 * left and w - step > 0:
+            out.append(w - step)
+            step *= 4.0
+        step = d
+        while step < 0.5 * min(right, 10.0 * w):
+            out.append(w + step)
+            step *= 4.0
+    return np.asarray(out, dtype=float)
+
+
+def quadrature_nodes_needed(rom_poles, ritz=None) -> int:
+    """Rough node count of the quadrature: 15 per piece, about two pieces per separate resonance."""
+    n = breakpoints(rom_poles).size + (breakpoints(ritz).size if ritz is not None and ritz.size else 0)
+    return 15 * (4 + 2 * n)
+
+
+def _quadrature(fom, arrays, rom, rtol, max_nodes, refine, ritz=None):
+    """||T - Tr||^2 by adaptive quadrature of ||E(jw)||_F^2, its absolute floor, and a record."""
+    E, A, B, C, D = arrays
+    rr = RomResponse(E, A, B, C, D, refine=refine)
+    ev = FomResponse(fom, refine=refine)
+    lam = rom.poles()
+    bp = breakpoints(lam)
+    if ritz is not None and ritz.size:
+        # the model's resonances, as many as leave half of the node budget to the adaptive refinement
+        extra = breakpoints(ritz)
+        room = max(0, max_nodes // 30 - bp.size)
+        if extra.size > room:
+            extra = extra[np.linspace(0, extra.size - 1, room).astype(int)] if room else extra[:0]
+        bp = np.concatenate([bp, extra])
+    mags = np.abs(np.concatenate([lam, ritz if ritz is not None else []]))
+    mags = mags[mags > 0]
+    w0 = float(np.exp(np.median(np.log(mags)))) if mags.size else float(np.sqrt(np.prod(fom.band)))
+
+    def refine_here(T0, Trw):
+        # the unrefined difference has relative error about 16 eps |T| / |E|: refine where that
+        # would be more than a hundredth of rtol
+        e = np.sqrt(np.sum(np.abs(T0 - Trw) ** 2))
+        return bool(16.0 * EPS * np.sqrt(np.sum(np.abs(T0) ** 2)) > 0.01 * rtol * e)
+
+    def f(w):
+        s = 1j * w
+        Trw = rr.transfer(s)
+        Tw = ev.transfer(s, need=lambda T0: refine_here(T0, Trw))
+        e2 = float(np.sum(np.abs(Tw - Trw) ** 2))  # the difference in long double
+        # first-order rounding of |E|^2 when E is accurate to unit_T |T| + unit_r |Tr|
+        size = (ev.last_unit * float(np.sqrt(np.sum(np.abs(Tw) ** 2)))
+                + rr.last_unit * float(np.sqrt(np.sum(np.abs(Trw) ** 2))))
+        return e2, 2.0 * np.sqrt(e2) * size
+
+    res = integrate_half_axis(f, w0, bp, rtol=rtol, max_nodes=max_nodes)
+    value2 = res.value / np.pi
+    rounding = res.aux / np.pi
+    rec = {"value": float(np.sqrt(max(value2, 0.0))), "squared": float(value2), "nodes": res.nodes,
+           "pieces": res.pieces, "error_estimate_squared": res.error / np.pi, "rounding_squared": rounding,
+           "converged": res.converged, "lu_count": ev.lu_count, "lu_shifts": list(ev.shifts), "w0": w0,
+           "breakpoints": int(bp.size)}
+    return value2, res.error / np.pi + rounding, rec
+
+
+def h2_error(fom, rom, *, method: str = "auto", rtol: float = 1e-8, max_nodes: int = 1500, refine: int = 1,
+             adi=None, details: bool = False):
+    r"""Exact :math:`\|T - T_r\|_{\mathcal H_2}` of a reduced model (see the module docstring).
+
+    Parameters
+    ----------
+    fom : Index3Model
+    rom : SecondOrderROM or FirstOrderROM
+        Same numbers of inputs and outputs as ``fom``.
+    method : {"auto", "pole-residue", "quadrature"}
+        Route (module docstring). ``"auto"``: pole-residue when its estimated
+        relative accuracy is within ``rtol``, else quadrature.
+    rtol : float in (0, 1)
+        Relative accuracy asked for (default 1e-8).
+    max_nodes : int
+        Node budget of the quadrature (one sparse LU each).
+    refine : int
+        Extended-precision refinement steps of each response (0: plain solves).
+    adi : dict, optional
+        LR-ADI options of the Gramian factor (as in :func:`h2_norm`).
+    details : bool
+        Also return a dict: ``method`` (route used), ``lu_count`` (sparse LUs
+        made by this call, LR-ADI included when it ran), ``lu_shifts`` (the
+        shifts of the LUs of the routes, LR-ADI's not included), ``floor`` /
+        ``rel_floor`` (estimated absolute / relative accuracy), ``trusted``,
+        ``nodes``, ``norm`` (:math:`\|T\|_{\mathcal H_2}`), and the records of
+        the routes tried.
+
+    Returns
+    -------
+    float, or (float, dict)
+        ``inf`` (with a :class:`StabilityWarning`) for an unstable reduced
+        model or one with a nonzero feedthrough ``D``.
+
+    Raises
+    ------
+    ShapeError
+        ``rom`` has other input or output dimensions than ``fom``.
+    InputError
+        ``rom`` has non-finite matrices or a singular E; bad arguments.
+
+    Notes
+    -----
+    Cost: the Gramian factor once per model (shared with ``bt``), then one
+    LU per real pole or conjugate pair of the reduced model (pole-residue),
+    and, when the quadrature runs, one LU per node (typically 100-1000).
+    """
+    if method not in METHODS:
+        raise OptionError(f"method must be one of {', '.join(map(repr, METHODS))}; got {method!r}")
+    if not (isinstance(rtol, (float, int)) and 0 < rtol < 1):
+        raise OptionError(f"rtol must be a float in (0, 1); got {rtol!r}")
+    if isinstance(max_nodes, bool) or not isinstance(max_nodes, (int, np.integer)) or max_nodes < 15:
+        raise OptionError(f"max_nodes must be an integer >= 15; got {max_nodes!r}")
+    adi = adi_options(adi)
+    arrays, why = validate_rom(fom, rom, "rom")
+    if why is not None:
+        return infinite(*why, details)
+    if np.any(arrays[4] != 0):
+        return infinite("rom has a nonzero feedthrough D: T - Tr is not strictly proper and its H2 norm is "
+                         "infinite", StabilityWarning, details)
+    t0 = time.perf_counter()
+    out = {"requested": method, "rtol": rtol}
+    lus = 0
+    with blas_threads(1):
+        norm2, floor_n2, nrec, gf = (None, 0.0, None, None)
+        if method != "quadrature":
+            norm2, floor_n2, nrec, gf = _norm_squared(fom, adi)
+            lus += nrec["gramian_lu_count"]
+            out["norm"] = float(np.sqrt(norm2))
+            out["gramian"] = nrec
+        value = rel = None
+        if method != "quadrature":
+            e2, fl2, prec = _pole_residue(fom, arrays, rom, norm2, floor_n2, refine)
+            lus += prec["lu_count"]
+            out["pole_residue"] = prec
+            if e2 is not None:
+                rel_pr = 0.5 * fl2 / max(e2, fl2, 1e-300)
+                prec["rel_floor"] = float(rel_pr)
+                ok = rel_pr <= rtol and prec["kappa"] <= KAPPA_MAX and e2 > 0
+                if method == "pole-residue" or ok:
+                    value, rel, route = float(np.sqrt(max(e2, 0.0))), float(rel_pr), "pole-residue"
+        if value is None:
+            gfc = gf or cached_gramian_factors(fom, **adi)
+            ritz = None if gfc is None else np.asarray(gfc.controllability.shifts)
+            prec = out.get("pole_residue", {})
+            have_pr = prec.get("rel_floor", np.inf) <= TRUST_REL and prec.get("kappa", np.inf) <= KAPPA_MAX
+            need = quadrature_nodes_needed(rom.poles(), ritz)
+            if method == "auto" and have_pr and need > max_nodes:
+                # a lightly damped model with many resonances (the TCOM): the quadrature cannot resolve
+                # them within the budget, and the formula's value is good to four digits or better
+                value, rel, route = prec["value"], prec["rel_floor"], "pole-residue"
+                out["quadrature"] = {"skipped": f"about {need} nodes needed (> max_nodes = {max_nodes})"}
+            else:
+                q2, qerr2, qrec = _quadrature(fom, arrays, rom, rtol, max_nodes, refine, ritz)
+                lus += qrec["lu_count"]
+                out["quadrature"] = qrec
+                qrel = float(0.5 * qerr2 / max(q2, 1e-300))
+                qrec["rel_floor"] = qrel
+                value, rel, route = float(np.sqrt(max(q2, 0.0))), qrel, "quadrature"
+                if prec.get("rel_floor", np.inf) < qrel and prec.get("kappa", np.inf) <= KAPPA_MAX:
+                    # the quadrature ran out of nodes and is less accurate than the formula: keep the formula
+                    value, rel, route = prec["value"], prec["rel_floor"], "pole-residue"
+    trusted = bool(rel <= max(TRUST_FACTOR * rtol, TRUST_REL))
+    if not trusted:
+        q = out.get("quadrature", {})
+        why = (f"; the quadrature stopped at max_nodes = {max_nodes}" if q.get("converged") is False else
+               "; the quadrature was skipped: " + q["skipped"] if "skipped" in q else "")
+        warnings.warn(f"h2_error: the value {value:.6e} ({route}) is accurate to about {rel:.1e} relative only "
+                      f"(rtol {rtol:g}){why}", AccuracyWarning, stacklevel=2)
+    if not details:
+        return value
+    out["lu_shifts"] = out.get("pole_residue", {}).get("lu_shifts", []) + out.get("quadrature", {}).get("lu_shifts", [])
+    out.update({"method": route, "value": value, "lu_count": int(lus), "floor": rel * value, "rel_floor": rel,
+                "trusted": trusted, "rtol_met": bool(rel <= rtol), "nodes": out.get("quadrature", {}).get("nodes", 0),
+                "time_s": time.perf_counter() - t0})
+    return value, out
+
+
+def h2_rel_error(fom, rom, *, details: bool = False, **options):
+    r""":math:`\|T - T_r\|_{\mathcal H_2} / \|T\|_{\mathcal H_2}` (options as :func:`h2_error`)."""
+    e, d = h2_error(fom, rom, details=True, **options)
+    n = d.get("norm")
+    if n is None:
+        n = h2_norm(fom, adi=options.get("adi"))
+    value = e / n if np.isfinite(e) else np.inf
+    if not details:
+        return value
+    return value, {**d, "norm": n, "rel_value": value}
