@@ -33,9 +33,18 @@ order ``info["r"]`` is then below ``info["r_requested"]`` with a
 Cycles: a new shift set within ``cycle_tol`` of one of the last
 ``cycle_window`` sets while more than 100 ``cycle_tol`` from the current one
 (criterion ``"shifts"``) is a cycle: ``update="auto"`` moves to its next stage,
-otherwise the iteration stops. Without convergence the best iterate (stable
-first, then smallest measure) is returned with ``converged=False`` and a
-:class:`~morsuite.errors.ConvergenceWarning`.
+otherwise the safeguard engages or (safeguard off) the iteration stops. Without
+convergence the best iterate (stable first) is returned with ``converged=False``
+and a :class:`~morsuite.errors.ConvergenceWarning`.
+
+Safeguard (option ``safeguard``, :class:`~.irka_safeguards.CycleGuard`): idle
+while the plain iteration may still converge, so that its fixed points and
+paths are kept bit for bit; engaged when it cycles in its last stage, settles
+at an unstable model or stalls in its last stage, it replaces the update by
+the residue rule with matched hysteresis and a tabu list, relaxed adaptively
+in shifts and directions. Without convergence it also picks the returned
+iterate: the stable one of smallest :attr:`IRKABase.iterate_score` among a
+shortlist (smallest measure without a scorer).
 
 Options and defaults: :attr:`IRKABase.OPTIONS`. Cost per iteration: one
 factorization per real shift or conjugate pair (``info["lu_count"]``), two
@@ -399,6 +408,7 @@ class IRKABase(Reducer):
                 chosen = (it, (rom, alpha.copy(), bdir.copy(), cdir.copy()), {})
                 break
             reason = None
+            guard.observe(measure)
             if guard.active and not stable and measure < guard.settle:
                 reason = "unstable fixed point"  # the criterion never accepts it: move away
             elif crit == "shifts" and self._is_cycle(new_alpha, d_shift, recent):
@@ -407,6 +417,7 @@ class IRKABase(Reducer):
                     prev_change = np.inf  # the step was just halved: no second adaptation
                 elif schedule.can_switch():
                     schedule.switch(it)
+                    guard.new_stage()
                 elif guard.active:
                     reason = "cycle"
                 else:
@@ -414,11 +425,9 @@ class IRKABase(Reducer):
                     break
             elif schedule.stage_expired(it):
                 schedule.switch(it)  # no convergence within this stage's share of maxit
-            elif guard.active and not guard.engaged and not schedule.can_switch() and guard.stalled(measure):
+                guard.new_stage()
+            elif guard.active and not guard.engaged and not schedule.can_switch() and guard.stalled():
                 reason = "stall"
-            if guard.active and not guard.engaged and reason is None and crit == "shifts":
-                back = shift_distance(new_alpha, recent[-1]) if recent else np.inf
-                reason = guard.watch(uinfo["update"], d_shift, back, o["cycle_tol"], o["tol"])
             how, relax = schedule.rule
             if reason is not None:
                 if reason == "unstable fixed point":

@@ -211,8 +211,7 @@ class CycleGuard:
     * ``"unstable fixed point"``: the shifts settle (measure below ``settle``) at an
       unstable reduced model, which the criterion never accepts;
     * ``"stall"``: in the last stage, ``window`` iterations without a new smallest
-      measure;
-    * ``"bt update undefined"``, ``"small two-cycle"``: see :meth:`watch`.
+      measure.
 
     Engaged, the update is the residue rule with matched hysteresis and a tabu list
     (:func:`guard_weights`), and the step is relaxed adaptively: halved (down to
@@ -243,7 +242,6 @@ class CycleGuard:
         self.step = 1.0
         self._best = np.inf
         self._since_best = 0
-        self._fallbacks = self._oscillating = 0
 
     @property
     def engaged(self) -> bool:
@@ -253,26 +251,20 @@ class CycleGuard:
         self.engaged_at, self.reason = it, reason
         self.events.append((it, f"engaged: {reason}"))
 
-    def stalled(self, measure) -> bool:
-        """Whether ``window`` iterations have passed without a new smallest ``measure``."""
+    def observe(self, measure):
+        """Record this iteration's measure (progress: a new smallest one in the stage)."""
         if measure < self._best:
             self._best, self._since_best = measure, 0
         else:
             self._since_best += 1
-        return self._since_best >= self.window
 
-    def watch(self, update, change, back, cycle_tol, tol):
-        """The reason to engage seen in this iteration of any stage, or None: the paper's BT
-        update undefined (an unstable model, ``update`` "residue-fallback") in ``window``/2
-        iterations, or three iterations in a row of a two-cycle too small for the cycle test
-        (shift ``change`` between ``tol`` and 100 ``cycle_tol``, the new set within a tenth
-        of it of the previous one, ``back``)."""
-        self._fallbacks += update == "residue-fallback"
-        if self._fallbacks >= max(1, self.window // 2):
-            return "bt update undefined"
-        small_cycle = tol < change < 100 * cycle_tol and back < 0.1 * change
-        self._oscillating = self._oscillating + 1 if small_cycle else 0
-        return "small two-cycle" if self._oscillating >= 3 else None
+    def new_stage(self):
+        """The update schedule moved on: progress is counted afresh."""
+        self._best, self._since_best = np.inf, 0
+
+    def stalled(self) -> bool:
+        """Whether ``window`` iterations have passed without a new smallest measure."""
+        return self._since_best >= self.window
 
     def on_cycle(self, it):
         self.h *= 4.0
