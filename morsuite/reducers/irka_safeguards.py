@@ -111,27 +111,28 @@ def perturb_shifts(alpha, bad, eps):
 # -- the safeguard against cycling and unstable fixed points (option ``safeguard``) ------------
 #: the safeguard's options, part of the option table of :class:`~.irka_engine.IRKABase`
 GUARD_OPTIONS = {
-        "safeguard": Option("auto", "choice", "safeguard against cycling and unstable fixed points "
-                            "(irka_safeguards.CycleGuard): idle until the plain iteration cycles in its last "
-                            "stage, settles at an unstable model or stalls, then the residue rule with matched "
-                            "hysteresis, a tabu list and adaptive relaxation; it also picks the returned "
-                            "iterate without convergence from a shortlist of stable ones. 'auto': on with "
-                            "update='auto', off with an explicit update rule; 'off': the plain iteration",
-                            choices=("auto", "on", "off")),
-        "safeguard_window": Option(10, "int", "iterations of the last stage without a new smallest measure "
-                                   "that engage the safeguard", low=2),
-        "safeguard_settle": Option(1e-3, "float", "measure below which an unstable iterate counts as an "
-                                   "unstable fixed point: the safeguard bans the shift or pair whose removal "
-                                   "leaves the most stable model", low=0, high=1, open_low=True, open_high=True),
-        "safeguard_hysteresis": Option(1.0, "float", "matched hysteresis of the engaged safeguard's residue "
-                                       "rule (multiplied by 4 at each further cycle)", low=0),
-        "safeguard_tabu_radius": Option(0.01, "float", "relative distance to a banned shift within which a "
-                                        "mirrored pole is passed over", low=0, high=1, open_low=True,
-                                        open_high=True),
-        "safeguard_min_step": Option(0.125, "float", "smallest step of the engaged safeguard's adaptive "
-                                     "relaxation (1: no relaxation)", low=0, high=1, open_low=True),
-        "shortlist": Option(5, "int", "stable iterates kept (with their models) for the final choice "
-                            "without convergence (safeguard on)", low=1),
+    "safeguard": Option("auto", "choice", "safeguard against cycling and unstable fixed points "
+                        "(irka_safeguards.CycleGuard): idle until the plain iteration cycles in its last "
+                        "stage, settles at an unstable model or stalls, then the residue rule with matched "
+                        "hysteresis, a tabu list and adaptive relaxation; it also picks the returned "
+                        "iterate without convergence from a shortlist of stable ones. 'auto': on with "
+                        "update='auto', off with an explicit update rule; 'off': the plain iteration",
+                        choices=("auto", "on", "off")),
+    "safeguard_window": Option(10, "int", "iterations of the last stage without a new smallest measure "
+                               "that engage the safeguard", low=2),
+    "safeguard_settle": Option(1e-6, "float", "measure below which an unstable iterate counts as an "
+                               "unstable fixed point (the plain iteration stays there): the safeguard bans "
+                               "the shift or pair whose removal leaves the most stable model",
+                               low=0, high=1, open_low=True, open_high=True),
+    "safeguard_hysteresis": Option(1.0, "float", "matched hysteresis of the engaged safeguard's residue "
+                                   "rule (multiplied by 4 at each further cycle)", low=0),
+    "safeguard_tabu_radius": Option(0.01, "float", "relative distance to a banned shift within which a "
+                                    "mirrored pole is passed over", low=0, high=1, open_low=True,
+                                    open_high=True),
+    "safeguard_min_step": Option(0.125, "float", "smallest step of the engaged safeguard's adaptive "
+                                 "relaxation (1: no relaxation)", low=0, high=1, open_low=True),
+    "shortlist": Option(5, "int", "stable iterates kept (with their models) for the final choice "
+                        "without convergence (safeguard on)", low=1),
 }
 
 
