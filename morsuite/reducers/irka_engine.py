@@ -65,8 +65,8 @@ from ..errors import (ConvergenceWarning, InputError, MorsuiteWarning, RankWarni
 from ..linalg.dense import shift_distance
 from ..rom import SecondOrderROM
 from .base import Option, Reducer
-from .irka_safeguards import GUARD_OPTIONS, CycleGuard, Shortlist, ill_conditioned, instability_culprit, oblique_selection, \
-    orthonormal_basis, perturb_shifts, shift_slots, zero_transfer_error
+from .irka_safeguards import GUARD_OPTIONS, CycleGuard, Shortlist, ill_conditioned, instability_culprit, \
+    oblique_selection, orthonormal_basis, perturb_shifts, shift_slots, zero_transfer_error
 from .shift_update import COMPLEX_TOL, UpdateSchedule, bt_rule, initial_shifts, relaxed_update, residue_rule, \
     shifts_from_poles
 

@@ -27,8 +27,18 @@ applies them (options of its table, defaults in brackets):
   :math:`W^T V = 0`, no finite pole) leaves nothing to reduce and raises
   :class:`~morsuite.errors.ModelError` (:func:`zero_transfer_error`).
 
+* Cycling and unstable fixed points (``safeguard`` ["auto"] and the options of
+  :data:`GUARD_OPTIONS`, :class:`CycleGuard`): idle while the plain iteration can
+  still converge; engaged, the residue rule with matched hysteresis and a tabu list
+  (:func:`guard_weights`, :func:`instability_culprit`) and adaptive relaxation.
+  Without convergence the returned iterate comes from a :class:`Shortlist` of
+  stable ones.
+
 Cost: one QR + SVD (or Gram-Schmidt) of each n1 x k basis, :math:`O(n_1 k^2)`
-flops, and a k x k SVD; no sparse LU. Measurements: ``docs/design/irka.md``.
+flops, and a k x k SVD; no sparse LU. The safeguard adds dense r-sized work per
+iteration, and at a settled unstable model one projection of the raw bases per
+real shift or pair left out, :math:`O(n_1 r^3)` flops in all, no sparse LU.
+Measurements: ``docs/design/irka.md``.
 """
 
 from __future__ import annotations
@@ -268,6 +278,7 @@ class CycleGuard:
         return self._since_best >= self.window
 
     def on_cycle(self, it):
+        """A further cycle while engaged: fourfold hysteresis, half the step."""
         self.h *= 4.0
         self.step = max(self.min_step, self.step / 2)
         self.events.append((it, f"cycle: hysteresis {self.h:g}, step {self.step:g}"))
@@ -281,15 +292,19 @@ class CycleGuard:
         return self.step
 
     def ban(self, it, shift, value):
+        """Put ``shift`` (stored in the upper half-plane) on the tabu list; ``value``: the largest
+        relative pole real part without it, for the record."""
         a = complex(shift)
         self.tabu.append(a if a.imag >= 0 else a.conjugate())
         self.events.append((it, f"banned {self.tabu[-1]:.6g} (largest relative pole real part without it "
                                 f"{value:.2e})"))
 
     def weights(self, lam, current):
+        """Score factors of the poles ``lam`` given the ``current`` shifts (:func:`guard_weights`)."""
         return guard_weights(lam, current, self.h, self.radius, self.tabu, self.tabu_radius)
 
     def info(self) -> dict:
+        """The record kept in ``info["safeguard"]``."""
         return {"engaged_at": self.engaged_at, "reason": self.reason, "tabu": list(self.tabu),
                 "hysteresis": self.h if self.engaged else None, "events": [f"{i}: {e}" for i, e in self.events]}
 
