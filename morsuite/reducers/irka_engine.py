@@ -33,9 +33,18 @@ order ``info["r"]`` is then below ``info["r_requested"]`` with a
 Cycles: a new shift set within ``cycle_tol`` of one of the last
 ``cycle_window`` sets while more than 100 ``cycle_tol`` from the current one
 (criterion ``"shifts"``) is a cycle: ``update="auto"`` moves to its next stage,
-otherwise the iteration stops. Without convergence the best iterate (stable
-first, then smallest measure) is returned with ``converged=False`` and a
-:class:`~morsuite.errors.ConvergenceWarning`.
+otherwise the safeguard engages or (safeguard off) the iteration stops. Without
+convergence the best iterate (stable first) is returned with ``converged=False``
+and a :class:`~morsuite.errors.ConvergenceWarning`.
+
+Safeguard (option ``safeguard``, :class:`~.irka_safeguards.CycleGuard`): idle
+while the plain iteration may still converge, so that its fixed points and
+paths are kept bit for bit; engaged when it cycles in its last stage, settles
+at an unstable model or stalls in its last stage, it replaces the update by
+the residue rule with matched hysteresis and a tabu list, relaxed adaptively
+in shifts and directions. Without convergence it also picks the returned
+iterate: the stable one of smallest :attr:`IRKABase.iterate_score` among a
+shortlist (smallest measure without a scorer).
 
 Options and defaults: :attr:`IRKABase.OPTIONS`. Cost per iteration: one
 factorization per real shift or conjugate pair (``info["lu_count"]``), two
@@ -56,7 +65,8 @@ from ..errors import (ConvergenceWarning, InputError, MorsuiteWarning, RankWarni
 from ..linalg.dense import shift_distance
 from ..rom import SecondOrderROM
 from .base import Option, Reducer
-from .irka_safeguards import ill_conditioned, oblique_selection, orthonormal_basis, perturb_shifts, zero_transfer_error
+from .irka_safeguards import GUARD_OPTIONS, CycleGuard, Shortlist, ill_conditioned, instability_culprit, \
+    oblique_selection, orthonormal_basis, perturb_shifts, shift_slots, zero_transfer_error
 from .shift_update import COMPLEX_TOL, UpdateSchedule, bt_rule, initial_shifts, relaxed_update, residue_rule, \
     shifts_from_poles
 
@@ -64,7 +74,7 @@ __all__ = ["IRKABase"]
 
 #: per-iteration records copied into info["history"], in this order
 _HISTORY_KEYS = ("measure", "shift_change", "response_change", "criterion", "n_shifts", "rank", "ill_conditioned",
-                 "refined", "gram_schmidt", "stable", "max_pole_real", "update", "mirrored", "shifts")
+                 "refined", "gram_schmidt", "stable", "max_pole_real", "update", "mirrored", "step", "shifts")
 
 
 class IRKABase(Reducer):
@@ -123,11 +133,19 @@ class IRKABase(Reducer):
                             "cycle_window sets, while 100 times farther from the current one, is a cycle",
                             low=0, high=1, open_low=True, open_high=True),
         "cycle_window": Option(6, "int", "number of earlier shift sets checked for a cycle", low=0),
+        **GUARD_OPTIONS,
         "pivot_tol": Option(0.0, "float", "smallest relative LU pivot before a shift counts as a pole "
                             "(0: only exact singularity and non-finite solves count)", low=0, high=1),
         "shift_perturbation": Option(1e-6, "float", "relative perturbation applied to a shift whose "
                                      "saddle matrix is singular", low=0, high=1, open_low=True),
     }
+
+    #: Score of the shortlisted stable iterates when the iteration does not converge (safeguard
+    #: on): a callable ``(fom, rom) -> float``, smaller is better (meant: the exact H2 error), or
+    #: None: their convergence measure. The one place to plug a scorer in: on a reducer,
+    #: ``red.iterate_score = f``; for every IRKA variant, ``IRKABase.iterate_score = staticmethod(f)``.
+    #: Cost: one call per shortlisted iterate (option ``shortlist``), at the end only.
+    iterate_score = None
 
     # -- hooks -------------------------------------------------------------
     def _setup(self) -> dict:
@@ -258,9 +276,10 @@ class IRKABase(Reducer):
                 raise zero_transfer_error(self.name, "the projection basis has rank 0")
         return self._project(V, W), k, k_rank, bool(ill), bool(gs)
 
-    def _update(self, rom, k, how, current=None):
+    def _update(self, rom, k, how, current=None, guard=None):
         """New shifts and directions from the current reduced model (k of them at most);
-        ``current``: the shifts of this iteration (the residue update's hysteresis)."""
+        ``current``: the shifts of this iteration (the residue update's hysteresis);
+        ``how="guarded"``: the residue rule weighted by the engaged safeguard ``guard``."""
         o = self.options
         E, A, B, C = self._realization(rom)
         lam = hsv = None
@@ -270,8 +289,9 @@ class IRKABase(Reducer):
                 how = "residue-fallback"
         if lam is None:
             lam, bres, cres = self._poles_and_residues(rom, E, B, C)
+            weights = guard.weights(lam, current) if how == "guarded" else None
             lam, bdir, cdir = residue_rule(lam, bres, cres, k, current=current, hysteresis=o["residue_hysteresis"],
-                                           radius=o["hysteresis_radius"])
+                                           radius=o["hysteresis_radius"], weights=weights)
         if lam.size == 0:
             raise zero_transfer_error(self.name, "the reduced model has no finite pole")
         alpha, bdir, cdir, mirrored = shifts_from_poles(lam, bdir, cdir, self.fom.band)
@@ -309,6 +329,20 @@ class IRKABase(Reducer):
         return bool(o["cycle_window"]) and d_shift > 100 * o["cycle_tol"] and any(
             new_alpha.size == a.size and shift_distance(new_alpha, a) < o["cycle_tol"] for a in recent)
 
+    def _ban_culprit(self, guard, it, alpha, Vraw, Wraw, left):
+        """Ban the shift or pair whose removal from this iteration's raw bases leaves the most
+        stable model (:func:`~.irka_safeguards.instability_culprit`; projections, no solve)."""
+        def rom_without(cols):
+            keep = np.setdiff1d(np.arange(Vraw.shape[1]), cols)
+            try:
+                return self._rom_from_raw(Vraw[:, keep], Wraw[:, keep] if left else None, left)[0]
+            except (ArithmeticError, ValueError, np.linalg.LinAlgError):
+                return None
+        slots = shift_slots(alpha, COMPLEX_TOL)
+        s, val = instability_culprit(slots, rom_without) if len(slots) > 1 else (None, None)
+        if s is not None:
+            guard.ban(it, alpha[slots[s][0][0]], val)
+
     def _reduce(self, r):
         o = self.options
         t_setup0 = time.perf_counter()
@@ -317,7 +351,9 @@ class IRKABase(Reducer):
         alpha, bdir, cdir = self._initial(r)
         left = o["projection"] == "petrov"
         history, recent = [], []
-        best = None
+        shortlist = Shortlist(o["shortlist"])
+        guard = CycleGuard.from_options(o)
+        chosen = None
         converged = cycled = False
         t_proj = t_upd = 0.0
         cap = r
@@ -327,6 +363,7 @@ class IRKABase(Reducer):
         check_grid = np.logspace(np.log10(self.fom.band[0]), np.log10(self.fom.band[1]), o["n_check"])
         H_prev = None
         it = perturbed = 0
+        prev_change = np.inf
         self._ill_conditioned = False  # read by the solves of the next iteration (IRKA: refine_when)
         for it in range(1, o["maxit"] + 1):
             refined = self._refining()
@@ -343,7 +380,10 @@ class IRKABase(Reducer):
                 # the shifts of this iteration ask for more than the model holds:
                 # shrink the shift count for good (it never grows back)
                 cap = min(cap, k_rank)
-            new_alpha, new_b, new_c, uinfo = self._update(rom, min(cap, rom.states), how, current=alpha)
+            # the guard is passed only when engaged: an override of _update without it still works
+            extra = {"guard": guard} if guard.engaged else {}
+            new_alpha, new_b, new_c, uinfo = self._update(rom, min(cap, rom.states),
+                                                          "guarded" if guard.engaged else how, current=alpha, **extra)
             t2 = time.perf_counter()
             t_proj += t1 - t0
             t_upd += t2 - t1
@@ -360,37 +400,69 @@ class IRKABase(Reducer):
                             "ill_conditioned": bool(ill), "refined": bool(refined), "gram_schmidt": gs,
                             "measure": measure, "shift_change": d_shift, "response_change": d_resp,
                             "criterion": crit, "stable": stable, "max_pole_real": max_pole_real,
-                            "update": uinfo["update"], "mirrored": uinfo["mirrored"]})
-            key = (not stable, measure)
-            if best is None or key < best[0]:
-                best = (key, it, rom, alpha.copy(), bdir.copy(), cdir.copy())
+                            "update": uinfo["update"], "mirrored": uinfo["mirrored"], "step": 1.0})
+            shortlist.add(measure, it, stable, (rom, alpha.copy(), bdir.copy(), cdir.copy()))
             if measure < o["tol"] and stable:
                 # an unstable iterate is not a fixed point worth returning: iterate on
                 converged = True
-                best = (key, it, rom, alpha.copy(), bdir.copy(), cdir.copy())
+                chosen = (it, (rom, alpha.copy(), bdir.copy(), cdir.copy()), {})
                 break
-            if crit == "shifts" and self._is_cycle(new_alpha, d_shift, recent):
-                if schedule.can_switch():
+            reason = None
+            guard.observe(measure)
+            if guard.active and not stable and measure < guard.settle:
+                reason = "unstable fixed point"  # the criterion never accepts it: move away
+            elif crit == "shifts" and self._is_cycle(new_alpha, d_shift, recent):
+                if guard.engaged:
+                    guard.on_cycle(it)
+                    prev_change = np.inf  # the step was just halved: no second adaptation
+                elif schedule.can_switch():
                     schedule.switch(it)
+                    guard.new_stage()
+                elif guard.active:
+                    reason = "cycle"
                 else:
                     cycled = True
                     break
             elif schedule.stage_expired(it):
                 schedule.switch(it)  # no convergence within this stage's share of maxit
+                guard.new_stage()
+            elif guard.active and not guard.engaged and not schedule.can_switch() and guard.stalled():
+                reason = "stall"
             how, relax = schedule.rule
+            if reason is not None:
+                if reason == "unstable fixed point":
+                    self._ban_culprit(guard, it, alpha, Vraw, Wraw, left)
+                    guard.step = 1.0  # jump off the banned shift, do not creep away from it
+                if not guard.engaged:
+                    guard.engage(it, reason)
+                new_alpha, new_b, new_c, uinfo = self._update(rom, min(cap, rom.states), "guarded", current=alpha,
+                                                              guard=guard)
+                history[-1]["update"] = uinfo["update"]
+            elif guard.engaged:
+                relax = guard.adapt_step(d_shift, prev_change) if np.isfinite(prev_change) else guard.step
+            prev_change = d_shift
+            history[-1]["step"] = relax
             recent = (recent + [alpha.copy()])[-o["cycle_window"]:] if o["cycle_window"] else []
             if relax < 1:
-                new_alpha, new_b, new_c = relaxed_update(alpha, bdir, cdir, new_alpha, new_b, new_c, relax)
+                new_alpha, new_b, new_c = relaxed_update(alpha, bdir, cdir, new_alpha, new_b, new_c, relax,
+                                                         blend_directions=guard.engaged)
             alpha, bdir, cdir = new_alpha, new_b, new_c
+        if chosen is None:
+            score = getattr(self, "iterate_score", None) if guard.active else None
+            chosen = shortlist.choose(None if score is None else (lambda m: score(self.fom, m)))
         times = {"setup": t_setup, **setup_times, **self._phase_times(), "projection": t_proj,
                  "shift_update": t_upd}
-        return self._outcome(r, best, history, it, converged, cycled, times=times, perturbed=perturbed,
-                             switched=schedule.switched_at)
+        rom, info = self._outcome(r, chosen, history, it, converged, cycled, times=times, perturbed=perturbed,
+                                  switched=schedule.switched_at)
+        info["safeguard"] = {**guard.info(), "active": guard.active,
+                             "scored_by": "iterate_score" if chosen[2] else "measure",
+                             "scores": {str(i): v for i, v in chosen[2].items()}}
+        return rom, info
 
     def _outcome(self, r, best, history, it, converged, cycled, *, times, perturbed, switched):
         """The best iterate, the warnings its state calls for, and the info record."""
         o = self.options
-        _, best_it, rom, alpha_used, b_used, c_used = best
+        best_it, (rom, alpha_used, b_used, c_used), _ = best
         # stacklevel 4: the warnings point at the caller of _reduce, as when they were issued there
         if rom.order < r:
             self.warn(f"{self.name}: the projection bases lost numerical rank; the reduced order was capped "

@@ -27,19 +27,32 @@ applies them (options of its table, defaults in brackets):
   :math:`W^T V = 0`, no finite pole) leaves nothing to reduce and raises
   :class:`~morsuite.errors.ModelError` (:func:`zero_transfer_error`).
 
+* Cycling and unstable fixed points (``safeguard`` ["auto"] and the options of
+  :data:`GUARD_OPTIONS`, :class:`CycleGuard`): idle while the plain iteration can
+  still converge; engaged, the residue rule with matched hysteresis and a tabu list
+  (:func:`guard_weights`, :func:`instability_culprit`) and adaptive relaxation.
+  Without convergence the returned iterate comes from a :class:`Shortlist` of
+  stable ones.
+
 Cost: one QR + SVD (or Gram-Schmidt) of each n1 x k basis, :math:`O(n_1 k^2)`
-flops, and a k x k SVD; no sparse LU. Measurements: ``docs/design/irka.md``.
+flops, and a k x k SVD; no sparse LU. The safeguard adds dense r-sized work per
+iteration, and at a settled unstable model one projection of the raw bases per
+real shift or pair left out, :math:`O(n_1 r^3)` flops in all, no sparse LU.
+Measurements: ``docs/design/irka.md``.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 
 from ..errors import ModelError
 from ..linalg.dense import orth
 from ..linalg.orthonormal import gram_schmidt
+from .base import Option
 
-__all__ = ["orthonormal_basis", "ill_conditioned", "oblique_selection", "perturb_shifts", "zero_transfer_error"]
+__all__ = ["orthonormal_basis", "ill_conditioned", "oblique_selection", "perturb_shifts", "zero_transfer_error",
+           "GUARD_OPTIONS", "guard_weights", "shift_slots", "instability_culprit", "CycleGuard", "Shortlist"]
 
 _ZERO_MSG = ("{name}: {what}: the transfer function vanishes in the tangential directions (a zero input or "
              "output matrix, or inputs acting only on constrained coordinates); nothing to reduce")
@@ -103,3 +116,227 @@ def perturb_shifts(alpha, bad, eps):
     alpha = alpha.copy()
     alpha[idx] = alpha[idx] * (1 + eps)
     return alpha, idx.size
+
+
+# -- the safeguard against cycling and unstable fixed points (option ``safeguard``) ------------
+#: the safeguard's options, part of the option table of :class:`~.irka_engine.IRKABase`
+GUARD_OPTIONS = {
+    "safeguard": Option("auto", "choice", "safeguard against cycling and unstable fixed points "
+                        "(irka_safeguards.CycleGuard): idle until the plain iteration cycles in its last "
+                        "stage, settles at an unstable model or stalls, then the residue rule with matched "
+                        "hysteresis, a tabu list and adaptive relaxation; it also picks the returned "
+                        "iterate without convergence from a shortlist of stable ones. 'auto': on with "
+                        "update='auto', off with an explicit update rule; 'off': the plain iteration",
+                        choices=("auto", "on", "off")),
+    "safeguard_window": Option(10, "int", "iterations of the last stage without a new smallest measure "
+                               "that engage the safeguard", low=2),
+    "safeguard_settle": Option(1e-6, "float", "measure below which an unstable iterate counts as an "
+                               "unstable fixed point (the plain iteration stays there): the safeguard bans "
+                               "the shift or pair whose removal leaves the most stable model",
+                               low=0, high=1, open_low=True, open_high=True),
+    "safeguard_hysteresis": Option(1.0, "float", "matched hysteresis of the engaged safeguard's residue "
+                                   "rule (multiplied by 4 at each further cycle)", low=0),
+    "safeguard_tabu_radius": Option(0.01, "float", "relative distance to a banned shift within which a "
+                                    "mirrored pole is passed over", low=0, high=1, open_low=True,
+                                    open_high=True),
+    "safeguard_min_step": Option(0.125, "float", "smallest step of the engaged safeguard's adaptive "
+                                 "relaxation (1: no relaxation)", low=0, high=1, open_low=True),
+    "shortlist": Option(5, "int", "stable iterates kept (with their models) for the final choice "
+                        "without convergence (safeguard on)", low=1),
+}
+
+
+def guard_weights(lam, current, hysteresis, radius, tabu=(), tabu_radius=0.01):
+    r"""Score factors (one per pole) of the safeguard's residue selection.
+
+    Matched hysteresis: the current shifts and the mirrored poles
+    :math:`\mu_j = |\mathrm{Re}\,\lambda_j| - i\,\mathrm{Im}\,\lambda_j` are assigned one
+    to one (optimal assignment on the relative distance); a pole assigned to a shift
+    within relative distance ``radius`` has its score multiplied by 1 + ``hysteresis``.
+    One shift favours one pole: of two poles near one shift (a near-double resonance)
+    only one keeps its place, which the radius rule of
+    :func:`~.shift_update.select_by_residue` cannot say. Tabu: a pole whose mirror lies
+    within ``tabu_radius`` (relative) of a banned shift or its conjugate has its score
+    multiplied by 1e-12, so it is chosen only when nothing else is left.
+    """
+    lam = np.asarray(lam, dtype=complex)
+    w = np.ones(lam.size)
+    if lam.size == 0:
+        return w
+    mu = np.abs(lam.real) - 1j * lam.imag
+    scale = np.maximum(np.abs(mu), np.finfo(float).tiny)
+    cur = np.asarray(current if current is not None else [], dtype=complex).ravel()
+    if hysteresis > 0 and cur.size:
+        cost = np.abs(mu[:, None] - cur[None, :]) / np.maximum(scale[:, None], np.abs(cur)[None, :])
+        i, j = linear_sum_assignment(cost)
+        near = cost[i, j] < radius
+        w[i[near]] *= 1.0 + hysteresis
+    for t in tabu:
+        d = np.minimum(np.abs(mu - t), np.abs(mu - np.conj(t))) / max(abs(t), np.finfo(float).tiny)
+        w[d < tabu_radius] *= 1e-12
+    return w
+
+
+def shift_slots(alpha, tol):
+    """The raw basis columns of each real shift or conjugate pair, in the order the bases are
+    built: a list of (shift indices, column indices)."""
+    slots, col = [], 0
+    for i, a in enumerate(alpha):
+        if abs(a.imag) > tol * abs(a):
+            if a.imag < 0:
+                continue
+            partner = [j for j in np.flatnonzero(np.isclose(alpha, np.conj(a), rtol=1e-8, atol=0)) if j != i]
+            slots.append(([i] + partner[:1], [col, col + 1]))
+            col += 2
+        else:
+            slots.append(([i], [col]))
+            col += 1
+    return slots
+
+
+def instability_culprit(slots, rom_without):
+    """Index into ``slots`` of the real shift or conjugate pair whose removal from the bases
+    leaves the most stable reduced model (smallest largest relative real part of a pole),
+    and that value. ``rom_without(cols)`` projects with the raw basis columns ``cols``
+    left out (no new solve) and returns the model, or None if that fails."""
+    best, best_val = None, np.inf
+    for s, (_, cols) in enumerate(slots):
+        rom = rom_without(cols)
+        if rom is None:
+            continue
+        lam = rom.poles()
+        val = float(np.max(lam.real / np.maximum(np.abs(lam), np.finfo(float).tiny))) if lam.size else -np.inf
+        if val < best_val:
+            best, best_val = s, val
+    return best, best_val
+
+
+class CycleGuard:
+    r"""State of the safeguard of :class:`~.irka_engine.IRKABase` (option ``safeguard``).
+
+    Idle until the plain iteration shows that it will not converge; then *engaged*
+    for the rest of the reduction. It engages when (the iteration's ``reason``):
+
+    * ``"cycle"``: a cycle of shift sets is detected in the last stage of the update
+      schedule (where the plain iteration stops);
+    * ``"unstable fixed point"``: the shifts settle (measure below ``settle``) at an
+      unstable reduced model, which the criterion never accepts;
+    * ``"stall"``: in the last stage, ``window`` iterations without a new smallest
+      measure.
+
+    Engaged, the update is the residue rule with matched hysteresis and a tabu list
+    (:func:`guard_weights`), and the step is relaxed adaptively: halved (down to
+    ``min_step``) when the shift change grows, doubled back towards 1 when it falls.
+    Relaxation keeps the fixed points (:math:`\alpha = f(\alpha)` solves
+    :math:`\alpha = (1-w)\alpha + w f(\alpha)`); the hysteresis grows fourfold at each
+    further cycle. At an unstable settled iterate the shift or pair whose removal
+    leaves the most stable model (:func:`instability_culprit`) is banned.
+    """
+
+    @classmethod
+    def from_options(cls, o):
+        """The safeguard of one reduction from the reducer's options ``o`` (idle until engaged)."""
+        active = o["safeguard"] == "on" or (o["safeguard"] == "auto" and o["update"] == "auto")
+        return cls(active, hysteresis=o["safeguard_hysteresis"], radius=o["hysteresis_radius"],
+                   settle=o["safeguard_settle"], window=o["safeguard_window"], min_step=o["safeguard_min_step"],
+                   tabu_radius=o["safeguard_tabu_radius"])
+
+    def __init__(self, active, *, hysteresis, radius, settle, window, min_step, tabu_radius):
+        self.active = bool(active)
+        self.h0, self.radius, self.settle = hysteresis, radius, settle
+        self.window, self.min_step, self.tabu_radius = window, min_step, tabu_radius
+        self.h = hysteresis
+        self.engaged_at = None
+        self.reason = None
+        self.tabu = []
+        self.events = []
+        self.step = 1.0
+        self._best = np.inf
+        self._since_best = 0
+
+    @property
+    def engaged(self) -> bool:
+        return self.engaged_at is not None
+
+    def engage(self, it, reason):
+        self.engaged_at, self.reason = it, reason
+        self.events.append((it, f"engaged: {reason}"))
+
+    def observe(self, measure):
+        """Record this iteration's measure (progress: a new smallest one in the stage)."""
+        if measure < self._best:
+            self._best, self._since_best = measure, 0
+        else:
+            self._since_best += 1
+
+    def new_stage(self):
+        """The update schedule moved on: progress is counted afresh."""
+        self._best, self._since_best = np.inf, 0
+
+    def stalled(self) -> bool:
+        """Whether ``window`` iterations have passed without a new smallest measure."""
+        return self._since_best >= self.window
+
+    def on_cycle(self, it):
+        """A further cycle while engaged: fourfold hysteresis, half the step."""
+        self.h *= 4.0
+        self.step = max(self.min_step, self.step / 2)
+        self.events.append((it, f"cycle: hysteresis {self.h:g}, step {self.step:g}"))
+
+    def adapt_step(self, change, previous):
+        """Halve the step when the shift change grew, double it (at most 1) when it fell."""
+        if np.isfinite(previous) and change > previous:
+            self.step = max(self.min_step, self.step / 2)
+        else:
+            self.step = min(1.0, self.step * 2)
+        return self.step
+
+    def ban(self, it, shift, value):
+        """Put ``shift`` (stored in the upper half-plane) on the tabu list; ``value``: the largest
+        relative pole real part without it, for the record."""
+        a = complex(shift)
+        self.tabu.append(a if a.imag >= 0 else a.conjugate())
+        self.events.append((it, f"banned {self.tabu[-1]:.6g} (largest relative pole real part without it "
+                                f"{value:.2e})"))
+
+    def weights(self, lam, current):
+        """Score factors of the poles ``lam`` given the ``current`` shifts (:func:`guard_weights`)."""
+        return guard_weights(lam, current, self.h, self.radius, self.tabu, self.tabu_radius)
+
+    def info(self) -> dict:
+        """The record kept in ``info["safeguard"]``."""
+        return {"engaged_at": self.engaged_at, "reason": self.reason, "tabu": list(self.tabu),
+                "hysteresis": self.h if self.engaged else None, "events": [f"{i}: {e}" for i, e in self.events]}
+
+
+class Shortlist:
+    """The iterates kept for the final choice when the iteration does not converge.
+
+    Up to ``size`` stable iterates with the smallest measure, and the iterate of
+    smallest measure overall (returned only when no iterate is stable). ``choose`` scores
+    the stable ones with ``score(rom)`` (smaller is better; the reducer's
+    ``iterate_score``) or, without one, by their measure.
+    """
+
+    def __init__(self, size):
+        self.size = size
+        self.stable = []  # (measure, it, payload)
+        self.any = None
+
+    def add(self, measure, it, stable, payload):
+        if self.any is None or measure < self.any[0]:
+            self.any = (measure, it, payload)
+        if stable:
+            self.stable.append((measure, it, payload))
+            self.stable.sort(key=lambda t: (t[0], t[1]))  # ties: the earlier iterate first
+            del self.stable[self.size:]
+
+    def choose(self, score=None):
+        """(it, payload, scores): the chosen iterate and the score of each shortlisted one."""
+        if not self.stable:
+            return self.any[1], self.any[2], {}
+        if score is None:
+            return self.stable[0][1], self.stable[0][2], {}
+        scores = {it: float(score(payload[0])) for _, it, payload in self.stable}
+        it = min(scores, key=lambda k: (scores[k] if np.isfinite(scores[k]) else np.inf, k))
+        return it, next(p for _, i, p in self.stable if i == it), scores

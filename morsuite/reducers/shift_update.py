@@ -133,14 +133,15 @@ def bt_rule(E, A, B, C, k, hsv_tol):
     return lam, bdir, cdir, hsv
 
 
-def residue_rule(lam, bres, cres, k, current=None, hysteresis=0.0, radius=0.05):
+def residue_rule(lam, bres, cres, k, current=None, hysteresis=0.0, radius=0.05, weights=None):
     """The k poles of largest H2 contribution (:func:`select_by_residue`), one slot left by
     conjugate pairs filled by a real pole (:func:`fill_odd_slot`). Returns (lam, b, c)."""
-    sel = select_by_residue(lam, bres, cres, k, current=current, hysteresis=hysteresis, radius=radius)
+    sel = select_by_residue(lam, bres, cres, k, current=current, hysteresis=hysteresis, radius=radius,
+                            weights=weights)
     return fill_odd_slot(lam, bres, cres, sel, k)
 
 
-def select_by_residue(lam, bres, cres, k, current=None, hysteresis=0.0, radius=0.05):
+def select_by_residue(lam, bres, cres, k, current=None, hysteresis=0.0, radius=0.05, weights=None):
     r"""Indices of k poles with the largest H2 contribution, keeping conjugate pairs whole.
 
     The score of pole :math:`\lambda_i` is
@@ -148,11 +149,15 @@ def select_by_residue(lam, bres, cres, k, current=None, hysteresis=0.0, radius=0
     h > 0, a pole whose mirror image lies within relative distance ``radius`` of one
     of the ``current`` shifts has its score multiplied by 1 + h: a pole already in use
     is only replaced by one that scores clearly higher. A pair that does not fit in
-    the slots left is skipped, not split.
+    the slots left is skipped, not split. ``weights`` (one per pole) multiply the scores
+    instead of the hysteresis (the safeguard's matched hysteresis and tabu list,
+    :func:`~.irka_safeguards.guard_weights`).
     """
     score = (np.linalg.norm(bres, axis=1) * np.linalg.norm(cres, axis=1)
              / np.sqrt(2 * np.maximum(np.abs(lam.real), 1e-300)))
-    if hysteresis > 0 and current is not None and np.size(current) and lam.size:
+    if weights is not None:
+        score = score * weights
+    elif hysteresis > 0 and current is not None and np.size(current) and lam.size:
         cur = np.asarray(current, dtype=complex).ravel()
         dist = np.min(np.abs(-lam[:, None] - cur[None, :]) / np.maximum(np.abs(cur), 1e-300)[None, :], axis=1)
         score = score * np.where(dist < radius, 1.0 + hysteresis, 1.0)
@@ -220,13 +225,17 @@ def normalize_rows(X):
     return X / n
 
 
-def relaxed_update(alpha, bdir, cdir, new_alpha, new_b, new_c, w):
-    """Relaxed update: each new shift moved only a fraction w from its matched old one.
+def relaxed_update(alpha, bdir, cdir, new_alpha, new_b, new_c, w, blend_directions=False):
+    r"""Relaxed update: each new shift moved only a fraction w from its matched old one.
 
     Real shifts are matched with real ones and upper-half-plane shifts with
     upper-half-plane ones (optimal assignment by distance), so the set stays closed
-    under conjugation; the directions are those of the new shifts. If the two sets do
-    not split alike (different counts), the plain update is returned.
+    under conjugation; the directions are those of the new shifts, or with
+    ``blend_directions`` (the safeguard) :math:`(1-w) b + w\,e^{i\phi} b'`,
+    normalised, :math:`\phi` the phase that aligns the new direction :math:`b'` with
+    its matched old one :math:`b` (a direction is defined up to a complex factor); a
+    fixed point of the plain update is one of this. If the two sets do not split alike
+    (different counts), the plain update is returned.
     """
     def split(a):
         cplx = np.abs(a.imag) > COMPLEX_TOL * np.abs(a)
@@ -243,8 +252,12 @@ def relaxed_update(alpha, bdir, cdir, new_alpha, new_b, new_c, w):
         i, j = linear_sum_assignment(cost)
         a = (1 - w) * alpha[io][j] + w * new_alpha[inew][i]
         out_a.append(a)
-        out_b.append(new_b[inew][i])
-        out_c.append(new_c[inew][i])
+        if blend_directions:
+            out_b.append(_blend(bdir[io][j], new_b[inew][i], w))
+            out_c.append(_blend(cdir[io][j], new_c[inew][i], w))
+        else:
+            out_b.append(new_b[inew][i])
+            out_c.append(new_c[inew][i])
     a = np.concatenate(out_a)
     b = np.vstack(out_b)
     c = np.vstack(out_c)
@@ -254,3 +267,10 @@ def relaxed_update(alpha, bdir, cdir, new_alpha, new_b, new_c, w):
     c = np.vstack([c, np.conj(c[cplx])])
     order = np.lexsort((a.imag, a.real))
     return a[order], b[order], c[order]
+
+
+def _blend(old, new, w):
+    """Rows (1-w) old + w new, new turned by the phase of <new, old> first, normalised."""
+    ph = np.sum(np.conj(new) * old, axis=1)
+    ph = np.where(np.abs(ph) > 0, ph / np.maximum(np.abs(ph), np.finfo(float).tiny), 1.0)
+    return normalize_rows((1 - w) * old + w * new * ph[:, None])
