@@ -7,17 +7,18 @@ public benchmark collections ship them. The member names accepted are
 =========================  ==========================================================
 ``STEM.KEY``               the Oberwolfach / MOR Wiki style: ``gyro.M``, ``gyro.K``,
                            ``rail_1357_c60.B`` (Matrix Market content, no extension)
-``STEM_KEY.mtx``           SuiteSparse style auxiliary matrices: ``beam_M.mtx``
-``STEM.KEY.mtx``,          other separators
-``STEM-KEY.mtx``
+``STEM_KEY.mtx``           ``beam_M.mtx``, ``beam_K.mtx``
+``STEM.KEY.mtx``           ``beam.M.mtx``
+``STEM-KEY.mtx``           ``beam-M.mtx``
 ``KEY.mtx``                a directory holding one model: ``model/M.mtx``, ``model/K.mtx``
 =========================  ==========================================================
 
 each also with ``.mtx.gz`` / ``.mtx.bz2`` instead of ``.mtx``. With a ``.mtx``
 ending KEY is matched without regard to case (``beam_m.mtx`` is ``M``);
-``STEM.KEY`` needs KEY's own case (``gyro.m`` is a MATLAB script, not ``M``). A set is named by its directory
-(``model/``, when it holds one set), by its stem (``data/gyro``: the files
-``data/gyro.M``, ``data/gyro.K``, ...) or by any one of its files.
+``STEM.KEY`` needs KEY's own case (``gyro.m`` is a MATLAB script, not ``M``).
+A set is named by its directory (``model/``, when it holds one set), by its stem
+(``data/gyro``: the files ``data/gyro.M``, ``data/gyro.K``, ...) or by any one
+of its files.
 
 This module imports nothing numerical: a study whose models are all cached
 decides which files a model spec names, and hashes them, without importing

@@ -45,6 +45,7 @@ def existing(path) -> Path:
 
 
 def check_sign_option(sign):
+    """``sign`` if it is one of :data:`SIGNS`; InputError otherwise."""
     if sign not in SIGNS:
         raise InputError(f"sign must be 'mess' or 'physical'; got {sign!r}")
     return sign

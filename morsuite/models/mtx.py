@@ -1,9 +1,9 @@
 """Matrix Market sets: one file per matrix, as the public benchmark collections ship them.
 
 The Oberwolfach / MOR Wiki second-order benchmarks come as ``NAME.M``,
-``NAME.K``, ``NAME.B``, ``NAME.C`` (damping, when given, under its own key);
-SuiteSparse names auxiliary matrices ``NAME_M.mtx``; a hand-made export is often
-a directory of ``M.mtx``, ``K.mtx``, ... The naming rules are those of
+``NAME.K``, ``NAME.B``, ``NAME.C`` (the butterfly gyroscope's ``gyro.M``, ...);
+other collections write ``NAME_M.mtx``; a hand-made export is often a directory
+of ``M.mtx``, ``K.mtx``, ... The naming rules are those of
 :mod:`morsuite.modelfiles`; the matrices are read with :func:`scipy.io.mmread`
 (coordinate files give sparse matrices, array files dense ones).
 """
