@@ -130,16 +130,19 @@ def _add_run_parser(sub):
     return p
 
 
+MODEL_HELP = "catalog spec (dsms:g=6000) or a path: .mat, .npz, a Matrix Market set (directory or stem)"
+
+
 def build_parser():
     parser = argparse.ArgumentParser(prog="morsuite", description="Model reduction of second-order index-3 systems.")
     sub = parser.add_subparsers(dest="cmd", required=True)
     p = sub.add_parser("info", help="summary of a model")
-    p.add_argument("model", help="catalog spec (dsms:g=6000) or .mat/.npz path")
+    p.add_argument("model", help=MODEL_HELP)
     p.set_defaults(func=cmd_info)
     p = sub.add_parser("list", help="available models and reducers")
     p.set_defaults(func=cmd_list)
     p = sub.add_parser("reduce", help="reduce one model, print errors and timing")
-    p.add_argument("--model", required=True, help="catalog spec (dsms:g=6000) or .mat/.npz path")
+    p.add_argument("--model", required=True, help=MODEL_HELP)
     p.add_argument("--method", required=True, help="reducer name (see `morsuite list`)")
     p.add_argument("--r", required=True, type=int, help="reduced order")
     p.add_argument("--omega", type=_omega_arg, help="frequency grid LO:HI:N (rad/s, log-spaced)")

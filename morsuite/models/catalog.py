@@ -1,7 +1,9 @@
 """The model catalog: names, parameters and the ``model:key=value`` form.
 
-``get("dsms", g=6000)``, ``parse("dsms:g=6000")``, or a path to a .mat/.npz
-file. Every catalog model has a default frequency band (``model.band``).
+``get("dsms", g=6000)``, ``parse("dsms:g=6000")``, or a path: a .mat or .npz
+file or a Matrix Market set (``data/gyro``, ``./model_dir``; which strings are
+paths: :func:`morsuite.modelfiles.is_model_path`). Every catalog model has a
+default frequency band (``model.band``).
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ import inspect
 from pathlib import Path
 
 from ..errors import InputError
+from ..modelfiles import is_model_path
 from .generators import dsms, tcom
 from .index3 import Index3Model
 
@@ -69,13 +72,15 @@ def _value(text: str):
 
 
 def parse(spec: str) -> Index3Model:
-    """Model from ``"name"``, ``"name:key=value,key=value"`` or a .mat/.npz path.
+    """Model from ``"name"``, ``"name:key=value,key=value"`` or a path.
 
     Parameter values are parsed as int, float, bool, or a ``;``-separated tuple.
+    A path (a .mat, .npz or .mtx file, a Matrix Market set's directory or stem)
+    is read by :func:`morsuite.models.load` with its default options.
     """
     if not isinstance(spec, str) or not spec:
         raise InputError(f"model spec must be a non-empty string; got {spec!r}")
-    if spec.endswith((".mat", ".npz")):
+    if is_model_path(spec):
         from .io import load
         return load(Path(spec))
     name, _, rest = spec.partition(":")
@@ -93,7 +98,7 @@ def parse(spec: str) -> Index3Model:
 
 def canonical(spec: str) -> str:
     """Canonical text of a catalog spec (sorted keys), used in cache keys."""
-    if spec.endswith((".mat", ".npz")):
+    if is_model_path(spec):
         return str(Path(spec))
     name, _, rest = spec.partition(":")
     items = sorted(i for i in rest.split(",") if i)

@@ -130,6 +130,34 @@ def _npz_without(tmp: Path, key: str) -> Path:
     return bad
 
 
+def _mtx_set(tmp: Path, name: str, drop=(), sign="physical", **replace) -> Path:
+    """The Matrix Market set ``tmp/name/m_KEY.mtx`` of dsms(20), without the keys in ``drop``."""
+    fom = _small()
+    flip = -1.0 if sign == "mess" else 1.0
+    mats = {"M": fom.M, "D": flip * fom.D, "K": flip * fom.K, "G": fom.G, "B": fom.F, "C": fom.L, **replace}
+    d = tmp / name
+    d.mkdir(exist_ok=True)
+    for key, X in mats.items():
+        if key not in drop:
+            sio.mmwrite(str(d / f"m_{key}.mtx"), X)
+    return d
+
+
+def _hdf5(tmp: Path, name: str, matlab_class=None, keys=("M",)) -> Path:
+    """An HDF5 .mat file with sparse-group variables ``keys`` (MATLAB_class ``matlab_class``, if any)."""
+    import h5py
+
+    path = tmp / name
+    with h5py.File(path, "w", userblock_size=512) as f:
+        for key in keys:
+            g = f.create_group(key)
+            g.create_dataset("jc", data=np.zeros(2, dtype=np.uint64))
+            if matlab_class is not None:
+                g.attrs["MATLAB_class"] = np.bytes_(matlab_class)
+                g.attrs["MATLAB_sparse"] = np.uint64(1)
+    return path
+
+
 def _pole_model():
     n1 = 4
     K = sp.diags([-1.0, 2.0, 2.0, 2.0], format="csr")
@@ -227,7 +255,7 @@ _ROWS = [
     ("file-missing", "file", "load('nothing.npz')", lambda t, d: ms.models.load(t / "nothing.npz"),
      FileFormatError, r"does not exist or is not a file"),
     ("file-extension", "file", "load('model.txt')", lambda t, d: ms.models.load(_write(t / "model.txt", "x")),
-     FileFormatError, r"unknown extension '\.txt'; expected \.mat or \.npz"),
+     FileFormatError, r"unknown extension '\.txt'; expected \.mat, \.npz, \.mtx or a Matrix Market set"),
     ("npz-corrupt", "file", "a .npz that is not a zip", lambda t, d: ms.models.load(_write(t / "bad.npz", "junk")),
      FileFormatError, r"not a readable npz file"),
     ("npz-key", "file", ".npz without F", lambda t, d: ms.models.load(_npz_without(t, "F")), FileFormatError,
@@ -244,6 +272,40 @@ _ROWS = [
     ("mat-sign-option", "option", "load_mat(sign='negative')",
      lambda t, d: ms.models.load_mat(d / DATA_FILE, sign="negative"), InputError,
      r"sign must be 'mess' or 'physical'"),
+    ("mat73-not-matlab", "file", "an HDF5 .mat without MATLAB_class attributes",
+     lambda t, d: ms.models.load(_hdf5(t, "plain.mat")), FileFormatError,
+     r"an HDF5 file but not a MATLAB v7\.3 file"),
+    ("mat73-missing", "file", "v7.3 .mat with M only", lambda t, d: ms.models.load(_hdf5(t, "m.mat", "double")),
+     FileFormatError, r"missing matrix D, K, G \(found \['M'\]\)"),
+    ("mat73-class", "file", "v7.3 .mat whose M is a struct",
+     lambda t, d: ms.models.load(_hdf5(t, "s.mat", "struct", keys=("M", "D", "K", "G"))), FileFormatError,
+     r"variable 'M' has MATLAB class 'struct'; expected a numeric matrix"),
+    ("mat73-truncated", "file", "a v7.3 header without HDF5 data",
+     lambda t, d: ms.models.load(_write(t / "h.mat", "MATLAB 7.3 MAT-file".ljust(124) + "\0\x02IM" + "\0" * 400)),
+     FileFormatError, r"says MATLAB v7\.3 \(HDF5\) but holds no HDF5 data"),
+    ("mtx-no-set", "file", "load('none') with no such file or set", lambda t, d: ms.models.load(t / "none"),
+     FileFormatError, r"does not exist, and no Matrix Market set has that stem"),
+    ("mtx-no-damping", "file", "Matrix Market set without D", lambda t, d: ms.models.load(_mtx_set(t, "s", ["D"])),
+     FileFormatError, r"no file for matrix D \(looked for key D; found m_B\.mtx.*names=\{'D': None\}"),
+    ("mtx-two-sets", "file", "directory holding two Matrix Market sets",
+     lambda t, d: ms.models.load((_mtx_set(t, "two"), _write(t / "two" / "n_M.mtx", "x"),
+                                  _write(t / "two" / "n_K.mtx", "x"))[0]),
+     FileFormatError, r"holds several Matrix Market sets \(stems 'm', 'n'\)"),
+    ("mtx-both-F-B", "file", "a set with both F.mtx and B.mtx",
+     lambda t, d: ms.models.load(_mtx_set(t, "fb", F=_small().F)), FileFormatError,
+     r"both m_F\.mtx and m_B\.mtx could be matrix F"),
+    ("mtx-unreadable", "file", "a .mtx that is not Matrix Market",
+     lambda t, d: ms.models.load((_mtx_set(t, "u"), _write(t / "u" / "m_K.mtx", "junk"))[0]), FileFormatError,
+     r"m_K\.mtx: not a readable Matrix Market file"),
+    ("mtx-sign", "file", "set with M.E.S.S. signs read as physical",
+     lambda t, d: ms.models.load(_mtx_set(t, "ms", sign="mess")), FileFormatError,
+     r"no positive diagonal entry .*\(try sign='mess'"),
+    ("mtx-velocity-output", "file", "first-order C with a velocity output",
+     lambda t, d: ms.models.load(_mtx_set(t, "v", C=np.ones((1, 41)))), FileFormatError,
+     r"C has nonzeros outside its first n1 = 20 columns \(velocity outputs\)"),
+    ("mtx-names", "option", "load_mtx(names={'Q': 'E'})",
+     lambda t, d: ms.models.load_mtx(_mtx_set(t, "n"), names={"Q": "E"}), InputError,
+     r"names: unknown matrix 'Q'; valid: M, D, K, G, F, L"),
     ("save-non-model", "argument", "save_npz(a dict)", lambda t, d: ms.models.save_npz({}, t / "x.npz"),
      InputError, r"model must be an Index3Model; got dict"),
     ("rom-missing", "file", "load_rom('none.npz')", lambda t, d: ms.rom.load_rom(t / "none.npz"),

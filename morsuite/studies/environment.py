@@ -32,6 +32,17 @@ def _blas() -> dict:
         return {}
 
 
+def _plain_info(value):
+    """A threadpool_info value as JSON data: scipy's Matrix Market reader (loaded by
+    models.load_mtx) registers a pool whose ``version`` is a function, not a string."""
+    if callable(value):
+        try:
+            value = value()
+        except Exception:  # noqa: BLE001 - a version we cannot read is recorded as unknown
+            return None
+    return value if value is None or isinstance(value, (str, int, float, bool)) else str(value)
+
+
 def _threads() -> dict:
     out = {"cpu_count": os.cpu_count(), "env": {v: os.environ.get(v) for v in _THREAD_VARS if v in os.environ}}
     try:
@@ -40,7 +51,7 @@ def _threads() -> dict:
         pass
     try:
         from threadpoolctl import threadpool_info
-        out["threadpools"] = [{k: d.get(k) for k in ("internal_api", "num_threads", "version")}
+        out["threadpools"] = [{k: _plain_info(d.get(k)) for k in ("internal_api", "num_threads", "version")}
                               for d in threadpool_info()]
     except ImportError:
         pass

@@ -11,7 +11,7 @@ choices. Example::
     root = ".."                          # base of relative paths, relative to this file
 
     [models]
-    dsms = "dsms:g=600"                  # catalog string or a .mat/.npz path
+    dsms = "dsms:g=600"                  # catalog string, or a path: .mat, .npz, a Matrix Market set
 
     [grids]
     fig = { band = [1e-2, 1.0], n = 200 }   # log-spaced, rad/s; band defaults to the model's
@@ -44,7 +44,8 @@ from pathlib import Path
 import numpy as np
 
 from ..utils import to_plain
-from ..errors import InputError, SpecError
+from ..errors import FileFormatError, InputError, SpecError
+from ..modelfiles import is_model_path, model_files
 
 __all__ = ["Study", "ModelEntry", "GridEntry", "MethodEntry", "SceneEntry", "load_spec",
            "study_from_dict", "plain"]
@@ -204,14 +205,21 @@ _MODEL_FIELDS = ("model_id", "name", "n1", "n2", "order", "band")
 def _model_entry(ctx, alias, spec, root, memo=None):
     where = f"models.{alias}"
     ctx.string(where, spec)
-    if spec.endswith((".mat", ".npz")):
-        path = Path(spec)
+    if is_model_path(spec):
+        path = Path(spec).expanduser()
         path = path if path.is_absolute() else (root / path)
         path = path.resolve()
-        if not path.is_file():
-            ctx.fail(where, f"model file {str(path)!r} does not exist")
+        try:
+            files = model_files(path)
+        except FileFormatError as exc:
+            ctx.fail(where, str(exc))
         source = str(path)
-        model_id = "file:" + path.name + ":" + hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+        if len(files) == 1 and files[0] == path:
+            digest = hashlib.sha256(path.read_bytes()).hexdigest()
+        else:  # a Matrix Market set: its members' names and contents
+            digest = hashlib.sha256(b"".join(f.name.encode() + b"\0" + hashlib.sha256(f.read_bytes()).digest()
+                                             for f in files)).hexdigest()
+        model_id = "file:" + path.name + ":" + digest[:16]
         material = {"model_id": model_id}
     else:
         source, material = spec, {"spec": spec}
@@ -222,11 +230,11 @@ def _model_entry(ctx, alias, spec, root, memo=None):
 
     from ..models import catalog
 
-    if not spec.endswith((".mat", ".npz")):
+    if not is_model_path(spec):
         name = spec.partition(":")[0]
         if name not in catalog.CATALOG:
             ctx.fail(where, f"unknown model {name!r}{_suggest(name, catalog.available())}; catalog models: "
-                            f"{', '.join(catalog.available())} (or a .mat/.npz path)")
+                            f"{', '.join(catalog.available())} (or a path: .mat, .npz, a Matrix Market set)")
         model_id = "catalog:" + catalog.canonical(spec)
     try:
         fom = catalog.parse(source)
