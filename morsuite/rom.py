@@ -59,12 +59,12 @@ class _ROMBase:
         return self.transfer_many(np.array([complex(s)]))[0]
 
     def is_stable(self, tol: float = 0.0) -> bool:
-        """True if every finite pole has real part < -tol * max(1, |pole|)."""
+        """True if every finite pole has real part ``< -tol * max(1, |pole|)``."""
         lam = self.poles()
         return bool(np.all(lam.real < -tol * np.maximum(1.0, np.abs(lam))))
 
     def to_control(self):
-        """python-control ``StateSpace`` (E^-1 applied to A and B)."""
+        """The python-control :class:`control.StateSpace` (E^-1 applied to A and B)."""
         import control
 
         E, A, B, C, D = self._first_order_arrays()
