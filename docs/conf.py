@@ -25,6 +25,7 @@ extensions = [
     "numpydoc",
     "morsuite_api",
     "docstring_patches",
+    "morsuite_tables",
 ]
 
 source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}

@@ -40,6 +40,8 @@ from sphinx.util.nodes import nested_parse_with_titles
 
 #: section underline characters by depth (the page title uses "=")
 _UNDERLINES = "-~^\""
+#: data whose repr is longer than this is shown without its value
+_MAX_VALUE = 80
 
 
 def public_submodules(modname: str) -> list[str]:
@@ -159,7 +161,9 @@ def _object_directive(modname: str, name: str) -> list[str]:
     full = f"{modname}.{name}"
     if inspect.isclass(obj):
         kind = "autoexception" if issubclass(obj, BaseException) else "autoclass"
-        lines = [f".. {kind}:: {full}", "   :members:", "   :undoc-members:", "   :show-inheritance:"]
+        lines = [f".. {kind}:: {full}", "   :members:", "   :undoc-members:"]
+        if obj.__bases__ != (object,):
+            lines.append("   :show-inheritance:")
         bases = obj.__mro__[1:]
         private = [b for b in bases if b.__module__.startswith("morsuite") and b.__name__.startswith("_")]
         if private:
@@ -168,7 +172,9 @@ def _object_directive(modname: str, name: str) -> list[str]:
         return lines + [""]
     if inspect.isroutine(obj):
         return [f".. autofunction:: {full}", ""]
-    return [f".. autodata:: {full}", ""]
+    # a long value (a table) is unreadable in a signature; option tables are
+    # rendered as tables by morsuite_tables
+    return [f".. autodata:: {full}"] + (["   :no-value:"] if len(repr(obj)) > _MAX_VALUE else []) + [""]
 
 
 def _source_order(modname: str, names: list[str]) -> list[str]:
