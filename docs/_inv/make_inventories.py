@@ -196,7 +196,7 @@ def entries(project: str) -> list[tuple[str, str, str]]:
             # pyplot and friends re-export other modules' classes: list them where they live
             if project in ("matplotlib", "python") and not getattr(obj, "__module__", "").startswith(modname):
                 continue
-            if project == "numpy" and inspect.isclass(obj) and issubclass(obj, importlib.import_module("numpy").generic):
+            if project == "numpy" and inspect.isclass(obj) and issubclass(obj, sys.modules["numpy"].generic):
                 # scalar types share one page and have no pages for their methods
                 seen[full] = (role, f"reference/arrays.scalars.html#{full}")
                 continue
