@@ -21,7 +21,10 @@ What a module documents (:func:`documented_names`): the names of its
 functions it defines and the data it assigns with a ``#:`` doc comment.
 Imported names are never documented twice.
 
-Pages that use the directive are re-read on every build (their content
+A reference by the name users type (``:func:`morsuite.reducers.make```,
+``:class:`morsuite.models.Index3Model```) or by a name the current module
+imports (``:class:`SingularShiftError```) resolves to the object's documented
+entry, and ``np.``/``pd.`` in annotations to numpy and pandas. Pages that use the directive are re-read on every build (their content
 depends on the code, not on the page's text).
 """
 
@@ -88,13 +91,29 @@ def _defined_here(mod, name: str, assigned: set[str]) -> bool:
     return name in assigned
 
 
+def _exported_by_parents(mod) -> list[str]:
+    """Classes and functions defined in ``mod`` that a parent package exports (``models`` exports
+    ``catalog.register`` although ``catalog.__all__`` leaves it out): documented here too."""
+    parts = mod.__name__.split(".")
+    out = []
+    for i in range(1, len(parts)):
+        parent = importlib.import_module(".".join(parts[:i]))
+        for name in getattr(parent, "__all__", []):
+            obj = getattr(parent, name, None)
+            if ((inspect.isclass(obj) or inspect.isroutine(obj)) and getattr(obj, "__module__", None) == mod.__name__
+                    and getattr(mod, obj.__name__, None) is obj and obj.__name__ not in out):
+                out.append(obj.__name__)
+    return out
+
+
 def documented_names(modname: str) -> list[str]:
     """The names documented in module ``modname`` (see the module docstring)."""
     mod = importlib.import_module(modname)
     assigned = _assigned_names(mod)
     exported = getattr(mod, "__all__", None)
     if exported is not None:
-        return [n for n in exported if hasattr(mod, n) and _defined_here(mod, n, assigned)]
+        names = [n for n in exported if hasattr(mod, n) and _defined_here(mod, n, assigned)]
+        return names + [n for n in _exported_by_parents(mod) if n not in names]
     try:
         attr_docs = {name for (_, name) in ModuleAnalyzer.for_module(modname).find_attr_docs()}
     except Exception:  # noqa: BLE001 - no source: document classes and functions only
@@ -241,6 +260,71 @@ class MorsuiteAPI(Directive):
         return node.children
 
 
+# -- references by public name, by short name, and through np./pd. -----------
+#: abbreviations of annotations (``np.ndarray``) -> the package intersphinx knows
+_ABBREVIATIONS = {"np.": "numpy.", "pd.": "pandas.", "sp.": "scipy.sparse.", "sla.": "scipy.linalg.",
+                  "spla.": "scipy.sparse.linalg."}
+
+
+def canonical_name(target: str) -> str | None:
+    """Where the morsuite object ``target`` is documented: the defining module's name of it
+    (``morsuite.analysis.h2_norm`` -> ``morsuite.analysis.h2.h2_norm``), or None."""
+    if not target.startswith("morsuite."):
+        return None
+    parts = target.split(".")
+    for i in range(len(parts) - 1, 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:i]))
+        except ImportError:
+            continue
+        try:
+            for attr in parts[i:]:
+                obj = getattr(obj, attr)
+        except AttributeError:
+            return None
+        break
+    else:
+        return None
+    if inspect.ismodule(obj):
+        return obj.__name__
+    mod, qual = getattr(obj, "__module__", None), getattr(obj, "__qualname__", None)
+    if not (inspect.isclass(obj) or inspect.isroutine(obj)) or not mod or not qual:
+        return None
+    return f"{mod}.{qual}"
+
+
+def _resolve_public_name(app, env, node, contnode):
+    """Resolve what the Python domain could not: a morsuite object by the name users type
+    (``morsuite.reducers.make``), a short name imported into the current module
+    (``SingularShiftError`` in ``morsuite.reducers.irka``), ``np.``/``pd.`` abbreviations."""
+    if node.get("refdomain") != "py":
+        return None
+    target = node.get("reftarget", "")
+    for short, full in _ABBREVIATIONS.items():
+        if target.startswith(short):
+            from sphinx.ext.intersphinx import missing_reference
+
+            expanded = node.deepcopy()
+            expanded["reftarget"] = full + target[len(short):]
+            return missing_reference(app, env, expanded, contnode)
+    modname, clsname = node.get("py:module"), node.get("py:class")
+    candidates = [target]
+    if modname and not target.startswith("morsuite."):
+        candidates = ([f"{modname}.{clsname}.{target}"] if clsname else []) + [f"{modname}.{target}"]
+    domain = env.domains["py"]
+    for candidate in candidates:
+        try:
+            canonical = canonical_name(candidate)
+        except Exception:  # noqa: BLE001 - an import failing here only means: not resolvable
+            canonical = None
+        if canonical is not None:
+            found = domain.resolve_xref(env, node["refdoc"], app.builder, node["reftype"], canonical, node,
+                                        contnode)
+            if found is not None:
+                return found
+    return None
+
+
 # -- pages with generated content are read again on every build ------------
 def _generated_docs(env) -> set:
     if not hasattr(env, "morsuite_generated_docs"):
@@ -265,4 +349,5 @@ def setup(app):
     app.connect("env-purge-doc", _purge)
     app.connect("env-merge-info", _merge)
     app.connect("env-get-outdated", _outdated)
+    app.connect("missing-reference", _resolve_public_name)
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}

@@ -89,7 +89,7 @@ def _rst_cell(text) -> str:
 
 def list_table(header: list[str], rows: list[list[str]], widths: str | None = None) -> list[str]:
     """A ``list-table`` with a header row; cells are reStructuredText (one line each)."""
-    lines = [".. list-table::", "   :header-rows: 1"]
+    lines = [".. list-table::", "   :header-rows: 1", "   :width: 100%"]
     if widths:
         lines.append(f"   :widths: {widths}")
     lines.append("")
@@ -275,12 +275,16 @@ def cli_rst() -> list[str]:
 def refused_rst() -> list[str]:
     refused = importlib.import_module("morsuite.stress.refused")
     rows, skipped = refused.table_rows()
-    out = []
+    by_area: dict[str, list] = {}
     for area, what, got, msg, key in rows:
         if "expected" in got or "not refused" in got:
             logger.warning("refused-inputs row %r: %s (message: %s)", key, got, msg)
-        out.append([_rst_cell(area), _rst_cell(what), f"``{got}``", _rst_cell(msg), f"``{key}``"])
-    lines = list_table(["area", "input", "error", "message", "test id"], out, "10 22 14 44 10")
+        by_area.setdefault(area, []).append([_rst_cell(what), f"``{got}``", _rst_cell(msg), f"``{key}``"])
+    lines = []
+    for area, out in by_area.items():
+        title = area[:1].upper() + area[1:]
+        lines += [title, "-" * len(title), ""]
+        lines += list_table(["input", "error", "message", "test id"], out, "24 16 46 14")
     if skipped:
         lines += [f"Left out (no ``{refused.DATA_FILE}`` in the data directory): "
                   + ", ".join(f"``{k}``" for k in skipped) + ".", ""]
