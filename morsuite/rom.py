@@ -59,12 +59,12 @@ class _ROMBase:
         return self.transfer_many(np.array([complex(s)]))[0]
 
     def is_stable(self, tol: float = 0.0) -> bool:
-        """True if every finite pole has real part < -tol * max(1, |pole|)."""
+        """True if every finite pole has real part ``< -tol * max(1, |pole|)``."""
         lam = self.poles()
         return bool(np.all(lam.real < -tol * np.maximum(1.0, np.abs(lam))))
 
     def to_control(self):
-        """python-control ``StateSpace`` (E^-1 applied to A and B)."""
+        """The python-control :class:`control.StateSpace` (E^-1 applied to A and B)."""
         import control
 
         E, A, B, C, D = self._first_order_arrays()
@@ -112,24 +112,30 @@ class SecondOrderROM(_ROMBase):
 
     @property
     def order(self) -> int:
+        """r, the dimension of the second-order matrices."""
         return self.M.shape[0]
 
     @property
     def states(self) -> int:
+        """First-order states, 2r."""
         return 2 * self.order
 
     @property
     def m(self):
+        """Number of inputs (columns of F)."""
         return self.F.shape[1]
 
     @property
     def p(self):
+        """Number of outputs (rows of L)."""
         return self.L.shape[0]
 
     def __repr__(self):
         return f"SecondOrderROM(r={self.order}, states={self.states}, m={self.m}, p={self.p})"
 
     def transfer_many(self, s) -> np.ndarray:
+        r""":math:`T_r(s_k) = \hat L (s_k^2 \hat M + s_k \hat D + \hat K)^{-1} \hat F` at every point of ``s``:
+        complex (len(s), p, m); one dense r x r solve per point."""
         s = np.asarray(s, dtype=complex).reshape(-1)
         P = s[:, None, None] ** 2 * self.M + s[:, None, None] * self.D + self.K
         X = np.linalg.solve(P, np.broadcast_to(self.F, (s.size,) + self.F.shape))
@@ -157,6 +163,7 @@ class SecondOrderROM(_ROMBase):
         return E, A, B, C, np.zeros((self.p, self.m))
 
     def to_first_order(self) -> "FirstOrderROM":
+        """The same model as a :class:`FirstOrderROM` with the realization of :meth:`first_order`."""
         E, A, B, C = self.first_order()
         return FirstOrderROM(E, A, B, C)
 
@@ -212,30 +219,37 @@ class FirstOrderROM(_ROMBase):
 
     @property
     def order(self) -> int:
+        """Number of states (the dimension of A)."""
         return self.A.shape[0]
 
     @property
     def states(self) -> int:
+        """Number of states, the same as :attr:`order`."""
         return self.order
 
     @property
     def m(self):
+        """Number of inputs (columns of B)."""
         return self.B.shape[1]
 
     @property
     def p(self):
+        """Number of outputs (rows of C)."""
         return self.C.shape[0]
 
     def __repr__(self):
         return f"FirstOrderROM(states={self.states}, m={self.m}, p={self.p})"
 
     def transfer_many(self, s) -> np.ndarray:
+        r""":math:`T_r(s_k) = C (s_k E - A)^{-1} B + D` at every point of ``s``: complex (len(s), p, m);
+        one dense solve per point."""
         s = np.asarray(s, dtype=complex).reshape(-1)
         P = s[:, None, None] * self.E - self.A
         X = np.linalg.solve(P, np.broadcast_to(self.B, (s.size,) + self.B.shape))
         return self.C @ X + self.D
 
     def transfer_derivative(self, s) -> np.ndarray:
+        r""":math:`T_r'(s) = -C (sE - A)^{-1} E (sE - A)^{-1} B`."""
         s = complex(s)
         P = s * self.E - self.A
         return -self.C @ np.linalg.solve(P, self.E @ np.linalg.solve(P, self.B))
@@ -244,9 +258,11 @@ class FirstOrderROM(_ROMBase):
         return self.E, self.A, self.B, self.C, self.D
 
     def to_first_order(self) -> "FirstOrderROM":
+        """This model itself."""
         return self
 
     def poles(self) -> np.ndarray:
+        """Finite generalized eigenvalues of the pencil (A, E)."""
         return _finite_eigs(self.A, self.E)
 
 

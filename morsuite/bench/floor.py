@@ -152,6 +152,7 @@ class FloorRun:
 
     @property
     def ratio(self) -> float:
+        """The run's time over its floor (1: the run costs what its LUs cost bare)."""
         return self.time_s / self.floor_s
 
 

@@ -93,6 +93,7 @@ class MemoryProbe:
         return False
 
     def as_dict(self) -> dict:
+        """The measured peaks and deltas in MB, as plain data."""
         return {"tracemalloc_peak_mb": self.traced_peak_mb, "rss_before_mb": self.rss_before_mb,
                 "rss_peak_mb": self.rss_peak_mb, "rss_delta_mb": self.rss_delta_mb,
                 "rss_peak_reset": self.hwm_reset}

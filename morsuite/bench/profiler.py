@@ -121,6 +121,7 @@ class StackProfiler:
         self.last = time.perf_counter()
 
     def run(self, fn, *args, **kwargs):
+        """Call ``fn(*args, **kwargs)`` under the profiler and return its result."""
         import sys
 
         self.last = time.perf_counter()

@@ -173,18 +173,22 @@ class Index3Model:
     # -- sizes -----------------------------------------------------------
     @property
     def n1(self) -> int:
+        """Number of positions (the dimension of M)."""
         return self.M.shape[0]
 
     @property
     def n2(self) -> int:
+        """Number of constraints (rows of G)."""
         return self.G.shape[0]
 
     @property
     def m(self) -> int:
+        """Number of inputs (columns of F)."""
         return self.F.shape[1]
 
     @property
     def p(self) -> int:
+        """Number of outputs (rows of L)."""
         return self.L.shape[0]
 
     @property

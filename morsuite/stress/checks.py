@@ -44,7 +44,7 @@ HERMITE_TOL = 1e-6
 NULLSPACE_TOL = 1e-8
 BT_BOUND_RTOL = 1e-3  # documented tolerance of the BT bound check (ADI Gramians are approximate)
 N_GRID = 60
-#: outputs below this fraction of |L| |X| are compared in absolute terms (see check_nullspace)
+#: outputs below this fraction of ``|L| |X|`` are compared in absolute terms (see check_nullspace)
 CANCEL = 1e-4
 
 
@@ -152,7 +152,7 @@ def check_nullspace(fom, points) -> Outcome:
 
     The difference is measured against ``max(|T|, CANCEL * |L| |X|)``: an output
     that is many orders below the state it reads (cancellation in L X) is only
-    determined to within eps |L| |X| by any backward stable solver.
+    determined to within ``eps |L| |X|`` by any backward stable solver.
     """
     worst, metrics = 0.0, {}
     for s in points:

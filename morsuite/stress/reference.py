@@ -198,7 +198,7 @@ _REAL_SPLU = spla.splu
 class equilibrated_saddle:
     """Context manager: SaddlePointSolver factors the Ruiz-equilibrated matrix (prototype of the K1 fix).
 
-    ``Dr S Dc = L U`` with Dr, Dc from five Ruiz sweeps over |S|; solves are
+    ``Dr S Dc = L U`` with Dr, Dc from five Ruiz sweeps over ``|S|``; solves are
     unscaled (``x = Dc (LU)^-1 Dr b``, transposed ``x = Dr (LU)^-T Dc b``).
     Used to attribute a silent failure to K1: a check that fails with the
     suite's solver and passes under this context failed because of K1.

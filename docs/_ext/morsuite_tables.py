@@ -1,0 +1,321 @@
+"""Sphinx extension: tables read from the code when the docs are built, so they cannot drift.
+
+Directives (each renders reStructuredText; the page is re-read on every build):
+
+``.. morsuite-reducer-options::`` [NAME]
+    Every option of every registered reducer (or of reducer NAME): default,
+    admissible values and description, from the class's ``OPTIONS`` table
+    (:class:`morsuite.reducers.base.Option`). The same table is appended to
+    each reducer class's docstring in the API reference, and the raw
+    ``OPTIONS`` attribute is left out there.
+``.. morsuite-spec-keys::``
+    The keys of a study spec (TOML), from the key tables of
+    :mod:`morsuite.studies.spec` and the scene kinds of
+    :mod:`morsuite.studies.scenes`. A key without a description here is a
+    build warning: add it to ``SPEC_KEY_DOCS`` / ``SCENE_KEY_DOCS``.
+``.. morsuite-cli::``
+    ``morsuite --help`` and every subcommand's help, and a table of each
+    subcommand's arguments with their defaults, from
+    :func:`morsuite.cli.build_parser`.
+``.. morsuite-refused-table::``
+    Runs every row of :mod:`morsuite.stress.refused` (a few seconds) and shows
+    the error class and the actual message; a row that is not refused as
+    declared is a build warning.
+
+Option tables of the older form ``name -> (default, admissible, description)``
+(``morsuite.analysis.simulate.OPTIONS``) are appended to their data's
+docstring in the API reference.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import os
+
+from docutils import nodes
+from docutils.parsers.rst import Directive
+from docutils.statemachine import StringList
+from sphinx.util import logging
+from sphinx.util.nodes import nested_parse_with_titles
+
+from morsuite_api import _generated_docs
+
+logger = logging.getLogger(__name__)
+
+#: top-level, [grids.NAME] and [methods.ALIAS] keys of a study spec
+SPEC_KEY_DOCS = {
+    "name": "name of the study and of its output folder OUT/NAME (default: the file's stem)",
+    "title": "title of the study's summary (default: the name)",
+    "description": "free text kept in the manifest (default: empty)",
+    "root": "base of the relative paths in the spec, relative to the spec file (default: the file's folder)",
+    "models": "table alias = \"catalog spec\" (e.g. \"dsms:g=600\") or the path of a .mat/.npz file (required)",
+    "grids": "table of frequency grids NAME = { band = [lo, hi], n = N }; a grid \"default\" always exists",
+    "methods": "table of [methods.ALIAS] tables (required, not empty)",
+    "scenes": "array of [[scenes]] tables: the figures and tables to make (required, not empty)",
+    "grids.band": "[lo, hi] in rad/s, log-spaced (default: the model's band)",
+    "grids.n": "number of frequencies, an integer >= 2 (default: {n})",
+    "methods.reducer": "registered reducer name (default: the alias)",
+    "methods.options": "reducer options (default: none given; every declared option with its default is recorded)",
+    "methods.label": "legend label (default: the alias)",
+}
+
+#: keys of a [[scenes]] table (common ones, and the kind-specific ones of morsuite.studies.scenes.KINDS)
+SCENE_KEY_DOCS = {
+    "name": "file-name-safe name of the scene's output files (required)",
+    "kind": "scene kind, one of the table below (required)",
+    "title": "figure title (default: empty)",
+    "model": "model alias (required)",
+    "methods": "method aliases (default: every method of the study)",
+    "r": "reduced order: an int, a list, or { from = 2, to = 40, step = 2 } (required)",
+    "grid": "grid name (default: \"default\", the model's band with 200 points)",
+    "paper_csv": "reference curve(s) to overlay: a path, or a table { curve = path }",
+    "error": "absolute or relative error",
+    "measure": "what is plotted against r: max absolute or relative error on the grid, or the H2 error on it",
+    "axis": "x axis: the reduced order r or the number of first-order states",
+    "time": "reduction time at this r alone (standalone) or of the reduce(r) call with shared work reused",
+    "count": "number of Hankel singular values shown (default: all)",
+}
+
+
+def _rst_cell(text) -> str:
+    """Plain text as one table cell: inline markup characters escaped, empty as a dash."""
+    text = " ".join(str(text).split())
+    for ch in "\\`*|_":
+        text = text.replace(ch, "\\" + ch)
+    return text or "\\-"
+
+
+def list_table(header: list[str], rows: list[list[str]], widths: str | None = None) -> list[str]:
+    """A ``list-table`` with a header row; cells are reStructuredText (one line each)."""
+    lines = [".. list-table::", "   :header-rows: 1", "   :width: 100%"]
+    if widths:
+        lines.append(f"   :widths: {widths}")
+    lines.append("")
+    for row in [header] + rows:
+        lines.append(f"   * - {row[0]}")
+        lines += [f"     - {cell}" for cell in row[1:]]
+    return lines + [""]
+
+
+def _literal(value) -> str:
+    return f"``{value!r}``"
+
+
+def _toml(value) -> str:
+    """A default as it is written in TOML (None: the key is not set)."""
+    if value is None:
+        return "not set"
+    if isinstance(value, bool):
+        return f"``{str(value).lower()}``"
+    return f"``{json.dumps(value)}``"
+
+
+# -- reducer options ---------------------------------------------------------
+def option_rows(options: dict) -> list[list[str]]:
+    """Rows (name, default, admissible values, description) of an ``OPTIONS`` table of either form."""
+    rows = []
+    for name, opt in options.items():
+        if hasattr(opt, "describe"):  # morsuite.reducers.base.Option
+            allowed = opt.describe() + (" or None" if opt.nullable else "")
+            rows.append([f"``{name}``", _literal(opt.default), _rst_cell(allowed), _rst_cell(opt.doc)])
+        else:  # (default, admissible values or type, description)
+            default, allowed, doc = opt
+            if isinstance(allowed, type):
+                allowed = f"a {allowed.__name__}" + (" or None" if default is None else "")
+            else:
+                allowed = "one of " + ", ".join(repr(a) for a in allowed)
+            rows.append([f"``{name}``", _literal(default), _rst_cell(allowed), _rst_cell(doc)])
+    return rows
+
+
+def options_table(options: dict) -> list[str]:
+    return list_table(["option", "default", "admissible", "description"], option_rows(options), "14 10 20 56")
+
+
+def reducer_options_rst(name: str | None = None) -> list[str]:
+    from morsuite import reducers
+
+    names = [name] if name else reducers.available()
+    lines = []
+    for n in names:
+        cls = reducers.get_class(n)
+        if name is None:
+            title = f"``{n}``"
+            lines += [title, "-" * len(title), ""]
+        lines += [f"Class :class:`{cls.__module__}.{cls.__qualname__}`; "
+                  f"``ms.reducers.make({n!r}, fom, **options)``.", ""]
+        lines += options_table(cls.OPTIONS)
+    return lines
+
+
+def _is_option_table(obj) -> bool:
+    return (isinstance(obj, dict) and bool(obj)
+            and all(hasattr(v, "describe") or _is_option_tuple(v) for v in obj.values()))
+
+
+def _is_option_tuple(v) -> bool:
+    return (isinstance(v, tuple) and len(v) == 3 and isinstance(v[2], str)
+            and (isinstance(v[1], type) or isinstance(v[1], (tuple, list))))
+
+
+def _append_options(app, what, name, obj, options, lines):
+    if what in ("class", "exception"):
+        table = getattr(obj, "OPTIONS", None)
+    else:
+        table = obj if what == "data" and name.endswith(".OPTIONS") else None
+    if table is None or not _is_option_table(table) or (what == "class" and "OPTIONS" not in vars(obj)):
+        return
+    lines += ["", ".. rubric:: Options", ""] + options_table(table)
+
+
+def _skip_options(app, what, name, obj, skip, options):
+    if name == "OPTIONS" and _is_option_table(obj) and what in ("class", "exception"):
+        return True
+    return None
+
+
+# -- study spec keys ---------------------------------------------------------
+def _doc(table: dict, key: str, where: str, **fmt) -> str:
+    if key not in table:
+        logger.warning("study spec key %r (%s) has no description in docs/_ext/morsuite_tables.py", key, where)
+        return ""
+    text = table[key]
+    for name, value in fmt.items():
+        text = text.replace("{" + name + "}", str(value))
+    return text
+
+
+def spec_keys_rst() -> list[str]:
+    from morsuite.studies import scenes, spec
+
+    lines = ["Top level", "---------", ""]
+    lines += list_table(["key", "meaning"], [[f"``{k}``", _rst_cell(_doc(SPEC_KEY_DOCS, k, "top level"))]
+                                             for k in spec.TOP_KEYS], "20 80")
+    lines += ["``[grids.NAME]``", "-----------------", ""]
+    lines += list_table(["key", "meaning"],
+                        [[f"``{k}``", _rst_cell(_doc(SPEC_KEY_DOCS, f"grids.{k}", "grids", n=spec.DEFAULT_GRID_N))]
+                         for k in spec.GRID_KEYS], "20 80")
+    lines += ["``[methods.ALIAS]``", "--------------------", ""]
+    lines += list_table(["key", "meaning"], [[f"``{k}``", _rst_cell(_doc(SPEC_KEY_DOCS, f"methods.{k}", "methods"))]
+                                             for k in spec.METHOD_KEYS], "20 80")
+    lines += ["``[[scenes]]``", "--------------", ""]
+    kind_keys = []
+    for kind in scenes.KINDS.values():
+        kind_keys += [k for k in kind.keys if k not in kind_keys]
+    rows = []
+    for key in list(scenes.COMMON_KEYS) + kind_keys:
+        rows.append([f"``{key}``", _rst_cell(_doc(SCENE_KEY_DOCS, key, "scenes"))])
+    lines += list_table(["key", "meaning"], rows, "20 80")
+    lines += ["Scene kinds", "-----------", ""]
+    rows = []
+    for name, kind in scenes.KINDS.items():
+        extra = []
+        for key, (default, choices) in kind.keys.items():
+            if key in ("r", "grid", "paper_csv"):
+                continue
+            allowed = ", ".join(json.dumps(c) for c in choices) if choices is not None else "a positive integer"
+            extra.append(f"``{key}``: {_toml(default)} ({_rst_cell(allowed)})")
+        needs = ["a grid" if kind.uses_grid else "no grid", "one r" if kind.one_r else "any number of r"]
+        if kind.min_methods > 1:
+            needs.append(f"at least {kind.min_methods} methods")
+        rows.append([f"``{name}``", _rst_cell(kind.doc), ", ".join(needs), "; ".join(extra) or "\\-"])
+    lines += list_table(["kind", "shows", "needs", "own keys (default, admissible)"], rows, "12 38 20 30")
+    return lines
+
+
+# -- command line ------------------------------------------------------------
+def _parsers():
+    from morsuite import cli
+
+    built = cli.build_parser()
+    parser = built[0] if isinstance(built, tuple) else built
+    subs = {}
+    for action in parser._actions:  # argparse keeps its subparsers only here
+        if isinstance(action, argparse._SubParsersAction):
+            subs.update(action.choices)
+    return parser, subs
+
+
+def _default(action) -> str:
+    if action.required or action.default in (None, argparse.SUPPRESS):
+        return "required" if action.required else "\\-"
+    return _literal(action.default)
+
+
+def cli_rst() -> list[str]:
+    old = os.environ.get("COLUMNS")
+    os.environ["COLUMNS"] = "100"  # argparse wraps help to the terminal width: fix it
+    try:
+        parser, subs = _parsers()
+        lines = ["``morsuite --help``", "-------------------", "", "::", ""]
+        lines += ["   " + ln for ln in parser.format_help().splitlines()] + [""]
+        for name, sub in subs.items():
+            title = f"``morsuite {name}``"
+            lines += [title, "-" * len(title), "", "::", ""]
+            lines += ["   " + ln for ln in sub.format_help().splitlines()] + [""]
+            rows = []
+            for action in sub._actions:
+                if isinstance(action, argparse._HelpAction):
+                    continue
+                flag = ", ".join(action.option_strings) or (action.metavar or action.dest)
+                rows.append([f"``{flag}``", _default(action), _rst_cell(action.help or "")])
+            if rows:
+                lines += list_table(["argument", "default", "meaning"], rows, "22 18 60")
+    finally:
+        if old is None:
+            os.environ.pop("COLUMNS", None)
+        else:
+            os.environ["COLUMNS"] = old
+    return lines
+
+
+# -- refused inputs ----------------------------------------------------------
+def refused_rst() -> list[str]:
+    refused = importlib.import_module("morsuite.stress.refused")
+    rows, skipped = refused.table_rows()
+    by_area: dict[str, list] = {}
+    for area, what, got, msg, key in rows:
+        if "expected" in got or "not refused" in got:
+            logger.warning("refused-inputs row %r: %s (message: %s)", key, got, msg)
+        by_area.setdefault(area, []).append([_rst_cell(what), f"``{got}``", _rst_cell(msg), f"``{key}``"])
+    lines = []
+    for area, out in by_area.items():
+        title = area[:1].upper() + area[1:]
+        lines += [title, "-" * len(title), ""]
+        lines += list_table(["input", "error", "message", "test id"], out, "24 16 46 14")
+    if skipped:
+        lines += [f"Left out (no ``{refused.DATA_FILE}`` in the data directory): "
+                  + ", ".join(f"``{k}``" for k in skipped) + ".", ""]
+    return lines
+
+
+class _Generated(Directive):
+    optional_arguments = 1
+    has_content = False
+    make = None
+
+    def run(self):
+        env = self.state.document.settings.env
+        _generated_docs(env).add(env.docname)
+        text = type(self).make(*self.arguments)
+        node = nodes.section()
+        node.document = self.state.document
+        nested_parse_with_titles(self.state, StringList(text, source=f"<{self.name}>"), node)
+        return node.children
+
+
+def _directive(fn):
+    return type(fn.__name__, (_Generated,), {"make": staticmethod(fn)})
+
+
+def setup(app):
+    app.setup_extension("morsuite_api")
+    app.add_directive("morsuite-reducer-options", _directive(reducer_options_rst))
+    app.add_directive("morsuite-spec-keys", _directive(spec_keys_rst))
+    app.add_directive("morsuite-cli", _directive(cli_rst))
+    app.add_directive("morsuite-refused-table", _directive(refused_rst))
+    app.connect("autodoc-process-docstring", _append_options, priority=600)  # after numpydoc
+    app.connect("autodoc-skip-member", _skip_options)
+    return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}

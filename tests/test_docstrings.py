@@ -1,0 +1,136 @@
+"""Every public name of the API has a docstring, and every public module has an API page.
+
+The public names are those the API reference documents (docs/_ext/morsuite_api.py):
+each package's ``__all__`` (or, without one, the classes and functions it defines),
+the public methods and properties of each such class, including those inherited from
+private bases, and every public module below ``morsuite``. ``KNOWN_MISSING`` lists the
+names still without a docstring in modules being edited elsewhere when this test was
+written; a name missing from a module not listed there fails the test, and a listed
+name that gained its docstring may simply be deleted from the list.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import pkgutil
+import re
+from pathlib import Path
+
+import morsuite
+
+DOCS_API = Path(__file__).resolve().parents[1] / "docs" / "api"
+
+#: no docstring yet, in modules being edited on other branches when this test was written
+#: (analysis, cli, linalg, reducers, report, studies)
+KNOWN_MISSING = {
+    "morsuite.analysis.signals.Impulse.m",
+    "morsuite.cli.build_parser",
+    "morsuite.cli.cmd_info",
+    "morsuite.cli.cmd_list",
+    "morsuite.cli.main",
+    "morsuite.linalg.dense.BTResult.order",
+    "morsuite.linalg.gramians.GramianFactors.converged",
+    "morsuite.linalg.saddle_lu.SolverStats.as_dict",
+    "morsuite.linalg.saddle_lu.SolverStats.copy",
+    "morsuite.reducers.base.Option.describe",
+    "morsuite.reducers.base.Option.validate",
+    "morsuite.reducers.base.Reduction.converged",
+    "morsuite.reducers.base.get_class",
+    "morsuite.reducers.bt.BT.max_order",
+    "morsuite.reducers.irka_projected.ProjectedModel.order",
+    "morsuite.reducers.shift_update.UpdateSchedule.can_switch",
+    "morsuite.reducers.shift_update.UpdateSchedule.switch",
+    "morsuite.report.figures.CsvSource.digest",
+    "morsuite.report.figures.CsvSource.frame",
+    "morsuite.report.tables.TableData.df",
+    "morsuite.report.tables.format_cell",
+    "morsuite.report.writer.csv_names",
+    "morsuite.studies.cache.Cache.has",
+    "morsuite.studies.cache.Cache.put",
+    "morsuite.studies.cache.Cache.put_json",
+    "morsuite.studies.environment.environment",
+    "morsuite.studies.execute.SchedulerChoice.describe",
+    "morsuite.studies.plan.Plan.describe",
+    "morsuite.studies.scenes.Kind.curve_names",
+    "morsuite.studies.spec.GridEntry.bounds_for",
+    "morsuite.studies.spec.GridEntry.omega_for",
+    "morsuite.studies.spec.MethodEntry.method_id",
+    "morsuite.studies.spec.Study.config_hash",
+    "morsuite.studies.tasks.rom_from_payload",
+}
+
+
+def public_modules() -> list[str]:
+    """Every public module and package below ``morsuite`` (no ``_private`` part in its name)."""
+    out = []
+    for info in pkgutil.walk_packages(morsuite.__path__, "morsuite."):
+        if not any(part.startswith("_") for part in info.name.split(".")):
+            out.append(info.name)
+    return sorted(out)
+
+
+def _exported(mod) -> list[str]:
+    names = getattr(mod, "__all__", None)
+    if names is not None:
+        return [n for n in names if not n.startswith("__")]
+    return [n for n, o in vars(mod).items() if not n.startswith("_") and (inspect.isclass(o) or inspect.isroutine(o))
+            and getattr(o, "__module__", None) == mod.__name__]
+
+
+def _canonical(obj, fallback: str) -> str:
+    mod, qual = getattr(obj, "__module__", None), getattr(obj, "__qualname__", None)
+    return f"{mod}.{qual}" if mod and qual and mod.startswith("morsuite") else fallback
+
+
+def _member_function(value):
+    if isinstance(value, property):
+        return value.fget
+    if isinstance(value, (classmethod, staticmethod)):
+        return value.__func__
+    return value if inspect.isfunction(value) else None
+
+
+def _class_members(cls):
+    """Public methods and properties of ``cls`` defined in morsuite: its own and its private bases'."""
+    for klass in cls.__mro__:
+        if not klass.__module__.startswith("morsuite") or (klass is not cls and not klass.__name__.startswith("_")):
+            continue
+        for name, value in vars(klass).items():
+            fn = _member_function(value)
+            if not name.startswith("_") and fn is not None:
+                yield f"{_canonical(cls, cls.__name__)}.{name}", fn
+
+
+def undocumented() -> set[str]:
+    """Canonical names of public modules, classes, functions and members without a docstring."""
+    missing = set()
+    for modname in public_modules():
+        mod = importlib.import_module(modname)
+        if not (mod.__doc__ or "").strip():
+            missing.add(modname)
+        for name in _exported(mod):
+            obj = getattr(mod, name, None)
+            if not (inspect.isclass(obj) or inspect.isroutine(obj)):
+                continue
+            if not (obj.__doc__ or "").strip():
+                missing.add(_canonical(obj, f"{modname}.{name}"))
+            if inspect.isclass(obj):
+                missing |= {full for full, fn in _class_members(obj) if not (fn.__doc__ or "").strip()}
+    return missing
+
+
+def test_every_public_name_has_a_docstring():
+    new = sorted(undocumented() - KNOWN_MISSING)
+    assert not new, "public names without a docstring:\n  " + "\n  ".join(new)
+
+
+def test_every_public_module_is_in_the_api_reference():
+    # docs/api/NAME.rst renders `.. morsuite-api:: PACKAGE`, which documents PACKAGE and every
+    # public module below it; a module outside every such package is missing from the docs
+    roots = set()
+    for page in DOCS_API.glob("*.rst"):
+        roots |= set(re.findall(r"^\.\. morsuite-api:: (\S+)\s*$", page.read_text(), flags=re.M))
+    assert roots, f"no morsuite-api directive found in {DOCS_API}"
+    uncovered = [m for m in public_modules() if not any(m == r or m.startswith(r + ".") for r in roots)]
+    assert not uncovered, "modules without an API page (add docs/api/NAME.rst): " + ", ".join(uncovered)
