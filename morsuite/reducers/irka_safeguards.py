@@ -256,9 +256,11 @@ class CycleGuard:
 
     @property
     def engaged(self) -> bool:
+        """Whether the safeguard has taken over the shift update."""
         return self.engaged_at is not None
 
     def engage(self, it, reason):
+        """Take over from iteration ``it`` on, recording ``reason`` in the event log."""
         self.engaged_at, self.reason = it, reason
         self.events.append((it, f"engaged: {reason}"))
 
@@ -324,6 +326,7 @@ class Shortlist:
         self.any = None
 
     def add(self, measure, it, stable, payload):
+        """Offer iterate ``it`` (its convergence ``measure``, stability and reduced model ``payload``)."""
         if self.any is None or measure < self.any[0]:
             self.any = (measure, it, payload)
         if stable:
