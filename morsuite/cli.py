@@ -42,22 +42,11 @@ def _reduced(args):
 
 def _print(out: dict, as_json: bool):
     if as_json:
-        print(json.dumps(_strict(out)))
+        from .utils import strict_json
+        print(json.dumps(strict_json(out)))
     else:
         for k, v in out.items():
             print(f"{k:>20}: {v}")
-
-
-def _strict(x):
-    """Non-finite floats as strings ("inf", "nan"): the output is strict JSON."""
-    import math
-    if isinstance(x, dict):
-        return {k: _strict(v) for k, v in x.items()}
-    if isinstance(x, list):
-        return [_strict(v) for v in x]
-    if isinstance(x, float) and not math.isfinite(x):
-        return str(x)
-    return x
 
 
 def cmd_reduce(args) -> int:

@@ -417,3 +417,27 @@ def test_option_tables_match_the_analysis_functions():
     assert timedomain.SCHEMES == tuple(SCHEMES)
     assert timedomain.ROM_METHODS == importlib.import_module("morsuite.analysis.simulate").OPTIONS["rom_method"][1]
     assert set(timedomain.INPUT_KINDS) <= set(inspect.getsource(ms.analysis.signals.make).split('"'))
+
+
+def test_untrusted_value_is_flagged_in_summary_figure_and_notes(tmp_path):
+    """The pole-residue formula forced on a tiny error (dsms, BT at r = 12: ||E|| ~ 1e-9 ||T||)
+    cancels: the value is kept, flagged, ringed in the figure, never shown as exact."""
+    text = SPEC.split("[[scenes]]")[0].replace('[models]', 'norm_options = { h2 = { method = "pole-residue" } }\n\n'
+                                               '[models]') + """
+[[scenes]]
+name = "h2"
+kind = "error_vs_r"
+model = "dsms"
+methods = ["bt"]
+r = [2, 12]
+measure = "h2"
+"""
+    (tmp_path / "f.toml").write_text(text)
+    res = run(tmp_path / "f.toml", out=tmp_path / "r", quiet=True, formats=("png",))
+    assert [bool(_row(res, "dsms(g=40)", "bt", r).h2_trusted) for r in (2, 12)] == [True, False]
+    ringed = pd.read_csv(res.outdir / "h2__flagged_bt.csv")
+    assert ringed.r.tolist() == [12]
+    assert ringed.value.iloc[0] == _row(res, "dsms(g=40)", "bt", 12).h2_error
+    assert any("not accurate to four digits" in n and "r = 12" in n for n in res.notes)
+    tex = (res.outdir / "h2.tex").read_text()
+    assert "only marks, mark=o" in tex and "not accurate to 4 digits" in tex

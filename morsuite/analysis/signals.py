@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FileFormatError, InputError
+from ..utils import band_pair
 
 __all__ = ["STEP_RTOL", "check_time_grid", "time_grid", "default_horizon_step", "step", "impulse", "Impulse",
            "chirp", "multisine", "read_csv", "make"]
@@ -98,12 +99,7 @@ def default_horizon_step(band) -> tuple[float, float]:
     2.4 s, still creeping by 3% over the last tenth: its slowest modes, near and
     below the band's lower end, are overdamped by the mass-proportional damping).
     """
-    try:
-        lo, hi = (float(b) for b in band)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"band must be a pair (lo, hi) of frequencies; got {band!r}") from exc
-    if not (0 < lo < hi < np.inf):
-        raise InputError(f"band must satisfy 0 < lo < hi < inf; got {band!r}")
+    lo, hi = band_pair(band)
     return 2.0 * np.pi / lo, 0.3 / hi
 
 

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..report.tables import TableData
-from ..utils import atomic_write_text
+from ..utils import atomic_write_text, strict_json
 from . import tasks as T
 from .cache import Cache
 from .execute import choose, compute, progress_enabled
@@ -59,17 +59,6 @@ class RunResult:
     @functools.cached_property
     def summary(self):
         return self.summary_table.frame()
-
-
-def _strict(x):
-    """Non-finite floats as strings ("inf", "nan"): the manifest is strict JSON."""
-    if isinstance(x, dict):
-        return {k: _strict(v) for k, v in x.items()}
-    if isinstance(x, list):
-        return [_strict(v) for v in x]
-    if isinstance(x, float) and not np.isfinite(x):
-        return str(x)
-    return x
 
 
 def _log(quiet, msg):
@@ -223,7 +212,7 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
                                        "report_s": t_report, "total_s": time.perf_counter() - t_start}, rerender)
     keep = {str(p.relative_to(outdir)) for p in files} | {"manifest.json"}
     _remove_stale(outdir, old, keep)
-    atomic_write_text(outdir / "manifest.json", json.dumps(_strict(plain(manifest)), indent=1, allow_nan=False))
+    atomic_write_text(outdir / "manifest.json", json.dumps(strict_json(plain(manifest)), indent=1, allow_nan=False))
     files.append(outdir / "manifest.json")
     for n in notes:
         _log(quiet, "note: " + n)

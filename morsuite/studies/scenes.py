@@ -270,6 +270,15 @@ def _trust(values, measure, notes, scene, m, r):
     return {"trusted": ok}
 
 
+def _flagged(m, study, recs, x, y) -> list:
+    """A ring around each point whose norm is not accurate to four digits (``trusted`` False)."""
+    bad = [rec for rec in recs if rec.get("trusted") is False]
+    if not bad:
+        return []
+    return [Curve(f"flagged_{m}", f"{study.methods[m].label}: not accurate to 4 digits",
+                  {x: [rec[x] for rec in bad], y: [rec[y] for rec in bad]}, x=x, style="flagged")]
+
+
 def _r_frame(red, x_extra):
     info = red["info"]
     return {"r": int(info["r"]), "states": int(info["states"]), "r_requested": int(red["r_requested"]),
@@ -307,6 +316,7 @@ def _against_r_scene(scene, study, res):
             cols = _columns(recs)
             cols = {k: cols[k] for k in [axis, "value"] + [c for c in cols if c not in (axis, "value")]}
             curves.append(Curve(m, study.methods[m].label, cols, x=axis, style="points"))
+            curves += _flagged(m, study, recs, axis, "value")
     curves += _paper_curves(scene, study, axis, notes)
     return FigureData(scene.name, _title(scene, study, default), XLABEL[axis], ylabel, curves,
                       xscale="linear", notes=notes)
@@ -330,6 +340,7 @@ def _pareto_scene(scene, study, res):
         if recs:
             curves.append(Curve(m, study.methods[m].label, _columns(recs), x=col, style="points",
                                 annotate="r"))
+            curves += _flagged(m, study, recs, col, "value")
     return FigureData(scene.name, _title(scene, study, f"{model.name}: time against error, one point per r"),
                       YLABEL[measure], TIME_LABEL[tmode], curves, notes=notes)
 
