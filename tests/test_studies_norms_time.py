@@ -125,6 +125,9 @@ IRKA, BT = (("tol", 1e-6),), (("form", "vv"),)
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
+    from morsuite.studies import tasks
+
+    tasks._model.cache_clear()   # models (and their Gramian factors) of earlier tests in this process
     tmp = tmp_path_factory.mktemp("nt")
     (tmp / "nt.toml").write_text(SPEC)
     res = run(tmp / "nt.toml", out=tmp / "results", quiet=True)
