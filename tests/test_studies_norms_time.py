@@ -444,3 +444,38 @@ measure = "h2"
     assert any("not accurate to four digits" in n and "r = 12" in n for n in res.notes)
     tex = (res.outdir / "h2.tex").read_text()
     assert "only marks, mark=o" in tex and "not accurate to 4 digits" in tex
+
+
+@pytest.mark.parametrize("csv,scene,match", [
+    ("t,u\n0,1\n100,nan\n200,1\n", {}, "non-finite entry in row 2"),
+    ("t,u1,u2\n0,1,1\n200,1,1\n", {}, "has 2 input columns; the model has m = 1"),
+    ("t,u\n0,1\n100,1\n", {}, "ends at t = 100, before the horizon 200"),
+    ("t,u\n0,1\n200,1\n", {"step": 500.0}, "step 500.0 is larger than the horizon 200.0"),
+    ("t,u\n0,1\n200,1\n", {"direction": [1.0]}, "direction does not apply to a CSV input"),
+    ("t,u\n0,1\n200,1\n", {"channel": 4}, "channel 4 does not exist: model 'dsms' has p = 3 outputs"),
+])
+def test_time_scene_bad_input_is_refused_before_anything_runs(tmp_path, monkeypatch, csv, scene, match):
+    from morsuite.errors import SpecError
+    from morsuite.studies import tasks, timedomain
+
+    def boom(*a, **k):
+        raise AssertionError("computation started although the spec is invalid")
+    for mod, fn in ((tasks, "reduce_sweep"), (timedomain, "full_simulation")):
+        monkeypatch.setattr(mod, fn, boom)
+    (tmp_path / "u.csv").write_text(csv)
+    extra = "".join(f"{k} = {json.dumps(v)}\n" for k, v in scene.items())
+    text = SPEC.split("[[scenes]]")[0] + f"""
+[[scenes]]
+name = "measured"
+kind = "time"
+model = "dsms"
+methods = ["irka"]
+r = 2
+input = "csv:u.csv"
+horizon = 200.0
+{extra}"""
+    (tmp_path / "m.toml").write_text(text)
+    with pytest.raises(SpecError, match=r"scenes\[0\] \('measured'\)") as exc:
+        run(tmp_path / "m.toml", out=tmp_path / "r", quiet=True)
+    assert match in str(exc.value)
+    assert not (tmp_path / "r").exists()
