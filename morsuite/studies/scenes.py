@@ -402,7 +402,8 @@ def _verdict(rows, study) -> str:
                 continue
             vals.sort()
             (best, who), (second, _) = vals[0], vals[1]
-            ratio = f"{second / best:.3g}x smaller than the next" if best > 0 else "zero"
+            ratio = ("tied with the next" if second == best else
+                     f"{second / best:.3g}x smaller than the next" if best > 0 else "zero")
             flag = " (an untrusted value among them)" if col == "h2_error" and any(
                 row.get("h2_trusted") is False for row in at) else ""
             lines.append(f"r = {r}, {col}: {study.methods[who].label} ({best:.3g}; {ratio}){flag}")
