@@ -1,4 +1,4 @@
-"""Command line: ``morsuite run | reduce | list | info | bench``."""
+"""Command line: ``morsuite run | reduce | simulate | list | info | bench``."""
 
 from __future__ import annotations
 
@@ -21,11 +21,10 @@ def _option_value(text):
     return _value(text)
 
 
-def cmd_reduce(args) -> int:
-    """Reduce one model with one method; print one JSON object."""
-    import numpy as np
-
-    from . import analysis, models, reducers
+def _reduced(args):
+    """(fom, Reduction) of ``--model``, ``--method``, ``--r``, ``--option``; the reducer's warnings are
+    recorded in ``info["warnings"]`` (and not printed under ``--json``)."""
+    from . import models, reducers
 
     fom = models.parse(args.model)
     opts = {}
@@ -34,25 +33,103 @@ def cmd_reduce(args) -> int:
         if not eq:
             raise SystemExit(f"--option expects KEY=VALUE, got {item!r}")
         opts[key] = _option_value(val)
-    lo, hi, n = args.omega if args.omega else (*fom.band, 200)
-    omega = np.logspace(np.log10(lo), np.log10(hi), n)
     with warnings.catch_warnings():
         if args.json:
             warnings.simplefilter("ignore")  # they are recorded in info["warnings"]
         res = reducers.make(args.method, fom, **opts).reduce(args.r)
+    return fom, res
+
+
+def _print(out: dict, as_json: bool):
+    if as_json:
+        from .utils import strict_json
+        print(json.dumps(strict_json(out)))
+    else:
+        for k, v in out.items():
+            print(f"{k:>20}: {v}")
+
+
+def cmd_reduce(args) -> int:
+    """Reduce one model with one method; print one JSON object (band errors and, unless --no-norms,
+    the exact H2 and Hinf errors)."""
+    import numpy as np
+
+    from . import analysis
+
+    fom, res = _reduced(args)
+    lo, hi, n = args.omega if args.omega else (*fom.band, 200)
+    omega = np.logspace(np.log10(lo), np.log10(hi), n)
     df = analysis.errors(fom, res.rom, omega)
     info = res.info
     out = {"model": args.model, "method": args.method, "r": info["r"], "r_requested": info["r_requested"],
            "states": info["states"], "converged": info["converged"], "iterations": info["iterations"],
            "stable": info["stable"], "time_s": info["time_s"], "lu_count": info.get("lu_count"),
            "max_abs_error": float(df.abs_error.max()), "max_rel_error": float(df.rel_error.max()),
-           "omega": [lo, hi, n], "warnings": info["warnings"]}
-    if args.json:
-        print(json.dumps(out))
+           "omega": [lo, hi, n]}
+    keys = ("h2_error", "h2_rel_error", "hinf_error", "hinf_rel_error", "h2_route", "h2_trusted", "hinf_route",
+            "hinf_peak_frequency", "h2_lu_count", "hinf_lu_count", "h2_time_s", "hinf_time_s")
+    warned = list(info["warnings"])
+    if args.no_norms:
+        out.update(dict.fromkeys(keys))
     else:
-        for k, v in out.items():
-            print(f"{k:>14}: {v}")
+        with warnings.catch_warnings():
+            if args.json:
+                warnings.simplefilter("ignore")  # recorded in norm_warnings
+            norms = analysis.error_norms(fom, res.rom)
+        out.update({k: norms.get(k) for k in keys})
+        warned += norms["norm_warnings"]
+    out["warnings"] = warned
+    _print(out, args.json)
     return 0
+
+
+def cmd_simulate(args) -> int:
+    """Reduce, then simulate the full and the reduced model for one input; print the output errors."""
+    from .analysis import output_errors
+    from .analysis.compare import time_input, time_response
+
+    fom, res = _reduced(args)
+    t, u, setup = time_input(fom.band, fom.m, args.input, horizon=args.horizon, step=args.step,
+                             direction=args.direction)
+    with warnings.catch_warnings():
+        if args.json:
+            warnings.simplefilter("ignore")  # recorded in warnings
+        y, full = time_response(fom, t, u, scheme=args.scheme)
+        y_r, red = time_response(res.rom, t, u, scheme=args.scheme, rom_method=args.rom_method)
+    errs = output_errors(y, y_r, t)
+    info = res.info
+    out = {"model": args.model, "method": args.method, "r": info["r"], "r_requested": info["r_requested"],
+           "states": info["states"], "converged": info["converged"], "stable": info["stable"],
+           "input": args.input, "horizon": setup["horizon"], "step": setup["step"], "steps": setup["steps"],
+           "scheme": args.scheme, "rom_method": args.rom_method, "direction": setup["direction"],
+           **{k: errs[k] for k in ("max_output_error", "l2_output_error", "max_output_rel_error",
+                                   "l2_output_rel_error", "max_output", "l2_output", "t_max_error")},
+           "growth": red["growth"], "unstable_poles": red["unstable_poles"], "growth_factor": red["growth_factor"],
+           "lu_count": full["lu_count"], "reduce_lu_count": info.get("lu_count"),
+           "times": {"reduce_s": info["time_s"], "simulate_full_s": full["time_s"], "simulate_rom_s": red["time_s"]},
+           "csv": args.csv, "warnings": list(info["warnings"]) + full["warnings"] + red["warnings"]}
+    if args.csv:
+        _write_curves(args.csv, t, y, y_r)
+    _print(out, args.json)
+    return 0
+
+
+def _write_curves(path, t, y, y_r):
+    import numpy as np
+
+    from .utils import atomic_write_text
+
+    p = y.shape[1]
+    header = ",".join(["t"] + [f"y{j + 1}" for j in range(p)] + [f"y_r{j + 1}" for j in range(p)])
+    rows = np.column_stack([t, y, y_r])
+    atomic_write_text(path, header + "\n" + "\n".join(",".join(repr(float(v)) for v in row) for row in rows) + "\n")
+
+
+def _direction_arg(text):
+    try:
+        return [float(v) for v in text.split(",")]
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"--direction must be numbers separated by commas, got {text!r}") from exc
 
 
 def cmd_info(args) -> int:
@@ -66,6 +143,28 @@ def cmd_list(args) -> int:
     print("models:   " + ", ".join(models.available()))
     print("reducers: " + ", ".join(reducers.available()))
     return 0
+
+
+def _add_simulate_parser(sub):
+    """``morsuite simulate --model M --method X --r R [--input SPEC] [--horizon T] [--step H] ...``."""
+    p = sub.add_parser("simulate", help="reduce, simulate full and reduced model in time, print the output errors")
+    p.add_argument("--model", required=True, help="catalog spec (dsms:g=6000) or .mat/.npz path")
+    p.add_argument("--method", required=True, help="reducer name (see `morsuite list`)")
+    p.add_argument("--r", required=True, type=int, help="reduced order")
+    p.add_argument("--option", action="append", metavar="KEY=VALUE", help="reducer option (repeatable)")
+    p.add_argument("--input", default="step", metavar="SPEC",
+                   help="step (default), impulse, chirp:omega0=0.01,omega1=1, multisine:omegas=0.1;0.5, csv:PATH")
+    p.add_argument("--horizon", type=float, metavar="T", help="simulated time in s (default 2 pi / band low end)")
+    p.add_argument("--step", type=float, metavar="H", help="time step in s (default 0.3 / band high end)")
+    p.add_argument("--scheme", default="trapezoidal", choices=("trapezoidal", "backward-euler"))
+    p.add_argument("--rom-method", default="scheme", choices=("scheme", "control"),
+                   help="reduced model: the same scheme (default) or python-control's forced_response")
+    p.add_argument("--direction", type=_direction_arg, metavar="B1,B2,...",
+                   help="input direction of a MIMO model (default all ones)")
+    p.add_argument("--csv", metavar="OUT", help="write t, y1..yp, y_r1..y_rp to this CSV file")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_simulate)
+    return p
 
 
 def _add_bench_parser(sub):
@@ -147,8 +246,12 @@ def build_parser():
     p.add_argument("--r", required=True, type=int, help="reduced order")
     p.add_argument("--omega", type=_omega_arg, help="frequency grid LO:HI:N (rad/s, log-spaced)")
     p.add_argument("--option", action="append", metavar="KEY=VALUE", help="reducer option (repeatable)")
+    p.add_argument("--no-norms", action="store_true",
+                   help="skip the exact H2 and Hinf errors (printed as null); they cost the model's Gramian "
+                        "factors once and up to a few hundred sparse LUs")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_reduce)
+    _add_simulate_parser(sub)
     _add_bench_parser(sub)
     _add_run_parser(sub)
     return parser, sub

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["atomic_path", "atomic_write_text", "to_plain"]
+__all__ = ["atomic_path", "atomic_write_text", "to_plain", "strict_json", "band_pair"]
 
 
 @contextlib.contextmanager
@@ -65,6 +65,30 @@ def to_plain(x):
     if isinstance(x, Path):
         return str(x)
     return x
+
+
+def strict_json(x):
+    """Non-finite floats as strings ("inf", "nan"), so that ``json.dumps(..., allow_nan=False)`` holds."""
+    if isinstance(x, dict):
+        return {k: strict_json(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [strict_json(v) for v in x]
+    if isinstance(x, float) and not np.isfinite(x):
+        return str(x)
+    return x
+
+
+def band_pair(band) -> tuple[float, float]:
+    """``(lo, hi)`` of a frequency band, checked: ``0 < lo < hi < inf`` (InputError otherwise)."""
+    from .errors import InputError
+
+    try:
+        lo, hi = (float(b) for b in band)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"band must be a pair (lo, hi) of numbers; got {band!r}") from exc
+    if not (0 < lo < hi < np.inf):
+        raise InputError(f"band must satisfy 0 < lo < hi < inf; got {band}")
+    return lo, hi
 
 
 _CONTROLLER = None

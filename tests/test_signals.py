@@ -135,3 +135,24 @@ def test_make_specs(tmp_path):
         signals.make("square", t, 1)
     with pytest.raises(InputError, match="omega"):
         signals.make("chirp:omega=1", t, 1)
+
+
+def test_make_direction_and_default_horizon_step(tmp_path):
+    t = signals.time_grid(2.0, 0.5)
+    np.testing.assert_array_equal(signals.make("step", t, 2, direction=[1.0, -2.0]),
+                                  np.outer(np.ones(5), [1.0, -2.0]))
+    b = signals.make("impulse", t, 2, direction=[0.0, 3.0]).direction
+    np.testing.assert_array_equal(b, [0.0, 3.0])
+    with pytest.raises(InputError, match="direction must have m = 2 entries"):
+        signals.make("step", t, 2, direction=[1.0])
+    with pytest.raises(InputError, match="given as well"):
+        signals.make({"kind": "step", "direction": [1.0, 1.0]}, t, 2, direction=[1.0, 1.0])
+    p = tmp_path / "u.csv"
+    p.write_text("t,u\n0,0\n4,4\n")
+    with pytest.raises(InputError, match="does not apply to a CSV input"):
+        signals.make(f"csv:{p}", t, 1, direction=[1.0])
+    # 2 pi / band_lo (one period of the band's lowest frequency), 0.3 / band_hi (21 steps a period at the top)
+    horizon, step = signals.default_horizon_step((1e-3, 1.0))
+    assert horizon == pytest.approx(2 * np.pi * 1e3) and step == pytest.approx(0.3)
+    with pytest.raises(InputError, match="0 < lo < hi"):
+        signals.default_horizon_step((1.0, 0.5))

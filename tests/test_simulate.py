@@ -351,6 +351,37 @@ def test_h2_bound_mimo():
     assert err["max_output_error"] <= gain * l2(uw) * (1 + 1e-2)
 
 
+def test_h2_bound_with_the_exact_error_norm():
+    """max_t ||y - y_r||_2 <= ||T - T_r||_H2 ||u||_L2 with ms.analysis.h2_error (no dense model): tight for
+    the worst-case input (the reversed error impulse response), far from tight for a chirp. The
+    norm itself is checked against the dense Lyapunov value, the reference of the bound."""
+    base = ms.models.dsms(g=30)
+    fom = base.with_io(L=base.L[:1])
+    rom = modal_rom(fom, 2)
+    h2, d = ms.analysis.h2_error(fom, rom, details=True)
+    assert d["trusted"] and h2 == pytest.approx(_h2(*error_system(fom, rom))[1], rel=1e-8)
+    t = signals.time_grid(400.0, 0.1)
+    he = impulse_response(*error_system(fom, rom), t)[:, 0, 0]
+    l2 = lambda a: float(np.sqrt(np.trapezoid(np.sum(np.reshape(a, (t.size, -1)) ** 2, axis=1), t)))  # noqa: E731
+    for u, tight in ((he[::-1] / l2(he), True),
+                     (signals.chirp(t, omega0=0.01, omega1=0.6) * np.exp(-t / 100)[:, None], False)):
+        err = output_errors(simulate(fom, t, u), simulate(rom, t, u), t)["max_output_error"]
+        assert err <= h2 * l2(u) * (1 + 1e-3)   # 1e-3: the scheme's and the quadrature's error
+        if tight:
+            assert err >= 0.98 * h2 * l2(u)
+        else:
+            assert err < 0.5 * h2 * l2(u)
+    # MIMO (3 inputs, 3 outputs, 2 constraints): the bound with the exact norm
+    fom = ms.models.random_constrained(40, 2, m=3, p=3, seed=1, zeta=0.2)
+    rom = ms.reducers.make("bt", fom).reduce(4).rom
+    h2 = ms.analysis.h2_error(fom, rom)
+    t = signals.time_grid(150.0, 0.02)
+    u = signals.multisine(t, omegas=[0.3, 0.9, 1.7], m=3, direction=[1.0, -1.0, 0.5]) * \
+        (np.sin(np.pi * t / t[-1]) ** 2)[:, None]
+    err = output_errors(simulate(fom, t, u), simulate(rom, t, u), t)["max_output_error"]
+    assert 0 < err <= h2 * l2(u)
+
+
 def test_unstable_rom_is_simulated_and_flagged():
     fom = ms.models.dsms(g=30)
     rom = modal_rom(fom, 4)

@@ -5,6 +5,8 @@ from .h2 import h2_error, h2_norm, h2_rel_error
 from .hinf import hinf_error, hinf_norm, hinf_rel_error
 from .simulate import output_errors, simulate
 from . import signals
+from .compare import error_norms
+from . import compare
 
 __all__ = ["sigma_max", "errors", "freq_grid", "h2_norm", "h2_error", "h2_rel_error", "hinf_norm", "hinf_error",
-           "hinf_rel_error", "simulate", "output_errors", "signals"]
+           "hinf_rel_error", "simulate", "output_errors", "signals", "error_norms", "compare"]

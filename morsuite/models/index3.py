@@ -24,7 +24,7 @@ import scipy.sparse.linalg as spla
 
 from ..errors import DtypeWarning, ModelError, ShapeError, InputError
 from ..linalg.saddle import SaddlePointSolver
-from ..utils import blas_threads
+from ..utils import band_pair, blas_threads
 
 __all__ = ["Index3Model", "as_real_matrix"]
 
@@ -150,13 +150,7 @@ class Index3Model:
         self.M, self.D, self.K, self.G = M, D, K, G
         self.F, self.L = F, L
         self.name = str(name)
-        try:
-            lo, hi = (float(b) for b in band)
-        except (TypeError, ValueError) as exc:
-            raise InputError(f"band must be a pair (lo, hi) of numbers; got {band!r}") from exc
-        if not (0 < lo < hi < np.inf):
-            raise InputError(f"band must satisfy 0 < lo < hi < inf; got {band}")
-        self.band = (lo, hi)
+        self.band = band_pair(band)
         if n2:
             rownnz = np.diff(G.indptr)
             zero_rows = np.flatnonzero((abs(G).sum(axis=1).A1 == 0))

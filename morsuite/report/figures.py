@@ -29,7 +29,7 @@ from .files import write_bytes, write_text
 __all__ = ["Curve", "FigureData", "CsvSource", "plot", "render", "save", "pgfplots_tex", "style", "style_context",
            "STYLE_VERSION", "STYLE_RC"]
 
-STYLES = ("line", "points", "paper", "full")
+STYLES = ("line", "points", "paper", "full", "flagged")
 
 #: Bump when the look of the figures changes in a way their data and :func:`style` do not show.
 STYLE_VERSION = 1
@@ -104,8 +104,10 @@ class Curve:
     DataFrame, or a :class:`CsvSource`. ``name`` is file-safe (it becomes part of the CSV name); ``label`` is the
     legend text (mathtext allowed, it is also valid LaTeX); ``style`` is "line",
     "full" (the full-order model: a thick black line under the reduced ones),
-    "points" (markers joined by a thin line, e.g. a Pareto front) or "paper"
-    (a dashed reference curve read from the paper's figure data).
+    "points" (markers joined by a thin line, e.g. a Pareto front), "paper"
+    (a dashed reference curve read from the paper's figure data) or "flagged"
+    (large hollow markers around points of the curve ``NAME`` for a curve named
+    ``flagged_NAME``: values that are not to be read as exact).
     """
 
     name: str
@@ -177,6 +179,10 @@ def _draw(figdata, fig, ax):
         if c.style == "paper":  # dashed, in the colour of the curve it is the paper's version of
             own = colors.get(c.name[len("paper_"):], "0.35")
             ax.plot(x, y, linestyle="--", color=own, alpha=0.8, linewidth=1.2, label=c.label)
+        elif c.style == "flagged":  # rings around points of the curve they flag, in its colour
+            own = colors.get(c.name[len("flagged_"):], "0.35")
+            ax.plot(x, y, linestyle="none", marker="o", markersize=9, markerfacecolor="none", color=own,
+                    label=c.label)
         elif c.style == "points":
             (line,) = ax.plot(x, y, marker="o", markersize=4, linewidth=0.8, label=c.label)
             colors[c.name] = line.get_color()
@@ -263,13 +269,13 @@ def pgfplots_tex(figdata: FigureData, csv_files: dict) -> str:
              r"\begin{axis}[" + ",\n  ".join(opts) + "]"]
     for c in figdata.curves:
         style = {"line": "thick", "full": "black!50, line width=2pt", "points": "mark=*, mark size=1.5pt",
-                 "paper": "dashed, thick"}[c.style]
+                 "paper": "dashed, thick", "flagged": "only marks, mark=o, mark size=3pt"}[c.style]
         meta = ""
         if c.annotate:
             style += (", nodes near coords, point meta=explicit symbolic, "
                       "every node near coord/.append style={font=\\tiny}")
             meta = f", meta={c.annotate}"
-        lines.append(rf"\addplot+[{style}{', no markers' if c.style != 'points' else ''}] "
+        lines.append(rf"\addplot+[{style}{', no markers' if c.style not in ('points', 'flagged') else ''}] "
                      rf"table[x={c.x}, y=value{meta}, col sep=comma] {{\morsuitedir {csv_files[c.name]}}};")
         lines.append(rf"\addlegendentry{{{_tex_text(c.label)}}}")
     lines += [r"\end{axis}", r"\end{tikzpicture}", ""]

@@ -4,7 +4,8 @@ A figure NAME becomes
 
 - one CSV per curve: ``NAME.csv`` when the figure has one computed curve, else
   ``NAME__CURVE.csv`` (CURVE is ``full``, a method alias, ``ALIAS_rR``, or
-  ``paper_...`` for a paper overlay); columns ``omega,value`` over frequency,
+  ``paper_...`` for a paper overlay, ``flagged_...`` for rings around points not to be
+  read as exact); columns ``omega,value`` over frequency,
   ``r,value`` or ``states,value`` against the reduced order (plus the other
   order columns and ``cached``), ``iteration,value``, ``index,value``, or
   ``<measure>,value`` for a Pareto plot (value = time in s);
@@ -31,9 +32,10 @@ __all__ = ["write_figure", "write_table_data", "csv_names", "figure_files", "tab
 
 
 def csv_names(figdata: FigureData) -> dict:
-    own = [c for c in figdata.curves if c.style != "paper"]
+    overlay = ("paper", "flagged")
+    own = [c for c in figdata.curves if c.style not in overlay]
     single = len(own) == 1
-    return {c.name: (f"{figdata.name}.csv" if single and c.style != "paper" else f"{figdata.name}__{c.name}.csv")
+    return {c.name: (f"{figdata.name}.csv" if single and c.style not in overlay else f"{figdata.name}__{c.name}.csv")
             for c in figdata.curves}
 
 

@@ -171,6 +171,35 @@ def _lradi():
     return importlib.import_module("morsuite.linalg.lradi").lradi
 
 
+def _rom(fom=None, r=2):
+    """A second-order BT reduced model of dsms(20) (or of ``fom``)."""
+    return ms.reducers.make("bt", fom or _small(), form="vv").reduce(r).rom
+
+
+def _nan_rom():
+    rom = _rom()
+    rom.K[0, 0] = np.nan  # after construction: the ROM's own check has passed
+    return rom
+
+
+def _other_io_rom():
+    """A reduced model with 2 inputs and 2 outputs (dsms(20) has 1 and 3)."""
+    return _rom(ms.models.random_constrained(n1=20, n2=2, m=2, p=2))
+
+
+def _time_spec(**scene):
+    """A minimal valid study with one time scene, its keys replaced by ``scene``."""
+    return _spec(scenes=[{"name": "s", "kind": "time", "model": "d", "r": 2, **scene}])
+
+
+def _sim(u_edit=None, m=None):
+    t = ms.analysis.signals.time_grid(10.0, 1.0)
+    u = np.ones((t.size, m or 1))
+    if u_edit:
+        u[3, 0] = np.nan
+    return ms.analysis.simulate(_small(), t, u)
+
+
 _ROWS = [
     # -- model matrices ------------------------------------------------------------
     ("M-missing", "matrix", "M is None", lambda t, d: _model(M=None), InputError, r"matrix M is missing"),
@@ -372,6 +401,43 @@ _ROWS = [
     ("errors-H", "argument", "errors(..., H_full of the wrong length)",
      lambda t, d: ms.analysis.errors(_small(), _irka(maxit=2).reduce(2).rom, [0.1, 0.2], H_full=np.ones((3, 3, 1))),
      InputError, r"H_full has 3 frequencies; omega has 2"),
+    # -- exact error norms (inf with a StabilityWarning for an unstable ROM: tests/test_studies_norms_time.py) --
+    ("h2-io", "norms", "h2_error of a ROM with other input/output dimensions",
+     lambda t, d: ms.analysis.h2_error(_small(), _other_io_rom()), ShapeError, r"rom has 2 inputs and 2 outputs"),
+    ("hinf-io", "norms", "hinf_error of a ROM with other input/output dimensions",
+     lambda t, d: ms.analysis.hinf_error(_small(), _other_io_rom()), ShapeError, r"rom has 2 inputs and 2 outputs"),
+    ("h2-nan", "norms", "h2_error of a ROM whose K became NaN", lambda t, d: ms.analysis.h2_error(_small(), _nan_rom()),
+     InputError, r"matrix K has non-finite entries"),
+    ("hinf-nan", "norms", "hinf_error of a ROM whose K became NaN",
+     lambda t, d: ms.analysis.hinf_error(_small(), _nan_rom()), InputError, r"matrix K has non-finite entries"),
+    ("norm-kind", "norms", "error_norms(kinds=['h3'])",
+     lambda t, d: ms.analysis.error_norms(_small(), _rom(), kinds=["h3"]), OptionError, r"norm must be one of"),
+    # -- time-domain simulation (an unstable ROM is simulated and flagged: tests/test_simulate.py) ---------------
+    ("sim-step", "time", "time_grid(horizon=1, step=2)", lambda t, d: ms.analysis.signals.time_grid(1.0, 2.0),
+     InputError, r"step 2.0 is larger than the horizon 1.0"),
+    ("sim-nan-u", "time", "simulate with a NaN input sample", lambda t, d: _sim(u_edit=True), InputError,
+     r"u has non-finite samples \(NaN or inf\), first at t\[3\]"),
+    ("sim-channels", "time", "simulate with 2 input channels for m = 1", lambda t, d: _sim(m=2), InputError,
+     r"u has 2 channels \(columns\); the model has m = 1"),
+    ("sim-csv-channels", "time", "input CSV with 2 channels for m = 1",
+     lambda t, d: ms.analysis.signals.read_csv(_write(t / "u.csv", "t,u1,u2\n0,1,1\n1,1,1\n"), m=1), InputError,
+     r"has 2 input columns; the model has m = 1"),
+    ("sim-steps", "time", "more than 10,000,000 steps",
+     lambda t, d: ms.analysis.compare.time_input((1e-2, 1.0), 1, horizon=1e6, step=1e-3), InputError,
+     r"at most 10,000,000 are simulated"),
+    ("spec-time-step", "study spec", "time scene with step > horizon", lambda t, d: _time_spec(horizon=1.0, step=2.0),
+     SpecError, r"scenes\[0\] \('s'\): time-domain input on model 'd'.*larger than the horizon"),
+    ("spec-time-direction", "study spec", "time scene direction of length 2 for m = 1",
+     lambda t, d: _time_spec(direction=[1.0, 1.0]), SpecError, r"direction must have m = 1 entries"),
+    ("spec-time-input", "study spec", "time scene input 'ramp'", lambda t, d: _time_spec(input="ramp"), SpecError,
+     r"unknown value 'ramp'.*valid choices: step, impulse, chirp, multisine, csv"),
+    ("spec-norms", "study spec", "norms = ['h3']", lambda t, d: _spec(norms=["h3"]), SpecError,
+     r"norms: unknown value 'h3'.*valid choices: h2, hinf"),
+    ("spec-norm-grid", "study spec", "measure 'h2' with a grid",
+     lambda t, d: _spec(scenes=[{"name": "s", "kind": "error_vs_r", "model": "d", "r": 2, "measure": "h2",
+                                 "grid": "default"}]), SpecError, r"measure 'h2' is a norm over the whole"),
+    ("spec-norm-option", "study spec", "norm_options h2 rtol = 2", lambda t, d: _spec(norm_options={"h2": {"rtol": 2}}),
+     SpecError, r"norm_options.h2.rtol: expected a number in \(0, 1\)"),
     # -- low-rank ADI ------------------------------------------------------------------------------
     ("adi-tol", "option", "lradi(tol=2)", lambda t, d: _lradi()(_small(), tol=2.0), InputError,
      r"tol must be a float in \(0, 1\)"),

@@ -10,6 +10,12 @@ one thing share one artifact:
   formed once per group);
 - a metrics group per (model, grid, reducer, options): reduced responses and errors,
   cached per r (keyed by the response's and the reduction's keys);
+- exact norms (:mod:`.norms`): the model's norm per (model, kind, options), and a norm
+  group per (reducer group, kind, options) with the error norm of each r;
+- time-domain comparisons (:mod:`.timedomain`): the full model's simulation per (model,
+  input settings), shared by the methods and scenes that simulate the same, and a
+  simulation group per (simulation, reducer group, rom_method) with each r's output
+  and errors;
 - an output per scene (a figure or a table) and the summary table: the last
   nodes of the graph, keyed by their content once their inputs exist (see
   :mod:`morsuite.studies.outputs`).
@@ -23,9 +29,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from .cache import cache_key, source_digest
-from .scenes import needs
+from .scenes import needs, output_names
+from .timedomain import settings as time_settings
 
-__all__ = ["Plan", "FomArtifact", "ReduceGroup", "MetricsGroup", "OutputArtifact", "build_plan", "SUMMARY"]
+__all__ = ["Plan", "FomArtifact", "ReduceGroup", "MetricsGroup", "NormArtifact", "NormGroup", "SimArtifact",
+           "SimGroup", "OutputArtifact", "build_plan", "SUMMARY"]
 
 #: Name of the summary table (``summary.csv``, ``summary.md``): every reduction of the run.
 SUMMARY = "summary"
@@ -61,6 +69,46 @@ class MetricsGroup:
 
 
 @dataclass
+class NormArtifact:
+    id: str
+    model: object          # ModelEntry
+    kind: str              # "h2" or "hinf"
+    options: dict
+    key: str
+
+
+@dataclass
+class NormGroup:
+    id: str
+    norm: str              # NormArtifact id (the model's norm: relative errors)
+    reduce: str            # ReduceGroup id
+    kind: str
+    options: dict
+    rs: list = field(default_factory=list)
+    keys: dict = field(default_factory=dict)     # r -> cache key
+
+
+@dataclass
+class SimArtifact:
+    id: str
+    model: object          # ModelEntry
+    settings: dict         # input, input_sha256, horizon, step, scheme, direction
+    key: str
+    scenes: list = field(default_factory=list)
+
+
+@dataclass
+class SimGroup:
+    id: str
+    sim: str               # SimArtifact id
+    reduce: str            # ReduceGroup id
+    rom_method: str
+    rs: list = field(default_factory=list)
+    keys: dict = field(default_factory=dict)     # r -> cache key
+    scenes: list = field(default_factory=list)
+
+
+@dataclass
 class OutputArtifact:
     id: str                # "figure/NAME" or "table/NAME"
     kind: str              # "figure" or "table"
@@ -77,6 +125,14 @@ class Plan:
     reduce_of: dict        # (model alias, method alias) -> reduce id
     metrics_of: dict       # (model alias, grid, method alias) -> metrics id
     outputs: dict = field(default_factory=dict)  # id -> OutputArtifact, in scene order, the summary last
+    norms: dict = field(default_factory=dict)        # id -> NormArtifact
+    norm_groups: dict = field(default_factory=dict)  # id -> NormGroup
+    sims: dict = field(default_factory=dict)         # id -> SimArtifact
+    sim_groups: dict = field(default_factory=dict)   # id -> SimGroup
+    norm_of: dict = field(default_factory=dict)        # (model alias, kind) -> norm id
+    norm_group_of: dict = field(default_factory=dict)  # (model alias, method alias, kind) -> norm group id
+    sim_of: dict = field(default_factory=dict)         # scene name -> simulation id
+    sim_group_of: dict = field(default_factory=dict)   # (scene name, method alias) -> simulation group id
 
     def describe(self) -> list[str]:
         lines = []
@@ -89,8 +145,20 @@ class Plan:
         for g in self.metrics.values():
             lines.append(f"metrics              {self.reduces[g.reduce].model.name} "
                          f"{self.reduces[g.reduce].method.reducer} r = {g.rs}")
+        for n in self.norms.values():
+            lines.append(f"model norm           {n.model.name} {n.kind}")
+        for g in self.norm_groups.values():
+            red = self.reduces[g.reduce]
+            lines.append(f"error norms          {red.model.name} {red.method.reducer} {g.kind} r = {g.rs}")
+        for sim in self.sims.values():
+            st = sim.settings
+            lines.append(f"simulation           {sim.model.name} {st['input']} over {st['horizon']:g} s, step "
+                         f"{st['step']:g} s ({st['scheme']})")
+        for g in self.sim_groups.values():
+            red = self.reduces[g.reduce]
+            lines.append(f"reduced simulations  {red.model.name} {red.method.reducer} r = {g.rs}")
         for o in self.outputs.values():
-            lines.append(f"{o.kind:<20} {o.scene or SUMMARY} (from {len(o.inputs)} artifacts; "
+            lines.append(f"{o.kind:<20} {o.id.partition('/')[2]} (from {len(o.inputs)} artifacts; "
                          f"reused when its data did not change)")
         return lines
 
@@ -104,10 +172,29 @@ def _metrics_key(fom_key, reduction_key):
     return cache_key("metrics", fom=fom_key, reduction=reduction_key, tasks=source_digest("studies/tasks.py"))
 
 
+def _norm_key(model, kind, options):
+    return cache_key("model_norm", model=model.model_id, norm=kind, options=options,
+                     tasks=source_digest("studies/norms.py"))
+
+
+def _norm_error_key(reduction_key, kind, options):
+    return cache_key("norm_error", reduction=reduction_key, norm=kind, options=options,
+                     tasks=source_digest("studies/norms.py"))
+
+
+def _sim_key(model, setup):
+    return cache_key("simulation", model=model.model_id, settings=setup, tasks=source_digest("studies/timedomain.py"))
+
+
+def _sim_error_key(sim_key, reduction_key, rom_method):
+    return cache_key("sim_error", simulation=sim_key, reduction=reduction_key, rom_method=rom_method,
+                     tasks=source_digest("studies/timedomain.py"))
+
+
 def build_plan(study) -> Plan:
     """The artifacts the study's scenes need, deduplicated by content."""
-    foms, reduces, metrics, outputs = {}, {}, {}, {}
-    fom_of, reduce_of, metrics_of = {}, {}, {}
+    plan = Plan({}, {}, {}, {}, {}, {})
+    foms, reduces, metrics, outputs = plan.foms, plan.reduces, plan.metrics, plan.outputs
 
     def reduce_group(model_alias, method_alias, r):
         model, method = study.models[model_alias], study.methods[method_alias]
@@ -120,8 +207,44 @@ def build_plan(study) -> Plan:
             g.keys[r] = _reduction_key(model, method, r)
             g.rs = sorted(g.keys)
         g.aliases.add((model_alias, method_alias))
-        reduce_of[(model_alias, method_alias)] = gid
+        plan.reduce_of[(model_alias, method_alias)] = gid
         return g
+
+    def norm_need(model_alias, method_alias, r, kind):
+        model, opts = study.models[model_alias], study.norm_options[kind]
+        key = _norm_key(model, kind, opts)
+        nid = "norm-" + key[:16]
+        plan.norms.setdefault(nid, NormArtifact(nid, model, kind, opts, key))
+        plan.norm_of[(model_alias, kind)] = nid
+        g = reduce_group(model_alias, method_alias, r)
+        ngid = "normerr-" + cache_key("norm_group", group=g.id, norm=kind, options=opts)[:16]
+        ng = plan.norm_groups.setdefault(ngid, NormGroup(ngid, nid, g.id, kind, opts))
+        if r not in ng.keys:
+            ng.keys[r] = _norm_error_key(g.keys[r], kind, opts)
+            ng.rs = sorted(ng.keys)
+        plan.norm_group_of[(model_alias, method_alias, kind)] = ngid
+        return [nid, f"{g.id}/r{r}", f"{ngid}/r{r}"]
+
+    def time_need(scene, method_alias, r):
+        model = study.models[scene.model]
+        setup = time_settings(scene.params)
+        key = _sim_key(model, setup)
+        sid = "sim-" + key[:16]
+        sim = plan.sims.setdefault(sid, SimArtifact(sid, model, setup, key))
+        if scene.name not in sim.scenes:
+            sim.scenes.append(scene.name)
+        plan.sim_of[scene.name] = sid
+        g = reduce_group(scene.model, method_alias, r)
+        rom_method = scene.params["rom_method"]
+        sgid = "simerr-" + cache_key("sim_group", sim=key, group=g.id, rom_method=rom_method)[:16]
+        sg = plan.sim_groups.setdefault(sgid, SimGroup(sgid, sid, g.id, rom_method))
+        if r not in sg.keys:
+            sg.keys[r] = _sim_error_key(key, g.keys[r], rom_method)
+            sg.rs = sorted(sg.keys)
+        if scene.name not in sg.scenes:
+            sg.scenes.append(scene.name)
+        plan.sim_group_of[(scene.name, method_alias)] = sgid
+        return [sid, f"{g.id}/r{r}", f"{sgid}/r{r}"]
 
     for scene in study.scenes:
         inputs = []
@@ -129,6 +252,12 @@ def build_plan(study) -> Plan:
             if need[0] == "reduce":
                 _, model_alias, method_alias, r = need
                 inputs.append(f"{reduce_group(model_alias, method_alias, r).id}/r{r}")
+                continue
+            if need[0] == "norm":
+                inputs += norm_need(*need[1:])
+                continue
+            if need[0] == "time":
+                inputs += time_need(scene, need[2], need[3])
                 continue
             _, model_alias, grid, method_alias, r = need
             model = study.models[model_alias]
@@ -139,7 +268,7 @@ def build_plan(study) -> Plan:
             if f is None:
                 f = foms[fid] = FomArtifact(fid, model, bounds, fkey)
             f.aliases.add((model_alias, grid))
-            fom_of[(model_alias, grid)] = fid
+            plan.fom_of[(model_alias, grid)] = fid
             g = reduce_group(model_alias, method_alias, r)
             mid = "metrics-" + cache_key("metrics", fom=fkey, group=g.id)[:16]
             mg = metrics.get(mid)
@@ -149,12 +278,17 @@ def build_plan(study) -> Plan:
                 mg.rs = sorted(mg.rs + [r])
                 mg.keys[r] = _metrics_key(fkey, g.keys[r])
             mg.aliases.add((model_alias, grid, method_alias))
-            metrics_of[(model_alias, grid, method_alias)] = mid
+            plan.metrics_of[(model_alias, grid, method_alias)] = mid
             inputs += [fid, f"{g.id}/r{r}", f"{mid}/r{r}"]
         kind = "table" if scene.kind == "table" else "figure"
-        outputs[f"{kind}/{scene.name}"] = OutputArtifact(f"{kind}/{scene.name}", kind, scene.name,
-                                                         sorted(set(inputs)))
-    everything = [f"{g.id}/r{r}" for g in reduces.values() for r in g.rs] + \
-        [f"{m.id}/r{r}" for m in metrics.values() for r in m.rs]
+        for name in output_names(scene):
+            outputs[f"{kind}/{name}"] = OutputArtifact(f"{kind}/{name}", kind, scene.name, sorted(set(inputs)))
+    # the study's own norms: for every reduction some scene needs
+    for (model_alias, method_alias), gid in list(plan.reduce_of.items()):
+        for kind in study.norms:
+            for r in reduces[gid].rs:
+                norm_need(model_alias, method_alias, r, kind)
+    everything = [f"{g.id}/r{r}" for groups in (reduces, metrics, plan.norm_groups, plan.sim_groups)
+                  for g in groups.values() for r in g.rs] + list(plan.norms) + list(plan.sims)
     outputs[f"table/{SUMMARY}"] = OutputArtifact(f"table/{SUMMARY}", "table", None, sorted(everything))
-    return Plan(foms, reduces, metrics, fom_of, reduce_of, metrics_of, outputs)
+    return plan

@@ -26,30 +26,18 @@ from pathlib import Path
 import numpy as np
 
 from ..report.tables import TableData
-from ..utils import atomic_write_text
+from ..utils import atomic_write_text, strict_json
 from . import tasks as T
 from .cache import Cache
 from .execute import choose, compute, progress_enabled
 from .memo import SpecMemo
 from .outputs import previous_records, realize
 from .plan import SUMMARY, build_plan
+from .results import SUMMARY_COLUMNS, Results, summary as make_summary
 from .scenes import build
 from .spec import Study, load_spec, plain
 
-__all__ = ["run", "RunResult", "SUMMARY_COLUMNS", "H2_NOTE"]
-
-SUMMARY_COLUMNS = ["model", "method", "reducer", "r_requested", "r", "states", "converged", "iterations",
-                   "stable", "time_s", "time_standalone_s", "lu_count", "max_abs_error", "max_rel_error",
-                   "h2_error_grid", "error_bound", "grid", "cached", "status"]
-
-H2_NOTE = ("h2_error_grid is NOT the H2 error: it is sqrt((1/pi) * trapezoid over the grid of "
-           "||T(jw) - T_r(jw)||_F^2 dw), the H2 error restricted to the grid's band and approximated by the "
-           "trapezoidal rule on the grid. The exact H2 error of a ROM against the full index-3 model is not "
-           "computed.")
-
-TIME_NOTE = ("time_s is the reducer's own timing of reduce(r) (info['time_s']); when one reducer instance "
-             "serves several r, work that does not depend on r (Gramians, a projector) is done in its first "
-             "call only. time_standalone_s adds that shared work back: what reducing to this r alone costs.")
+__all__ = ["run", "RunResult", "SUMMARY_COLUMNS"]
 
 FIGURE_FORMATS = ("png", "pdf", "svg")
 
@@ -71,78 +59,6 @@ class RunResult:
     @functools.cached_property
     def summary(self):
         return self.summary_table.frame()
-
-
-class Results:
-    """Read access to a run's artifacts by the study's aliases (what scenes see)."""
-
-    def __init__(self, study, plan, foms, reductions, metrics):
-        self.study, self.plan = study, plan
-        self._foms, self._red, self._met = foms, reductions, metrics
-
-    def fom(self, model, grid):
-        fid = self.plan.fom_of.get((model, grid))
-        return self._foms.get(fid)
-
-    def reduction(self, model, method, r):
-        gid = self.plan.reduce_of.get((model, method))
-        return self._red.get(gid, {}).get(r)
-
-    def metrics(self, model, grid, method, r):
-        mid = self.plan.metrics_of.get((model, grid, method))
-        return self._met.get(mid, {}).get(r) if mid else None
-
-    def summary_row(self, model, method, r, grid=None) -> dict:
-        red = self.reduction(model, method, r)
-        met = self.metrics(model, grid, method, r) if grid else None
-        m = self.study.methods[method]
-        row = dict.fromkeys(SUMMARY_COLUMNS)
-        row.update(model=self.study.models[model].name, method=method, reducer=m.reducer, r_requested=int(r),
-                   grid=grid if met else None)
-        if red is None:
-            row["status"] = "not computed"
-            return row
-        row["cached"] = bool(red.get("cached", False))
-        if "error" in red:
-            row["status"] = "failed: " + red["error"]
-            return row
-        info = red["info"]
-        row.update(r=int(info["r"]), states=int(info["states"]), converged=bool(info.get("converged")),
-                   iterations=int(info.get("iterations", 0)), stable=bool(info.get("stable")),
-                   time_s=float(red["time_s"]), time_standalone_s=float(red["time_standalone_s"]),
-                   lu_count=info.get("lu_count"), status="ok")
-        bound = info.get("error_bound")
-        if isinstance(bound, (int, float)) and not isinstance(bound, bool):
-            row["error_bound"] = float(bound)  # the reducer's own a-priori bound (BT), when it has one
-        if met is not None and "error" not in met:
-            row.update(max_abs_error=met["max_abs_error"], max_rel_error=met["max_rel_error"],
-                       h2_error_grid=met["h2_error_grid"])
-        return row
-
-
-def _summary(study, plan, res) -> TableData:
-    rows = []
-    grids_of = {}
-    for (model, grid, method) in plan.metrics_of:
-        grids_of.setdefault((model, method), []).append(grid)
-    for (model, method), gid in sorted(plan.reduce_of.items()):
-        for r in plan.reduces[gid].rs:
-            grids = [g for g in sorted(grids_of.get((model, method), [])) if res.metrics(model, g, method, r)]
-            for grid in grids or [None]:  # one row per grid with errors, or one without
-                rows.append(res.summary_row(model, method, r, grid))
-    return TableData(SUMMARY, f"{study.title}: every reduction of this run", rows, columns=list(SUMMARY_COLUMNS),
-                     int_columns=("r", "states", "iterations", "lu_count"), note=H2_NOTE + "\n\n" + TIME_NOTE)
-
-
-def _strict(x):
-    """Non-finite floats as strings ("inf", "nan"): the manifest is strict JSON."""
-    if isinstance(x, dict):
-        return {k: _strict(v) for k, v in x.items()}
-    if isinstance(x, list):
-        return [_strict(v) for v in x]
-    if isinstance(x, float) and not np.isfinite(x):
-        return str(x)
-    return x
 
 
 def _log(quiet, msg):
@@ -184,8 +100,9 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
         software did not change since the last run (default False: those are reused, their
         files left untouched). Files whose bytes come out the same are not rewritten either way.
 
-    Cost: one sparse LU per frequency of each full-order response and the reducers' own
-    LUs, for what the cache does not hold; nothing for a fully cached study.
+    Cost: one sparse LU per frequency of each full-order response, the reducers' own
+    LUs, the norms' (:mod:`.norms`) and one LU per full-model simulation
+    (:mod:`.timedomain`), for what the cache does not hold; nothing for a fully cached study.
     """
     t_start = time.perf_counter()
     started = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
@@ -217,10 +134,20 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
         **meta, "rom": {"kind": meta["rom_kind"], "arrays": arrays}, "cached": True})
     metrics, missing_metrics = _lookup(cache, "metrics", plan.metrics,
                                        lambda arrays, meta: {**meta, **arrays, "cached": True})
+    norms = {nid: {**hit, "cached": True} for nid, n in plan.norms.items()
+             if (hit := cache.get_json("model_norm", n.key)) is not None}
+    norm_errors, missing_norms = _lookup(cache, "norm_error", plan.norm_groups,
+                                         lambda meta: {**meta, "cached": True}, json_only=True)
+    sims = {sid: {**hit[1], **hit[0], "cached": True} for sid, sim in plan.sims.items()
+            if (hit := cache.get("simulation", sim.key)) is not None}
+    sim_errors, missing_sims = _lookup(cache, "sim_error", plan.sim_groups,
+                                       lambda arrays, meta: {**meta, **arrays, "cached": True})
 
     # -- the graph: only what is missing (nothing at all, and no dask, for a cached study)
     t0 = time.perf_counter()
-    computed = _compute_missing(plan, cache, choice, bars, study.name, foms, reductions, missing, missing_metrics)
+    have = {"foms": foms, "reductions": reductions, "norms": norms, "sims": sims}
+    todo = {"reduce": missing, "metrics": missing_metrics, "norm_error": missing_norms, "sim_error": missing_sims}
+    computed = _compute_missing(plan, cache, choice, bars, study.name, have, todo)
     t_compute = time.perf_counter() - t0
 
     # -- assemble; on a remote cluster the workers could not write the cache: do it here
@@ -248,7 +175,8 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
             if "error" not in e:  # metrics are cheap and come back here anyway: the driver stores them
                 cache.put("metrics", plan.metrics[mid].keys[r], {k: e[k] for k in METRIC_ARRAYS},
                           {k: v for k, v in e.items() if k not in METRIC_ARRAYS})
-    res = Results(study, plan, foms, reductions, metrics)
+    _store_new(cache, plan, computed, norms, norm_errors, missing_norms, sims, sim_errors, missing_sims)
+    res = Results(study, plan, foms, reductions, metrics, norms, norm_errors, sims, sim_errors)
 
     # -- outputs: figures and tables, each reused when its content did not change
     t1 = time.perf_counter()
@@ -257,13 +185,13 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
     previous = previous_records(old)
     files, notes, records = [], [], []
     for scene in study.scenes:
-        item = build(scene, study, res)
-        notes += item.notes
-        if not isinstance(item, TableData) and not item.curves:
-            notes.append(f"scene {scene.name!r}: nothing to draw; no figure written")
-        output = plan.outputs[f"{'table' if isinstance(item, TableData) else 'figure'}/{scene.name}"]
-        records.append(realize(output, item, outdir, formats, previous, rerender))
-    summary = _summary(study, plan, res)
+        for item in build(scene, study, res):
+            notes += item.notes
+            if not isinstance(item, TableData) and not item.curves:
+                notes.append(f"scene {scene.name!r}: nothing to draw; no figure {item.name!r} written")
+            output = plan.outputs[f"{'table' if isinstance(item, TableData) else 'figure'}/{item.name}"]
+            records.append(realize(output, item, outdir, formats, previous, rerender))
+    summary = make_summary(study, plan, res, SUMMARY)
     records.append(realize(plan.outputs[f"table/{SUMMARY}"], summary, outdir, formats, previous, rerender))
     files += [outdir / name for rec in records for name in rec["files"]]
     for gid, entries in reductions.items():
@@ -275,16 +203,16 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
             elif not e["info"].get("converged", True):
                 notes.append(f"{who} at r = {r} did not converge ({e['info'].get('iterations')} iterations; "
                              f"best iterate returned)")
+    notes += _norm_notes(plan, norms, norm_errors)
     t_report = time.perf_counter() - t1
 
     from .manifest import manifest as make_manifest
 
-    manifest = make_manifest(study, plan, choice, cache, foms, reductions, metrics, records, files, outdir, notes,
-                             started, {"validate_s": t_validated - t_start, "compute_s": t_compute,
+    manifest = make_manifest(study, plan, choice, cache, res, records, files, outdir, notes, started, {"validate_s": t_validated - t_start, "compute_s": t_compute,
                                        "report_s": t_report, "total_s": time.perf_counter() - t_start}, rerender)
     keep = {str(p.relative_to(outdir)) for p in files} | {"manifest.json"}
     _remove_stale(outdir, old, keep)
-    atomic_write_text(outdir / "manifest.json", json.dumps(_strict(plain(manifest)), indent=1, allow_nan=False))
+    atomic_write_text(outdir / "manifest.json", json.dumps(strict_json(plain(manifest)), indent=1, allow_nan=False))
     files.append(outdir / "manifest.json")
     for n in notes:
         _log(quiet, "note: " + n)
@@ -295,18 +223,19 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
     return RunResult(study, outdir, manifest, summary, files, notes)
 
 
-def _lookup(cache, kind, groups, entry):
-    """``({id: {r: entry(arrays, meta)}}, {id: [r, ...]})``: what the cache holds of each
-    group's per-r artifacts (``group.keys[r]``), and what it lacks."""
+def _lookup(cache, kind, groups, entry, json_only=False):
+    """``({id: {r: entry(...)}}, {id: [r, ...]})``: what the cache holds of each group's
+    per-r artifacts (``group.keys[r]``), and what it lacks. ``entry(arrays, meta)``, or
+    ``entry(meta)`` for JSON-only entries."""
     found, missing = {}, {}
     for gid, g in groups.items():
         found[gid] = {}
         for r in g.rs:
-            hit = cache.get(kind, g.keys[r])
+            hit = cache.get_json(kind, g.keys[r]) if json_only else cache.get(kind, g.keys[r])
             if hit is None:
                 missing.setdefault(gid, []).append(r)
             else:
-                found[gid][r] = entry(*hit)
+                found[gid][r] = entry(hit) if json_only else entry(*hit)
     return found, missing
 
 
@@ -314,27 +243,106 @@ def _lookup(cache, kind, groups, entry):
 METRIC_ARRAYS = ("sigma_rom", "abs_error", "rel_error")
 
 
-def _compute_missing(plan, cache, choice, bars, desc, foms, reductions, missing, missing_metrics) -> dict:
+def _store_new(cache, plan, computed, norms, norm_errors, missing_norms, sims, sim_errors, missing_sims):
+    """Put the computed norms and simulations into the results and the cache (failures are not stored)."""
+    from .timedomain import SIM_ARRAYS, SIM_ERROR_ARRAYS
+
+    def split(e, names):
+        return {k: e[k] for k in names}, {k: v for k, v in e.items() if k not in names + ("cached",)}
+
+    for nid, n in plan.norms.items():
+        if nid in computed:
+            norms[nid] = e = computed[nid]
+            if "error" not in e:
+                cache.put_json("model_norm", n.key, {k: v for k, v in e.items() if k != "cached"})
+    for gid in missing_norms:
+        for r, e in computed[gid].items():
+            norm_errors[gid][r] = e
+            if "error" not in e:
+                cache.put_json("norm_error", e["key"], {k: v for k, v in e.items() if k != "cached"})
+    for sid, sim in plan.sims.items():
+        if sid in computed:
+            sims[sid] = e = computed[sid]
+            if "error" not in e:
+                cache.put("simulation", sim.key, *split(e, SIM_ARRAYS))
+    for gid in missing_sims:
+        for r, e in computed[gid].items():
+            sim_errors[gid][r] = e
+            if "error" not in e:
+                cache.put("sim_error", e["key"], *split(e, SIM_ERROR_ARRAYS))
+
+
+def _norm_notes(plan, norms, norm_errors) -> list:
+    out = []
+    for nid, e in norms.items():
+        if "error" in e:
+            n = plan.norms[nid]
+            out.append(f"the {n.kind} norm of {n.model.name} failed: {e['error']}")
+    for gid, entries in norm_errors.items():
+        g = plan.norm_groups[gid]
+        red = plan.reduces[g.reduce]
+        for r, e in sorted(entries.items()):
+            who = f"{g.kind} error of {red.method.reducer} on {red.model.name} at r = {r}"
+            if "error" in e:
+                out.append(f"{who} failed: {e['error']}")
+            elif not e.get("trusted", True):
+                out.append(f"{who} is not accurate to four digits (value {e.get('value')}, estimated relative "
+                           f"accuracy {e.get('rel_floor')}); shown with h2_trusted = False")
+            elif e.get("reason"):
+                out.append(f"{who} is infinite: {e['reason']}")
+    return out
+
+
+def _compute_missing(plan, cache, choice, bars, desc, have, todo) -> dict:
     """Build and compute the Dask graph of what the cache lacks; {} (and no dask import) when nothing does."""
-    if not (missing or missing_metrics or len(foms) < len(plan.foms)):
+    foms, reductions, norms, sims = have["foms"], have["reductions"], have["norms"], have["sims"]
+    if not (any(todo.values()) or len(foms) < len(plan.foms) or len(norms) < len(plan.norms)
+            or len(sims) < len(plan.sims)):
         return {}
     from dask import delayed
 
+    from . import norms as N, timedomain as TD
+
     cache_root = str(cache.root) if choice.local_files else None
-    graph, fom_nodes, red_nodes = {}, dict(foms), {}
+    graph, fom_nodes, red_nodes, sim_nodes = {}, dict(foms), {}, dict(sims)
     for fid, f in plan.foms.items():
         if fid not in foms:
             lo, hi, n = f.bounds
             graph[fid] = fom_nodes[fid] = delayed(T.fom_response, pure=False)(
                 f.model.source, lo, hi, n, f.key, cache_root,
                 bool(bars and choice.name == "synchronous" and n >= LONG_RESPONSE), choice.name, dask_key_name=fid)
-    for gid, rs in missing.items():
+    for gid, rs in todo["reduce"].items():
         g = plan.reduces[gid]
         graph[gid] = red_nodes[gid] = delayed(T.reduce_sweep, pure=False)(
             g.model.source, g.method.reducer, g.method.options, rs, {r: g.keys[r] for r in rs}, cache_root,
             choice.name, dask_key_name=gid)
-    for mid, rs in missing_metrics.items():
+    for mid, rs in todo["metrics"].items():
         mg = plan.metrics[mid]
         graph[mid] = delayed(T.metrics, pure=False)(fom_nodes[mg.fom], rs, reductions[mg.reduce],
                                                    red_nodes.get(mg.reduce, {}), dask_key_name=mid)
+    def after(model):
+        # the norms share the model's Gramian factors with bt: let the reductions of the model run
+        # first, so that a bt reduction pays (and reports) its own LR-ADI, as it does without norms
+        return [red_nodes[gid] for gid in red_nodes if plan.reduces[gid].model.model_id == model.model_id]
+
+    for nid, n in plan.norms.items():
+        if nid not in norms:
+            graph[nid] = delayed(N.model_norm, pure=False)(n.model.source, n.kind, n.options, n.key, choice.name,
+                                                           after=after(n.model), dask_key_name=nid)
+    for gid, rs in todo["norm_error"].items():
+        g = plan.norm_groups[gid]
+        red = plan.reduces[g.reduce]
+        graph[gid] = delayed(N.error_norms, pure=False)(
+            red.model.source, g.kind, g.options, rs, {r: g.keys[r] for r in rs}, choice.name,
+            reductions[g.reduce], red_nodes.get(g.reduce, {}), after=after(red.model), dask_key_name=gid)
+    for sid, sim in plan.sims.items():
+        if sid not in sims:
+            graph[sid] = sim_nodes[sid] = delayed(TD.full_simulation, pure=False)(
+                sim.model.source, sim.settings, sim.key, choice.name, dask_key_name=sid)
+    for gid, rs in todo["sim_error"].items():
+        g = plan.sim_groups[gid]
+        model = plan.sims[g.sim].model
+        graph[gid] = delayed(TD.rom_simulations, pure=False)(
+            sim_nodes[g.sim], list(model.band), model.m, g.rom_method, rs, {r: g.keys[r] for r in rs}, choice.name,
+            reductions[g.reduce], red_nodes.get(g.reduce, {}), dask_key_name=gid)
     return compute(graph, choice, progress=bars, desc=desc)

@@ -3,23 +3,37 @@ r"""Scene kinds: what each figure or table needs, and how it is built from resul
 A scene names one model, one or more methods (aliases of the study's
 ``[methods]``), the reduced orders ``r`` and, for frequency-domain scenes, a grid.
 
-========== ===================================================== ===== =======
-kind       shows                                                 grid  r
-========== ===================================================== ===== =======
-sigma      :math:`\sigma_{\max}(T(j\omega))` of full and reduced yes   one
-error      absolute (``error = "abs"``) or relative error         yes   one
-compare    error of several methods at one r (BT vs IRKA)         yes   one
-error_vs_r max error on the grid or ``h2_error_grid`` against r   yes   many
-time_vs_r  reduction time against r                              no    many
-pareto     time against error, one point per method and r        yes   many
-convergence IRKA's shift change per iteration, one curve per r   no    many
-hsv        Hankel singular values (methods that report ``hsv``)   no    one
-table      summary table of the scene's reductions                yes   many
-========== ===================================================== ===== =======
+=========== ===================================================== ===== =======
+kind        shows                                                 grid  r
+=========== ===================================================== ===== =======
+sigma       :math:`\sigma_{\max}(T(j\omega))` of full and reduced yes   one
+error       absolute (``error = "abs"``) or relative error         yes   one
+compare     error of several methods at one r (BT vs IRKA)         yes   one
+error_vs_r  an error measure against r (see ``measure``)           [1]   many
+time_vs_r   reduction time against r                              no    many
+pareto      time against an error measure, one point per (method, r) [1] many
+convergence IRKA's shift change per iteration, one curve per r    no    many
+hsv         Hankel singular values (methods that report ``hsv``)   no    one
+table       table of the scene's reductions (``norms = [...]``)    yes   many
+time        :math:`y` and :math:`y_r` over time, and their error   no    one
+=========== ===================================================== ===== =======
+
+[1] ``measure``: ``"max_abs"`` / ``"max_rel"`` (the band maximum of
+:math:`\sigma_{\max}(T - T_r)`, absolute or over :math:`\sigma_{\max}(T)`, on the
+scene's grid) or ``"h2"``, ``"h2_rel"``, ``"hinf"``, ``"hinf_rel"`` (exact norms over
+the whole axis, :mod:`morsuite.studies.norms`; no grid). The band-limited trapezoidal
+``h2_error_grid`` of earlier versions is gone: the exact H2 error replaced the one
+scene that used it.
+
+A ``time`` scene (:mod:`morsuite.studies.timedomain`) makes two figures, ``NAME``
+(:math:`y` of the full model and :math:`y_r` of each method, one output channel) and
+``NAME_error`` (:math:`\|y(t) - y_r(t)\|_2`), each curve thinned to at most
+:data:`MAX_POINTS` samples (the minimum and maximum of each stretch: peaks stay).
 
 ``needs(scene)`` lists the artifacts a scene uses, so a study computes nothing
 that no scene shows: scenes without a grid never trigger a full-order response,
-and a method appears only when a scene names it.
+norms are computed only for the reductions that a measure, a table or the study's
+``norms`` key names, and a method appears only when a scene names it.
 
 Curves against r use the x column ``r`` (the order of the reduced model, from
 ``info["r"]``) or ``states`` (first-order states: 2r for a second-order ROM), as
@@ -39,11 +53,17 @@ import numpy as np
 
 from ..report.figures import Curve, CsvSource, FigureData
 from ..report.tables import TableData
+from .checks import subset_of
+from .norms import NORM_KINDS, NORM_MEASURES
+from .timedomain import TIME_KEYS
 
-__all__ = ["KINDS", "COMMON_KEYS", "Kind", "TableData", "needs", "build", "MEASURES", "AXES", "TIMES"]
+__all__ = ["KINDS", "COMMON_KEYS", "Kind", "TableData", "needs", "build", "output_names", "MEASURES", "AXES",
+           "TIMES", "MAX_POINTS"]
 
 COMMON_KEYS = ("name", "kind", "title", "model", "methods")
-MEASURES = ("max_abs", "max_rel", "h2_grid")
+MEASURES = ("max_abs", "max_rel") + tuple(NORM_MEASURES)
+#: a time-domain curve is thinned to at most this many samples for its figure and CSV
+MAX_POINTS = 4000
 AXES = ("r", "states")
 TIMES = ("standalone", "call")
 
@@ -64,6 +84,10 @@ class Kind:
     def curve_names(self, methods) -> list:
         return (["full"] if self.with_full else []) + list(methods)
 
+    def grid_needed(self, params) -> bool:
+        """A grid unless the scene's measure is an exact norm (over the whole axis)."""
+        return self.uses_grid and params.get("measure") not in NORM_MEASURES
+
 
 KINDS = {
     "sigma": Kind("sigma_max of the full and the reduced models over frequency",
@@ -73,7 +97,7 @@ KINDS = {
     "compare": Kind("method against method at one r: error over frequency",
                     {"r": _R, "grid": _GRID, "paper_csv": _PAPER, "error": ("abs", ("abs", "rel"))}, True, True,
                     min_methods=2),
-    "error_vs_r": Kind("max error on the grid (or h2_error_grid) against r",
+    "error_vs_r": Kind("an error measure (band maximum on a grid, or an exact norm) against r",
                        {"r": _R, "grid": _GRID, "paper_csv": _PAPER, "measure": ("max_abs", MEASURES),
                         "axis": ("r", AXES)}, True, False),
     "time_vs_r": Kind("reduction time against r",
@@ -84,7 +108,10 @@ KINDS = {
                    True, False),
     "convergence": Kind("IRKA convergence history (shift change per iteration)", {"r": _R}, False, False),
     "hsv": Kind("Hankel singular value decay", {"r": _R, "count": (None, None)}, False, True),
-    "table": Kind("summary table of the scene's reductions", {"r": _R, "grid": _GRID}, True, False),
+    "table": Kind("summary table of the scene's reductions",
+                  {"r": _R, "grid": _GRID, "norms": ([], subset_of(NORM_KINDS))}, True, False),
+    "time": Kind("output of the full and reduced models over time, and the output error",
+                 {"r": _R, **TIME_KEYS}, False, True),
 }
 
 OMEGA = r"$\omega$ (rad/s)"
@@ -94,23 +121,38 @@ YLABEL = {
     "rel": r"$\sigma_{\max}(T - T_r) \,/\, \sigma_{\max}(T)$",
     "max_abs": r"$\max_\omega \sigma_{\max}(T - T_r)$ on the grid",
     "max_rel": r"$\max_\omega \sigma_{\max}(T - T_r)/\sigma_{\max}(T)$ on the grid",
-    "h2_grid": r"$\|T - T_r\|_{H_2}$ on the grid band (trapezoidal)",
+    "h2": r"$\|T - T_r\|_{\mathcal{H}_2}$",
+    "h2_rel": r"$\|T - T_r\|_{\mathcal{H}_2} \,/\, \|T\|_{\mathcal{H}_2}$",
+    "hinf": r"$\|T - T_r\|_{\mathcal{H}_\infty}$ (peak found)",
+    "hinf_rel": r"$\|T - T_r\|_{\mathcal{H}_\infty} \,/\, \|T\|_{\mathcal{H}_\infty}$",
 }
-MEASURE_COLUMN = {"max_abs": "max_abs_error", "max_rel": "max_rel_error", "h2_grid": "h2_error_grid"}
+MEASURE_COLUMN = {"max_abs": "max_abs_error", "max_rel": "max_rel_error", "h2": "h2_error", "h2_rel": "h2_rel_error",
+                  "hinf": "hinf_error", "hinf_rel": "hinf_rel_error"}
 XLABEL = {"r": r"reduced order $r$", "states": r"first-order states of the ROM ($2r$ for second order)"}
 TIME_LABEL = {"standalone": "time (s), reduction at this r alone",
               "call": "time (s) of reduce(r), shared work reused"}
 
 
 def needs(scene):
-    """Artifacts the scene reads: ("metrics", model, grid, method, r) or ("reduce", model, method, r)."""
+    """Artifacts the scene reads: ("metrics", model, grid, method, r), ("reduce", model, method, r),
+    ("norm", model, method, r, kind) (an exact error norm and the model's norm) or
+    ("time", model, method, r) (the scene's simulations)."""
     kind = KINDS[scene.kind]
+    norms = list(scene.params.get("norms") or [])
+    if scene.params.get("measure") in NORM_MEASURES:
+        norms.append(NORM_MEASURES[scene.params["measure"]][0])
     for m in scene.methods:
         for r in scene.rs:
-            if kind.uses_grid:
-                yield ("metrics", scene.model, scene.grid, m, r)
-            else:
-                yield ("reduce", scene.model, m, r)
+            yield ("metrics", scene.model, scene.grid, m, r) if scene.grid else ("reduce", scene.model, m, r)
+            for n in norms:
+                yield ("norm", scene.model, m, r, n)
+            if scene.kind == "time":
+                yield ("time", scene.model, m, r)
+
+
+def output_names(scene) -> list:
+    """The names of the scene's outputs (figures or a table)."""
+    return [scene.name, f"{scene.name}_error"] if scene.kind == "time" else [scene.name]
 
 
 # -- building --------------------------------------------------------------
@@ -193,8 +235,11 @@ def _freq_scene(scene, study, res):
 
 
 def _r_rows(scene, study, res, m):
-    """(reduction entry, metrics entry or None) for each r of the scene that succeeded."""
+    """``(r, (reduction entry, values), None)`` for each r of the scene that succeeded, else
+    ``(r, None, why)``; ``values``: the metrics on the scene's grid and, for a norm measure,
+    the norm columns (:meth:`~morsuite.studies.results.Results.norm_columns`)."""
     rows = []
+    measure = scene.params.get("measure")
     for r in scene.rs:
         red = res.reduction(scene.model, m, r)
         if red is None or "error" in red:
@@ -204,8 +249,34 @@ def _r_rows(scene, study, res, m):
         if met is not None and "error" in met:
             rows.append((r, None, met["error"]))
             continue
-        rows.append((r, (red, met), None))
+        values = dict(met or {})
+        if measure in NORM_MEASURES:
+            values.update(res.norm_columns(scene.model, m, r))
+            if values.get(MEASURE_COLUMN[measure]) is None:
+                rows.append((r, None, values.get(f"{NORM_MEASURES[measure][0]}_failed") or "not computed"))
+                continue
+        rows.append((r, (red, values), None))
     return rows
+
+
+def _trust(values, measure, notes, scene, m, r):
+    """The trusted flag of a norm measure's value (None for band measures); untrusted ones get a note."""
+    if measure not in NORM_MEASURES:
+        return {}
+    ok = values.get(f"{NORM_MEASURES[measure][0]}_trusted")
+    if ok is False:
+        notes.append(f"scene {scene.name!r}: {m} at r = {r}: the {MEASURE_COLUMN[measure]} value is not accurate "
+                     "to four digits (trusted = False in its CSV)")
+    return {"trusted": ok}
+
+
+def _flagged(m, study, recs, x, y) -> list:
+    """A ring around each point whose norm is not accurate to four digits (``trusted`` False)."""
+    bad = [rec for rec in recs if rec.get("trusted") is False]
+    if not bad:
+        return []
+    return [Curve(f"flagged_{m}", f"{study.methods[m].label}: not accurate to 4 digits",
+                  {x: [rec[x] for rec in bad], y: [rec[y] for rec in bad]}, x=x, style="flagged")]
 
 
 def _r_frame(red, x_extra):
@@ -234,15 +305,18 @@ def _against_r_scene(scene, study, res):
                 _missing(notes, scene, m, r, err)
                 continue
             red, met = pair
+            extra = {}
             if scene.kind == "error_vs_r":
                 value = met[MEASURE_COLUMN[measure]]
+                extra = _trust(met, measure, notes, scene, m, r)
             else:
                 value = red["time_standalone_s"] if tmode == "standalone" else red["time_s"]
-            recs.append(_r_frame(red, {"value": value}))
+            recs.append(_r_frame(red, {"value": value, **extra}))
         if recs:
             cols = _columns(recs)
             cols = {k: cols[k] for k in [axis, "value"] + [c for c in cols if c not in (axis, "value")]}
             curves.append(Curve(m, study.methods[m].label, cols, x=axis, style="points"))
+            curves += _flagged(m, study, recs, axis, "value")
     curves += _paper_curves(scene, study, axis, notes)
     return FigureData(scene.name, _title(scene, study, default), XLABEL[axis], ylabel, curves,
                       xscale="linear", notes=notes)
@@ -262,10 +336,11 @@ def _pareto_scene(scene, study, res):
                 continue
             red, met = pair
             t = red["time_standalone_s"] if tmode == "standalone" else red["time_s"]
-            recs.append({col: met[col], "value": t, **_r_frame(red, {})})
+            recs.append({col: met[col], "value": t, **_r_frame(red, _trust(met, measure, notes, scene, m, r))})
         if recs:
             curves.append(Curve(m, study.methods[m].label, _columns(recs), x=col, style="points",
                                 annotate="r"))
+            curves += _flagged(m, study, recs, col, "value")
     return FigureData(scene.name, _title(scene, study, f"{model.name}: time against error, one point per r"),
                       YLABEL[measure], TIME_LABEL[tmode], curves, notes=notes)
 
@@ -312,17 +387,49 @@ def _hsv_scene(scene, study, res):
                       r"Hankel singular value $\sigma_k$", curves, xscale="linear", notes=notes)
 
 
+#: the columns a table's verdict compares (smaller is better), when present
+VERDICT_COLUMNS = ("max_abs_error", "max_rel_error", "h2_error", "hinf_error", "max_output_error", "l2_output_error")
+
+
+def _verdict(rows, study) -> str:
+    """Which method has the smallest error, per r and measure, among the table's methods."""
+    lines = []
+    for r in sorted({row["r_requested"] for row in rows}):
+        at = [row for row in rows if row["r_requested"] == r and row["status"] == "ok"]
+        for col in VERDICT_COLUMNS:
+            vals = [(row[col], row["method"]) for row in at if isinstance(row.get(col), float) and row[col] == row[col]]
+            if len(vals) < 2:
+                continue
+            vals.sort()
+            (best, who), (second, _) = vals[0], vals[1]
+            ratio = ("tied with the next" if second == best else
+                     f"{second / best:.3g}x smaller than the next" if best > 0 else "zero")
+            flag = " (an untrusted value among them)" if col == "h2_error" and any(
+                row.get("h2_trusted") is False for row in at) else ""
+            lines.append(f"r = {r}, {col}: {study.methods[who].label} ({best:.3g}; {ratio}){flag}")
+    return ("Smallest error per measure: " + "; ".join(lines) + ".") if lines else ""
+
+
 def _table_scene(scene, study, res):
+    columns = res.summary_columns()
     rows = [res.summary_row(scene.model, m, r, scene.grid) for m in scene.methods for r in scene.rs]
     title = _title(scene, study, f"{study.models[scene.model].name}: reductions")
-    return TableData(scene.name, title, rows)
+    note = _verdict(rows, study) if len(scene.methods) > 1 else ""
+    return TableData(scene.name, title, rows, columns=columns, note=note)
+
+
+def _time_scene(scene, study, res):
+    from .time_figures import time_figures
+    return time_figures(scene, study, res, MAX_POINTS)
 
 
 _BUILDERS = {"sigma": _freq_scene, "error": _freq_scene, "compare": _freq_scene,
              "error_vs_r": _against_r_scene, "time_vs_r": _against_r_scene, "pareto": _pareto_scene,
-             "convergence": _convergence_scene, "hsv": _hsv_scene, "table": _table_scene}
+             "convergence": _convergence_scene, "hsv": _hsv_scene, "table": _table_scene, "time": _time_scene}
 
 
-def build(scene, study, res):
-    """The scene's FigureData or TableData from the results ``res`` (no computing)."""
-    return _BUILDERS[scene.kind](scene, study, res)
+def build(scene, study, res) -> list:
+    """The scene's outputs, FigureData or TableData, from the results ``res`` (no computing), in the
+    order of :func:`output_names`."""
+    out = _BUILDERS[scene.kind](scene, study, res)
+    return list(out) if isinstance(out, (list, tuple)) else [out]

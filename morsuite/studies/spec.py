@@ -29,11 +29,18 @@ choices. Example::
     r = 30                               # int, list, or { from = 2, to = 40, step = 2 }
     error = "abs"
     paper_csv = "../shared/paper_figures/dsms_r30_abs_error_irka.csv"
+
+Exact error norms (:mod:`morsuite.studies.norms`) are computed only where asked: the
+top-level ``norms = ["h2", "hinf"]`` (every reduction of the study; summary columns),
+a scene measure ``"h2"``, ``"h2_rel"``, ``"hinf"``, ``"hinf_rel"`` (``error_vs_r``,
+``pareto``) or a table scene's ``norms = [...]``; their options in
+``[norm_options]`` (``h2 = { rtol = 1e-8 }``, ``hinf = { max_lus = 190 }``).
+Time-domain scenes (kind ``time``: input, horizon, step, ...) are described in
+:mod:`morsuite.studies.timedomain`.
 """
 
 from __future__ import annotations
 
-import difflib
 import hashlib
 import json
 import tomllib
@@ -46,11 +53,13 @@ import numpy as np
 from ..utils import to_plain
 from ..errors import FileFormatError, InputError, SpecError
 from ..modelfiles import is_model_path, model_files
+from .checks import Ctx as _Ctx, name_ok as _name_ok, r_values as _r_values, subset_of, suggest as _suggest
 
 __all__ = ["Study", "ModelEntry", "GridEntry", "MethodEntry", "SceneEntry", "load_spec",
            "study_from_dict", "plain"]
 
-TOP_KEYS = ("name", "title", "description", "root", "models", "grids", "methods", "scenes")
+TOP_KEYS = ("name", "title", "description", "root", "models", "grids", "methods", "scenes", "norms",
+            "norm_options")
 GRID_KEYS = ("band", "n")
 METHOD_KEYS = ("reducer", "options", "label")
 DEFAULT_GRID = "default"
@@ -70,6 +79,8 @@ class ModelEntry:
     n2: int
     order: int           # n1 - n2: the largest admissible r
     band: tuple
+    m: int = 0           # inputs and outputs (0: not known, an old memo entry)
+    p: int = 0
 
 
 @dataclass(frozen=True)
@@ -127,6 +138,9 @@ class Study:
     methods: dict
     scenes: list
     raw: dict
+    #: norms computed for every reduction ("h2", "hinf"), and each kind's options (defaults filled in)
+    norms: tuple = ()
+    norm_options: dict = field(default_factory=dict)
     #: validated entries to keep in the cache once the study runs (:class:`~morsuite.studies.memo.SpecMemo`)
     memo: object = field(default=None, repr=False, compare=False)
 
@@ -141,6 +155,7 @@ class Study:
             "scenes": [{"name": s.name, "kind": s.kind, "title": s.title, "model": s.model, "methods": s.methods,
                         "r": s.rs, "grid": s.grid, "params": s.params,
                         "paper": {k: str(v) for k, v in s.paper.items()}} for s in self.scenes],
+            "norms": list(self.norms), "norm_options": self.norm_options,
         })
 
     @property
@@ -156,50 +171,8 @@ def _digest(obj) -> str:
     return hashlib.sha256(json.dumps(plain(obj), sort_keys=True).encode()).hexdigest()
 
 
-def _suggest(word, choices) -> str:
-    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1)
-    return f" (did you mean {close[0]!r}?)" if close else ""
-
-
-class _Ctx:
-    def __init__(self, source):
-        self.source = source
-
-    def fail(self, where, msg):
-        raise SpecError(f"study spec {self.source}: {where}: {msg}")
-
-    def keys(self, where, table, allowed):
-        if not isinstance(table, dict):
-            self.fail(where, f"expected a table; got {type(table).__name__}")
-        for key in table:
-            if key not in allowed:
-                self.fail(where, f"unknown key {key!r}{_suggest(key, allowed)}; valid keys: {', '.join(sorted(allowed))}")
-
-    def string(self, where, value, *, empty=False):
-        if not isinstance(value, str) or (not empty and not value):
-            self.fail(where, f"expected a non-empty string; got {value!r}")
-        return value
-
-    def choice(self, where, value, choices):
-        if value not in choices:
-            self.fail(where, f"unknown value {value!r}{_suggest(value, choices)}; valid choices: "
-                             f"{', '.join(map(str, choices))}")
-        return value
-
-    def ref(self, where, value, table, what):
-        self.string(where, value)
-        if value not in table:
-            self.fail(where, f"unknown {what} {value!r}{_suggest(value, table)}; defined {what}s: "
-                             f"{', '.join(sorted(table)) or '(none)'}")
-        return value
-
-
-def _name_ok(text):
-    return bool(text) and all(c.isalnum() or c in "-_." for c in text) and not text.startswith(".")
-
-
 # -- models ----------------------------------------------------------------
-_MODEL_FIELDS = ("model_id", "name", "n1", "n2", "order", "band")
+_MODEL_FIELDS = ("model_id", "name", "n1", "n2", "order", "m", "p", "band")
 
 
 def _model_entry(ctx, alias, spec, root, memo=None):
@@ -224,7 +197,7 @@ def _model_entry(ctx, alias, spec, root, memo=None):
     else:
         source, material = spec, {"spec": spec}
     hit = memo.lookup("model", material, "morsuite.models") if memo is not None else None
-    if hit is not None:
+    if hit is not None and all(k in hit for k in _MODEL_FIELDS):
         return ModelEntry(alias=alias, spec=spec, source=source, **{k: hit[k] for k in _MODEL_FIELDS[:-1]},
                           band=tuple(hit["band"]))
 
@@ -241,7 +214,8 @@ def _model_entry(ctx, alias, spec, root, memo=None):
     except InputError as exc:
         ctx.fail(where, f"model {spec!r} cannot be built: {exc}")
     entry = ModelEntry(alias=alias, spec=spec, source=source, model_id=model_id, name=fom.name,
-                       n1=int(fom.n1), n2=int(fom.n2), order=int(fom.order), band=tuple(map(float, fom.band)))
+                       n1=int(fom.n1), n2=int(fom.n2), order=int(fom.order), band=tuple(map(float, fom.band)),
+                       m=int(fom.m), p=int(fom.p))
     if memo is not None:
         owner = "morsuite.models.io" if "model_id" in material else \
             getattr(catalog.CATALOG[spec.partition(":")[0]], "__module__", "")
@@ -307,31 +281,6 @@ def _grid_entry(ctx, name, table):
     return GridEntry(name=name, band=band, n=int(n))
 
 
-def _r_values(ctx, where, value):
-    def bad():
-        ctx.fail(where, f"expected a positive integer, a list of them, or {{ from = A, to = B, step = S }}; "
-                        f"got {value!r}")
-    if isinstance(value, bool):
-        bad()
-    if isinstance(value, Integral):
-        rs = [int(value)]
-    elif isinstance(value, list):
-        if not value or any(isinstance(v, bool) or not isinstance(v, Integral) for v in value):
-            bad()
-        rs = [int(v) for v in value]
-    elif isinstance(value, dict):
-        ctx.keys(where, value, ("from", "to", "step"))
-        lo, hi, step = value.get("from"), value.get("to"), value.get("step", 1)
-        if any(isinstance(v, bool) or not isinstance(v, Integral) for v in (lo, hi, step)) or step < 1 or hi < lo:
-            bad()
-        rs = list(range(int(lo), int(hi) + 1, int(step)))
-    else:
-        bad()
-    if any(r < 1 for r in rs):
-        bad()
-    return tuple(sorted(set(rs)))
-
-
 # -- scenes ----------------------------------------------------------------
 def _scene_entry(ctx, i, table, study_models, grids, methods, root):
     from .scenes import COMMON_KEYS, KINDS
@@ -366,25 +315,32 @@ def _scene_entry(ctx, i, table, study_models, grids, methods, root):
         ctx.fail(f"{where}.methods", f"duplicate method in {mlist!r}")
     if len(mlist) < spec.min_methods:
         ctx.fail(f"{where}.methods", f"a {kind!r} scene needs at least {spec.min_methods} methods; got {mlist!r}")
-    grid = None
-    if spec.uses_grid:
-        grid = table.get("grid", DEFAULT_GRID)
-        ctx.ref(f"{where}.grid", grid, grids, "grid")
     if "r" not in table:
         ctx.fail(where, "missing key 'r'")
     rs = _r_values(ctx, f"{where}.r", table["r"])
     if spec.one_r and len(rs) != 1:
         ctx.fail(f"{where}.r", f"a {kind!r} scene shows one reduced order; got r = {list(rs)}")
     params = {}
-    for key, (default, choices) in spec.keys.items():
+    for key, (default, check) in spec.keys.items():
         if key in ("r", "grid", "paper_csv"):
             continue
         val = table.get(key, default)
-        if choices is not None:
-            ctx.choice(f"{where}.{key}", val, choices)
+        if key not in table and default is None:
+            pass  # an optional setting left out
+        elif callable(check):
+            val = check(ctx, f"{where}.{key}", val)
+        elif check is not None:
+            ctx.choice(f"{where}.{key}", val, check)
         elif val is not None and (isinstance(val, bool) or not isinstance(val, Integral) or val < 1):
             ctx.fail(f"{where}.{key}", f"expected a positive integer; got {val!r}")
         params[key] = val
+    grid = None
+    if spec.grid_needed(params):
+        grid = table.get("grid", DEFAULT_GRID)
+        ctx.ref(f"{where}.grid", grid, grids, "grid")
+    elif "grid" in table and spec.uses_grid:
+        ctx.fail(f"{where}.grid", f"measure {params.get('measure')!r} is a norm over the whole frequency axis "
+                                  "and uses no grid; remove 'grid'")
     title = table.get("title", "")
     ctx.string(f"{where}.title", title, empty=True)
     paper = {}
@@ -455,6 +411,8 @@ def study_from_dict(data: dict, *, path=None, source: str | None = None, memo=No
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         ctx.fail("scenes", f"duplicate scene name(s) {', '.join(map(repr, dup))}")
+    _check_output_names(ctx, scenes)
+    norms, norm_options = _norms(ctx, data)
     used = {s.model for s in scenes}
     for alias, spec in data["models"].items():
         if alias not in used:
@@ -465,8 +423,36 @@ def study_from_dict(data: dict, *, path=None, source: str | None = None, memo=No
         if s.rs[-1] > order:
             ctx.fail(f"scenes[{i}] ({s.name!r}).r", f"r = {s.rs[-1]} exceeds the order n1 - n2 = {order} "
                                                     f"of model {s.model!r} ({models[s.model].name})")
+        if s.kind == "time":
+            from .timedomain import resolve
+            resolve(ctx, f"scenes[{i}] ({s.name!r})", s.params, models[s.model], root, memo)
     return Study(name=name, title=title, description=description, path=path, root=root, models=models,
-                 grids=grids, methods=methods, scenes=scenes, raw=data, memo=memo)
+                 grids=grids, methods=methods, scenes=scenes, raw=data, norms=norms, norm_options=norm_options,
+                 memo=memo)
+
+
+def _check_output_names(ctx, scenes):
+    """Each scene's figures and tables (a time scene makes NAME and NAME_error) have names of their own."""
+    from .plan import SUMMARY
+    from .scenes import output_names
+
+    seen = {SUMMARY: "the summary table"}
+    for i, s in enumerate(scenes):
+        for out in output_names(s):
+            if out in seen:
+                ctx.fail(f"scenes[{i}] ({s.name!r}).name", f"its output {out!r} has the name of {seen[out]}; "
+                                                           "rename the scene")
+            seen[out] = f"scene {s.name!r}"
+
+
+def _norms(ctx, data):
+    """The top-level ``norms`` (kinds for every reduction) and ``norm_options`` (every kind, filled in)."""
+    from .norms import NORM_KINDS, full_options
+
+    kinds = tuple(subset_of(NORM_KINDS)(ctx, "norms", data.get("norms", [])))
+    given = data.get("norm_options", {})
+    ctx.keys("norm_options", given, NORM_KINDS)
+    return kinds, {k: full_options(ctx, f"norm_options.{k}", k, given.get(k)) for k in NORM_KINDS}
 
 
 def load_spec(path, *, memo=None) -> Study:

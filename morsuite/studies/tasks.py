@@ -12,6 +12,9 @@ plain data: arrays, numbers, strings, dicts. A reduced model travels as
   depend on r (Gramian factors, a projector) is done once.
 - :func:`metrics`: reduced responses and errors on a grid for the ROMs of one
   (model, method, options).
+
+Exact norms and time-domain simulations are the tasks of :mod:`.norms` and
+:mod:`.timedomain`.
 """
 
 from __future__ import annotations
@@ -137,25 +140,13 @@ def reduce_sweep(source: str, reducer: str, options: dict, rs, keys: dict, cache
     return out
 
 
-def _trapezoid(y, x):
-    y, x = np.asarray(y, float), np.asarray(x, float)
-    return float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(x)))
-
-
 def metrics(fom_result: dict, rs, *rom_dicts) -> dict:
     r"""Errors of the ROMs ``rs`` (looked up in ``rom_dicts``) on the full model's grid.
 
     For each r: ``sigma_rom``, ``abs_error`` (:math:`\sigma_{\max}(T - T_r)`),
-    ``rel_error`` (divided by :math:`\sigma_{\max}(T)`), their maxima, and
-
-    .. math::
-
-        \texttt{h2\_error\_grid} = \Big(\frac{1}{\pi}\int_{\omega_0}^{\omega_1}
-        \|T(j\omega) - T_r(j\omega)\|_F^2\, d\omega\Big)^{1/2}
-
-    by the trapezoidal rule on the grid: the H2 error restricted to the band of
-    the grid (the true H2 norm integrates over all of [0, inf)), an approximation,
-    hence the name. ``h2_rel_error_grid`` divides by the same quantity of T.
+    ``rel_error`` (divided by :math:`\sigma_{\max}(T)`) and their maxima over the grid,
+    ``max_abs_error`` and ``max_rel_error``: band quantities. Norms over the whole axis
+    are the tasks of :mod:`morsuite.studies.norms`.
     """
     from ..analysis import errors
 
@@ -163,8 +154,6 @@ def metrics(fom_result: dict, rs, *rom_dicts) -> dict:
     for d in rom_dicts:
         roms.update(d or {})
     omega, H = fom_result["omega"], fom_result["H"]
-    full2 = np.sum(np.abs(H) ** 2, axis=(1, 2))
-    h2_full = np.sqrt(_trapezoid(full2, omega) / np.pi)
     out = {}
     for r in rs:
         entry = roms.get(r)
@@ -174,11 +163,7 @@ def metrics(fom_result: dict, rs, *rom_dicts) -> dict:
         t0 = time.perf_counter()
         rom = rom_from_payload(entry["rom"])
         df = errors(None, rom, omega, H_full=H)
-        Hr = rom.freqresp(omega)
-        h2 = np.sqrt(_trapezoid(np.sum(np.abs(H - Hr) ** 2, axis=(1, 2)), omega) / np.pi)
         out[r] = {"sigma_rom": df["sigma_rom"].to_numpy(), "abs_error": df["abs_error"].to_numpy(),
                   "rel_error": df["rel_error"].to_numpy(), "max_abs_error": float(df["abs_error"].max()),
-                  "max_rel_error": float(df["rel_error"].max()), "h2_error_grid": float(h2),
-                  "h2_rel_error_grid": float(h2 / h2_full) if h2_full > 0 else float("nan"),
-                  "time_s": time.perf_counter() - t0}
+                  "max_rel_error": float(df["rel_error"].max()), "time_s": time.perf_counter() - t0}
     return out

@@ -1,0 +1,125 @@
+r"""Exact error norms in a study: how a study asks for them, their options, and their tasks.
+
+A study computes :math:`\|T - T_r\|_{\mathcal H_2}` and :math:`\|T - T_r\|_{\mathcal H_\infty}`
+(:func:`morsuite.analysis.h2_error`, :func:`morsuite.analysis.hinf_error`) only for the
+reductions something asks them for:
+
+- the top-level key ``norms = ["h2", "hinf"]``: every reduction of the study (the
+  summary gains the columns);
+- an ``error_vs_r`` or ``pareto`` scene with ``measure = "h2"``, ``"h2_rel"``,
+  ``"hinf"`` or ``"hinf_rel"`` (no grid: these norms cover the whole axis);
+- a ``table`` scene with ``norms = ["h2", "hinf"]`` (its rows and the summary's).
+
+Options: ``[norm_options]`` with ``h2 = { rtol = 1e-8, ... }`` and ``hinf = { max_lus = 190, ... }``,
+checked against :data:`NORM_OPTIONS` (the keyword options of ``h2_error`` and
+``hinf_error``, the same defaults; ``tests/test_studies_norms.py`` checks that they agree).
+
+Artifacts (cached; keys include the options, the code digest and this file's digest):
+
+- the model's norm per (model, kind, options): :func:`model_norm` (the H2 norm from the
+  Gramian factor that ``bt`` shares; the H-infinity norm by the peak search);
+- the error norm per (reduction, kind, options): :func:`error_norms` runs one reducer
+  group's missing r in one task, so that the model's Gramian factors are computed once.
+
+Relative errors (``h2_rel_error``, ``hinf_rel_error``) divide the two, when the summary is
+assembled. The records (route, LUs, floor, trusted flag, warnings) go into the manifest.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+
+from .checks import choice_of, float_in_01, int_at_least, nonnegative_int, positive_int
+from .tasks import CAUGHT, _model, _stamp, rom_from_payload
+
+__all__ = ["NORM_KINDS", "NORM_OPTIONS", "NORM_MEASURES", "ADI_KEYS", "full_options", "model_norm", "error_norms"]
+
+NORM_KINDS = ("h2", "hinf")
+#: measure of a scene -> (norm kind, relative?)
+NORM_MEASURES = {"h2": ("h2", False), "h2_rel": ("h2", True), "hinf": ("hinf", False), "hinf_rel": ("hinf", True)}
+#: the LR-ADI options of the Gramian factors (morsuite.linalg.gramians.ADI_DEFAULTS)
+ADI_KEYS = ("tol", "maxiter", "shifts", "num_shifts", "selection")
+
+
+def _adi(ctx, where, value):
+    if value is None:
+        return None
+    ctx.keys(where, value, ADI_KEYS)
+    checks = {"tol": float_in_01, "maxiter": positive_int, "num_shifts": positive_int}
+    out = {}
+    for k, v in value.items():
+        out[k] = checks[k](ctx, f"{where}.{k}", v) if k in checks else v
+    return out
+
+
+#: kind -> option -> (default, validator); the keyword options of h2_error / hinf_error
+NORM_OPTIONS = {
+    "h2": {"method": ("auto", choice_of(("auto", "pole-residue", "quadrature"))), "rtol": (1e-8, float_in_01),
+           "max_nodes": (1500, int_at_least(15)), "refine": (1, nonnegative_int), "adi": (None, _adi)},
+    "hinf": {"max_lus": (190, int_at_least(4)), "grid_lus": (120, positive_int), "rtol": (1e-10, float_in_01),
+             "per_decade": (8, positive_int), "refine": (1, nonnegative_int), "n_peaks": (8, positive_int),
+             "adi": (None, _adi)},
+}
+
+
+def full_options(ctx, where, kind, given) -> dict:
+    """Every option of ``kind`` with the defaults filled in, each value checked."""
+    table = NORM_OPTIONS[kind]
+    given = {} if given is None else given
+    ctx.keys(where, given, tuple(table))
+    return {k: (check(ctx, f"{where}.{k}", given[k]) if k in given else default)
+            for k, (default, check) in table.items()}
+
+
+def model_norm(source: str, kind: str, options: dict, key: str, run_by: str = "", after=None) -> dict:
+    r""":math:`\|T\|` of the model in the norm ``kind`` (task; see
+    :func:`morsuite.analysis.compare.model_norm`). A failure is recorded as ``error``.
+    ``after``: results of tasks that must run first (not used)."""
+    from ..analysis.compare import model_norm as compute
+
+    base = {"kind": "model_norm", "norm": kind, "key": key, "cached": False, "scheduler": run_by}
+    t0 = time.perf_counter()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # recorded in rec["warnings"]
+            rec = compute(_model(source), kind, options)
+    except CAUGHT as exc:
+        return {**base, "error": f"{type(exc).__name__}: {exc}", "time_s": time.perf_counter() - t0, **_stamp()}
+    return {**base, **{k: v for k, v in rec.items() if k != "kind"}, **_stamp()}
+
+
+def error_norms(source: str, kind: str, options: dict, rs, keys: dict, run_by: str, *rom_dicts, after=None) -> dict:
+    r""":math:`\|T - T_r\|` in the norm ``kind`` for each r (task; see
+    :func:`morsuite.analysis.compare.error_norm`). ``rom_dicts`` are the reducer
+    group's entries (cached and computed); a failed r is recorded as ``error``.
+    ``after``: results of tasks that must run first (not used).
+
+    Cost: the Gramian factors once per model (shared with ``bt`` in this process),
+    then per r about r LUs (H2, pole-residue), 100-1000 (H2, quadrature) or at most
+    ``max_lus`` (H-infinity).
+    """
+    from ..analysis.compare import error_norm
+
+    roms = {}
+    for d in rom_dicts:
+        roms.update(d or {})
+    fom = _model(source)
+    out = {}
+    for r in rs:
+        base = {"kind": "norm_error", "norm": kind, "key": keys[r], "cached": False, "scheduler": run_by}
+        entry = roms.get(r)
+        if entry is None or "error" in entry:
+            out[r] = {**base, "error": "no reduced model" if entry is None else entry["error"], **_stamp()}
+            continue
+        t0 = time.perf_counter()
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # recorded in rec["warnings"]
+                rec = error_norm(fom, rom_from_payload(entry["rom"]), kind, options)
+        except CAUGHT as exc:
+            out[r] = {**base, "error": f"{type(exc).__name__}: {exc}", "time_s": time.perf_counter() - t0,
+                      **_stamp()}
+            continue
+        out[r] = {**base, **{k: v for k, v in rec.items() if k != "kind"}, **_stamp()}
+    return out
