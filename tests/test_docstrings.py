@@ -134,3 +134,27 @@ def test_every_public_module_is_in_the_api_reference():
     assert roots, f"no morsuite-api directive found in {DOCS_API}"
     uncovered = [m for m in public_modules() if not any(m == r or m.startswith(r + ".") for r in roots)]
     assert not uncovered, "modules without an API page (add docs/api/NAME.rst): " + ", ".join(uncovered)
+
+
+def test_every_study_spec_key_is_described_for_the_docs():
+    """The docs' spec-key tables (docs/_ext/morsuite_tables.py) warn, and so fail the -W build,
+    for a key without a description: catch it here, where a new key is added."""
+    import importlib.util
+    from pathlib import Path
+
+    from morsuite.studies import scenes, spec
+
+    path = Path(__file__).resolve().parents[1] / "docs" / "_ext" / "morsuite_tables.py"
+    mod_spec = importlib.util.spec_from_file_location("morsuite_tables_for_test", path)
+    tables = importlib.util.module_from_spec(mod_spec)
+    mod_spec.loader.exec_module(tables)
+    missing = [k for k in spec.TOP_KEYS if k not in tables.SPEC_KEY_DOCS]
+    missing += [f"grids.{k}" for k in spec.GRID_KEYS if f"grids.{k}" not in tables.SPEC_KEY_DOCS]
+    missing += [f"methods.{k}" for k in spec.METHOD_KEYS if f"methods.{k}" not in tables.SPEC_KEY_DOCS]
+    keys = set(scenes.COMMON_KEYS)
+    for kind in scenes.KINDS.values():
+        keys |= set(kind.keys)
+        for key, (_default, choices) in kind.keys.items():
+            assert tables._admissible(choices), f"scene key {key!r}: its validator describes nothing"
+    missing += sorted(k for k in keys if k not in tables.SCENE_KEY_DOCS)
+    assert not missing, f"spec keys without a description in docs/_ext/morsuite_tables.py: {missing}"

@@ -59,6 +59,10 @@ SPEC_KEY_DOCS = {
     "methods.reducer": "registered reducer name (default: the alias)",
     "methods.options": "reducer options (default: none given; every declared option with its default is recorded)",
     "methods.label": "legend label (default: the alias)",
+    "norms": "exact error norms computed for every reduction of the study: a list from \"h2\", \"hinf\" "
+             "(default: none; scenes may still ask for them)",
+    "norm_options": "options of the exact norms, tables h2 = { ... } and hinf = { ... } with the keyword options "
+                    "of morsuite.analysis.h2_error / hinf_error (default: their defaults)",
 }
 
 #: keys of a [[scenes]] table (common ones, and the kind-specific ones of morsuite.studies.scenes.KINDS)
@@ -72,7 +76,17 @@ SCENE_KEY_DOCS = {
     "grid": "grid name (default: \"default\", the model's band with 200 points)",
     "paper_csv": "reference curve(s) to overlay: a path, or a table { curve = path }",
     "error": "absolute or relative error",
-    "measure": "what is plotted against r: max absolute or relative error on the grid, or the H2 error on it",
+    "measure": "what is plotted against r: max absolute or relative error on the grid (max_abs, max_rel), or an "
+               "exact norm of the error over the whole axis (h2, h2_rel, hinf, hinf_rel; no grid)",
+    "norms": "table scene: exact error norms shown as columns, a list from \"h2\", \"hinf\"",
+    "input": "time scene: the input, a string KIND[:key=value,...] (step, impulse, chirp, multisine, csv:PATH) "
+             "or a table { kind = ..., ... }",
+    "horizon": "time scene: simulated time in seconds (default: 2 pi / the band's lower end)",
+    "step": "time scene: constant time step in seconds (default: 0.3 / the band's upper end)",
+    "scheme": "time scene: integrator of the full model and, with rom_method = scheme, of the ROMs",
+    "rom_method": "time scene: ROMs stepped by the same scheme or by python-control's forced_response",
+    "direction": "time scene: input direction b (u(t) = b s(t)) for a model with several inputs (default: ones)",
+    "channel": "time scene: output channel drawn (1-based; the errors use all channels)",
     "axis": "x axis: the reduced order r or the number of first-order states",
     "time": "reduction time at this r alone (standalone) or of the reduce(r) call with shared work reused",
     "count": "number of Hankel singular values shown (default: all)",
@@ -187,6 +201,21 @@ def _doc(table: dict, key: str, where: str, **fmt) -> str:
     return text
 
 
+def _admissible(choices) -> str:
+    """What a scene key admits: a list of choices, or a validator (its ``choices``, its
+    ``describe`` text, or the first line of its docstring)."""
+    if choices is None:
+        return "a positive integer"
+    if callable(choices):
+        if getattr(choices, "choices", None) is not None:
+            return ", ".join(json.dumps(c) for c in choices.choices)
+        text = getattr(choices, "describe", None) or (choices.__doc__ or "").strip().splitlines()[0]
+        if not text:
+            logger.warning("scene key validator %r has neither choices, describe nor a docstring", choices)
+        return text
+    return ", ".join(json.dumps(c) for c in choices)
+
+
 def spec_keys_rst() -> list[str]:
     from morsuite.studies import scenes, spec
 
@@ -215,7 +244,7 @@ def spec_keys_rst() -> list[str]:
         for key, (default, choices) in kind.keys.items():
             if key in ("r", "grid", "paper_csv"):
                 continue
-            allowed = ", ".join(json.dumps(c) for c in choices) if choices is not None else "a positive integer"
+            allowed = _admissible(choices)
             extra.append(f"``{key}``: {_toml(default)} ({_rst_cell(allowed)})")
         needs = ["a grid" if kind.uses_grid else "no grid", "one r" if kind.one_r else "any number of r"]
         if kind.min_methods > 1:

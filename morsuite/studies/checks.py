@@ -3,8 +3,8 @@
 Every failure raises :class:`~morsuite.errors.SpecError` as
 ``study spec SOURCE: WHERE: what was wrong`` (with a close match suggested for a
 misspelt name). Validators are plain functions ``check(ctx, where, value) -> value``
-that the scene kinds (:mod:`.scenes`) and the option tables (:mod:`.norms`,
-:mod:`.timedomain`) name; none imports the numerical code.
+that the scene kinds (:mod:`.scenes`) and the option tables (:mod:`morsuite.studies.norms`,
+:mod:`morsuite.studies.timedomain`) name; none imports the numerical code.
 """
 
 from __future__ import annotations
@@ -103,6 +103,7 @@ def int_at_least(low):
         if isinstance(value, bool) or not isinstance(value, Integral) or value < low:
             ctx.fail(where, f"expected an integer >= {low}; got {value!r}")
         return int(value)
+    check.describe = f"an integer >= {low}"
     return check
 
 
@@ -136,6 +137,7 @@ def choice_of(choices):
     """A validator of one value from ``choices``."""
     def check(ctx, where, value):
         return ctx.choice(where, value, choices)
+    check.choices = tuple(choices)
     return check
 
 
@@ -151,4 +153,5 @@ def subset_of(choices):
         if len(set(value)) != len(value):
             ctx.fail(where, f"duplicate value in {value!r}")
         return list(value)
+    check.describe = "a list of distinct values from " + ", ".join(map(str, choices))
     return check

@@ -10,9 +10,9 @@ one thing share one artifact:
   formed once per group);
 - a metrics group per (model, grid, reducer, options): reduced responses and errors,
   cached per r (keyed by the response's and the reduction's keys);
-- exact norms (:mod:`.norms`): the model's norm per (model, kind, options), and a norm
+- exact norms (:mod:`morsuite.studies.norms`): the model's norm per (model, kind, options), and a norm
   group per (reducer group, kind, options) with the error norm of each r;
-- time-domain comparisons (:mod:`.timedomain`): the full model's simulation per (model,
+- time-domain comparisons (:mod:`morsuite.studies.timedomain`): the full model's simulation per (model,
   input settings), shared by the methods and scenes that simulate the same, and a
   simulation group per (simulation, reducer group, rom_method) with each r's output
   and errors;

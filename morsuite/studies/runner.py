@@ -101,8 +101,8 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
         files left untouched). Files whose bytes come out the same are not rewritten either way.
 
     Cost: one sparse LU per frequency of each full-order response, the reducers' own
-    LUs, the norms' (:mod:`.norms`) and one LU per full-model simulation
-    (:mod:`.timedomain`), for what the cache does not hold; nothing for a fully cached study.
+    LUs, the norms' (:mod:`morsuite.studies.norms`) and one LU per full-model simulation
+    (:mod:`morsuite.studies.timedomain`), for what the cache does not hold; nothing for a fully cached study.
     """
     t_start = time.perf_counter()
     started = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")

@@ -3,20 +3,20 @@ r"""Scene kinds: what each figure or table needs, and how it is built from resul
 A scene names one model, one or more methods (aliases of the study's
 ``[methods]``), the reduced orders ``r`` and, for frequency-domain scenes, a grid.
 
-=========== ===================================================== ===== =======
-kind        shows                                                 grid  r
-=========== ===================================================== ===== =======
-sigma       :math:`\sigma_{\max}(T(j\omega))` of full and reduced yes   one
-error       absolute (``error = "abs"``) or relative error         yes   one
-compare     error of several methods at one r (BT vs IRKA)         yes   one
-error_vs_r  an error measure against r (see ``measure``)           [1]   many
-time_vs_r   reduction time against r                              no    many
-pareto      time against an error measure, one point per (method, r) [1] many
-convergence IRKA's shift change per iteration, one curve per r    no    many
-hsv         Hankel singular values (methods that report ``hsv``)   no    one
-table       table of the scene's reductions (``norms = [...]``)    yes   many
-time        :math:`y` and :math:`y_r` over time, and their error   no    one
-=========== ===================================================== ===== =======
+============ ======================================================== ===== =====
+kind         shows                                                    grid  r
+============ ======================================================== ===== =====
+sigma        :math:`\sigma_{\max}(T(j\omega))` of full and reduced    yes   one
+error        absolute (``error = "abs"``) or relative error           yes   one
+compare      error of several methods at one r (BT vs IRKA)           yes   one
+error_vs_r   an error measure against r (see ``measure``)             [1]   many
+time_vs_r    reduction time against r                                 no    many
+pareto       time against an error measure, one point per (method, r) [1]   many
+convergence  IRKA's shift change per iteration, one curve per r       no    many
+hsv          Hankel singular values (methods that report ``hsv``)     no    one
+table        table of the scene's reductions (``norms = [...]``)      yes   many
+time         :math:`y` and :math:`y_r` over time, and their error     no    one
+============ ======================================================== ===== =====
 
 [1] ``measure``: ``"max_abs"`` / ``"max_rel"`` (the band maximum of
 :math:`\sigma_{\max}(T - T_r)`, absolute or over :math:`\sigma_{\max}(T)`, on the

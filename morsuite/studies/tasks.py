@@ -13,8 +13,8 @@ plain data: arrays, numbers, strings, dicts. A reduced model travels as
 - :func:`metrics`: reduced responses and errors on a grid for the ROMs of one
   (model, method, options).
 
-Exact norms and time-domain simulations are the tasks of :mod:`.norms` and
-:mod:`.timedomain`.
+Exact norms and time-domain simulations are the tasks of :mod:`morsuite.studies.norms` and
+:mod:`morsuite.studies.timedomain`.
 """
 
 from __future__ import annotations
