@@ -183,6 +183,14 @@ class IRKABase(Reducer):
         bres = np.linalg.solve(E @ Z, B) if Z.shape[1] == E.shape[0] else np.linalg.lstsq(E @ Z, B, rcond=None)[0]
         return lam, bres, (C @ Z).T
 
+    def _next_data(self, it, current, proposed, relax):
+        """The interpolation data of iteration ``it + 1``: the ``proposed`` update (alpha, b, c)
+        of the ``current`` data, relaxed when ``relax`` < 1 (:func:`~.shift_update.relaxed_update`).
+        A variant may take another step here (the first-order IRKA: Newton's)."""
+        if relax < 1:
+            return relaxed_update(*current, *proposed, relax)
+        return proposed
+
     def _lu_count(self) -> int:
         return 0
 
@@ -379,9 +387,7 @@ class IRKABase(Reducer):
                 schedule.switch(it)  # no convergence within this stage's share of maxit
             how, relax = schedule.rule
             recent = (recent + [alpha.copy()])[-o["cycle_window"]:] if o["cycle_window"] else []
-            if relax < 1:
-                new_alpha, new_b, new_c = relaxed_update(alpha, bdir, cdir, new_alpha, new_b, new_c, relax)
-            alpha, bdir, cdir = new_alpha, new_b, new_c
+            alpha, bdir, cdir = self._next_data(it, (alpha, bdir, cdir), (new_alpha, new_b, new_c), relax)
         times = {"setup": t_setup, **setup_times, **self._phase_times(), "projection": t_proj,
                  "shift_update": t_upd}
         return self._outcome(r, best, history, it, converged, cycled, times=times, perturbed=perturbed,
@@ -399,8 +405,9 @@ class IRKABase(Reducer):
                       RankWarning, stacklevel=4)
         if not converged:
             why = "a cycle of shift sets was detected" if cycled else f"maxit = {o['maxit']} was reached"
-            self.warn(f"{self.name} did not converge at r = {r}: {why}; returning iteration {best_it} "
-                      f"(shift change {history[best_it - 1]['measure']:.2e}, tol {o['tol']:g})",
+            what = (f"iteration {best_it} (shift change {history[best_it - 1]['measure']:.2e}, tol {o['tol']:g})"
+                    if best_it else "its start")
+            self.warn(f"{self.name} did not converge at r = {r}: {why}; returning {what}",
                       ConvergenceWarning, stacklevel=4)
         stable = bool(rom.is_stable())
         if not stable:
