@@ -99,6 +99,9 @@ from .shift_update import COMPLEX_TOL, shifts_from_poles
 
 __all__ = ["IRKAFO"]
 
+#: relative difference of exact H2 errors below which two iterates count as equally good
+H2_TIE = 1e-6
+
 
 class IRKAFO(IRKA):
     """First-order tangential IRKA on the index-3 model's descriptor form (module docstring).
@@ -348,8 +351,11 @@ class IRKAFO(IRKA):
             i = int(np.flatnonzero(alpha == a)[0])
             real = abs(a.imag) <= COMPLEX_TOL * abs(a)
             b, c = (bdir[i].real, cdir[i].real) if real else (bdir[i], cdir[i])
-            Tr = rom.transfer(a)
-            dTr = c @ rom.transfer_derivative(a) @ b
+            try:
+                Tr = rom.transfer(a)
+                dTr = c @ rom.transfer_derivative(a) @ b
+            except np.linalg.LinAlgError:  # the shift is a pole of the reduced model (it has +-lambda)
+                return np.inf
             worst = max(worst, _rel(cap["Tb"], Tr @ b), _rel(cap["cT"], c @ Tr),
                         _rel(cap["dT"], dTr) * abs(a.real) / abs(a))
         return float(worst)
@@ -398,9 +404,10 @@ class IRKAFO(IRKA):
         scored = [x for x in self._iterates if "h2_squared" in x]
         if scored:
             m = min(scored, key=lambda x: x["h2_squared"])
-            # ties within the accuracy of the values go to the later iterate (a converged last one)
-            pick = max((x for x in scored if x["h2_squared"] <= m["h2_squared"] + m["h2_floor_squared"]
-                        + x["h2_floor_squared"]), key=lambda x: x["iteration"])
+            # ties go to the later iterate (a converged last one): within the values' rounding floors, and
+            # within H2_TIE relative, below which the solves' own errors (not in the floors) decide
+            pick = max((x for x in scored if x["h2_squared"] <= m["h2_squared"] * (1.0 + 2.0 * H2_TIE)
+                        + m["h2_floor_squared"] + x["h2_floor_squared"]), key=lambda x: x["iteration"])
             if converged and last is not None and last not in scored:
                 pick = last  # the certification round failed: keep the engine's fixed point
         else:
