@@ -45,7 +45,8 @@ from ..linalg.h2 import modal_form, pole_residue_squared
 from ..rom import FirstOrderROM
 from .shift_update import COMPLEX_TOL, relaxed_update, shifts_from_poles
 
-__all__ = ["ModalSurrogate", "Chart", "SurrogateMap", "NewtonResult", "newton_fixed_point", "iterate"]
+__all__ = ["ModalSurrogate", "Chart", "SurrogateMap", "NewtonResult", "newton_fixed_point", "fixed_point_jacobian",
+           "iterate"]
 
 
 class ModalSurrogate:
@@ -326,7 +327,25 @@ def newton_fixed_point(smap: SurrogateMap, alpha, bdir, cdir, *, tol=1e-10, maxi
         if accepted is None:
             break
         x, (F, e2) = accepted[0], accepted[1]
-    return NewtonResult(False, chart.decode(x), e2, step, hist[-1]["residual"], Jf, chart, hist)
+    res = hist[-1]["residual"]
+    if res < 100 * tol:
+        # stalled at the rounding level of the map (ill-conditioned modal forms): a fixed point all the same
+        Jf = _jacobian(smap, chart, x, F, sc, fd_step)
+        return NewtonResult(Jf is not None, chart.decode(x), e2, step, res, Jf, chart, hist)
+    return NewtonResult(False, chart.decode(x), e2, step, res, Jf, chart, hist)
+
+
+def fixed_point_jacobian(smap: SurrogateMap, alpha, bdir, cdir, fd_step=1e-7):
+    """(chart, f'(x)) at data (alpha, b, c): the chart there and the forward-difference Jacobian of
+    the map in its coordinates (None where the chart breaks). Cost: coordinates + 1 map evaluations."""
+    chart = Chart.at(alpha, bdir, cdir)
+    if chart is None:
+        return None, None
+    x = chart.encode(alpha, bdir, cdir)
+    out = smap.residual(chart, x)
+    if out is None:
+        return chart, None
+    return chart, _jacobian(smap, chart, x, out[0], chart.scales(x), fd_step)
 
 
 def _jacobian(smap, chart, x, F, sc, h):
