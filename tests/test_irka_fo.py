@@ -311,3 +311,13 @@ def test_registry_info_and_reuse(tcom20):
         second = red.reduce(8).info
     # the BT start's Gramian factors and SVD are reused across r
     assert second["start"]["gramians_reused"] and second["start"]["lu_count"] == 0
+
+
+def test_without_h2_tracking_the_certificate_still_decides(tcom20):
+    res = _reduce(tcom20, 6, strategy="plain", init="logspace", track_h2=False)
+    info = res.info
+    assert info["h2_error"] is None and all(h is None for h in info["h2_history"])
+    assert info["converged"] == (info["engine_converged"] and info["certificate"]["residual"] <= 1e-4)
+    assert info["certificate"]["residual"] is not None
+    assert not tcom20.cache  # no Gramian factors were computed
+

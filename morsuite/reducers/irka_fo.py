@@ -143,7 +143,8 @@ class IRKAFO(IRKA):
                                 "is tried when the surrogate iteration does not come within newton_switch", low=1),
         "newton_maxit": Option(40, "int", "Newton steps per start", low=1),
         "track_h2": Option(True, "bool", "exact H2 error of every iterate from the next iteration's solves "
-                           "(needs the Gramian factors: computed once per model if not cached)"),
+                           "(needs the Gramian factors: computed once per model if not cached; the "
+                           "certificate is computed either way)"),
         "certificate_tol": Option(1e-4, "float", "largest interpolation residual rho (module docstring) at "
                                   "which a converged iterate counts as converged", low=0, high=1,
                                   open_low=True, open_high=True),
@@ -207,8 +208,7 @@ class IRKAFO(IRKA):
         self._capture = []
         V, W = super()._bases(alpha, bdir, cdir, left)
         self._data = (alpha, bdir, cdir)
-        if self.options["track_h2"]:
-            self._track(alpha, bdir, cdir)
+        self._track(alpha, bdir, cdir)
         return V, W
 
     def _next_data(self, it, current, proposed, relax):
@@ -350,7 +350,8 @@ class IRKAFO(IRKA):
         if rec is None:
             return
         rec["certificate"] = self._certificate(rec["rom"], alpha, bdir, cdir)
-        rec.update(self._h2_of(rec["modal"], alpha))
+        if self.options["track_h2"]:
+            rec.update(self._h2_of(rec["modal"], alpha))
 
     def _certificate(self, rom, alpha, bdir, cdir):
         """The interpolation residual rho (module docstring) of ``rom`` at the captured shifts."""
@@ -406,7 +407,7 @@ class IRKAFO(IRKA):
         iters = [x for x in self._iterates if x["iteration"] > 0]
         last = iters[-1] if iters else None
         lu0 = self._lu_count()
-        if converged and o["track_h2"] and last is not None and "certificate" not in last:
+        if converged and last is not None and "certificate" not in last:
             try:
                 self._bases(*last["next"], o["projection"] == "petrov")
             except SingularShiftError:
