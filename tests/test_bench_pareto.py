@@ -73,7 +73,7 @@ def test_pareto_quick_through_bench_run(tmp_path):
         assert (tmp_path / name).stat().st_size > 0, name
     df = pd.read_csv(tmp_path / "pareto.csv")
     ok = df[df["status"] == "ok"]
-    assert set(ok["method"]) == {"irka", "bt", "bt-vv", "irka-projected"}
+    assert set(ok["method"]) == {"irka", "bt", "bt-vv", "irka-projected", "irka-fo"}
     for col in ("time_s", "time_standalone_s", "max_abs_error", "max_rel_error"):
         assert np.all(np.isfinite(ok[col])), col
     assert (ok["time_standalone_s"] >= ok["time_s"] - 1e-12).all()

@@ -18,8 +18,8 @@ from .output import new_figure, save_png, write_table
 __all__ = ["write_outputs"]
 
 
-_COLORS = {"irka": "C0", "bt": "C3", "bt-vv": "C1", "irka-projected": "C2"}
-_MARKERS = {"irka": "o", "bt": "s", "bt-vv": "v", "irka-projected": "D"}
+_COLORS = {"irka": "C0", "bt": "C3", "bt-vv": "C1", "irka-projected": "C2", "irka-fo": "C4"}
+_MARKERS = {"irka": "o", "bt": "s", "bt-vv": "v", "irka-projected": "D", "irka-fo": "^"}
 
 
 def _pareto_figure(spec, rows, summaries, path):

@@ -4,5 +4,6 @@ from .base import Option, Reducer, Reduction, available, get_class, make, regist
 from .irka import IRKA
 from .irka_projected import IRKAProjected  # noqa: F401  (registers "irka-projected")
 from .bt import BT  # noqa: F401  (registers "bt")
+from .irka_fo import IRKAFO  # noqa: F401  (registers "irka-fo")
 
 __all__ = ["Option", "Reducer", "Reduction", "make", "available", "register", "get_class", "IRKA"]

@@ -125,12 +125,11 @@ class IRKA(IRKABase):
         ``kernel_tol`` (RMS per column)."""
         if self._GGt is None or X.shape[1] == 0:
             return X
-        G = self.fom.G
-        C = G.T @ self._GGt.solve(np.asarray(G @ X))
+        C = self._range_part(X)
         if np.linalg.norm(C) <= self.options["kernel_tol"] * np.sqrt(X.shape[1]):
             return X  # X is in null(G) to rounding (a well-conditioned basis): nothing to remove
         X = X - C
-        X = X - G.T @ self._GGt.solve(np.asarray(G @ X))  # twice is enough
+        X = X - self._range_part(X)  # twice is enough
         # re-orthonormalise in order (X is orthonormal up to the removed part); a direction
         # almost wholly in range(G^T) carries no state and is dropped (Gram-Schmidt). When
         # every column kept most of its norm, X is near-orthonormal and two Cholesky-QR
@@ -141,6 +140,15 @@ class IRKA(IRKABase):
             except np.linalg.LinAlgError:
                 pass
         return gram_schmidt(X, 1e-2, pivot=False)[0]
+
+    def _range_part(self, X):
+        """:math:`G^T (G G^T)^{-1} G X_i` for each n1-row block :math:`X_i` of X (one block here;
+        a first-order variant stacks position and velocity blocks), in the shape of X."""
+        G, n1 = self.fom.G, self.fom.n1
+        nb, k = X.shape[0] // n1, X.shape[1]
+        Xb = X.reshape(nb, n1, k).transpose(1, 0, 2).reshape(n1, nb * k) if nb > 1 else X
+        C = G.T @ self._GGt.solve(np.asarray(G @ Xb))
+        return C.reshape(n1, nb, k).transpose(1, 0, 2).reshape(nb * n1, k) if nb > 1 else C
 
     def _lu_count(self):
         return self._solver.stats.factorizations

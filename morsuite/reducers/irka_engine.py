@@ -201,6 +201,15 @@ class IRKABase(Reducer):
         bres = np.linalg.solve(E @ Z, B) if Z.shape[1] == E.shape[0] else np.linalg.lstsq(E @ Z, B, rcond=None)[0]
         return lam, bres, (C @ Z).T
 
+    def _next_data(self, it, current, proposed, relax, blend=False):
+        """The interpolation data of iteration ``it + 1``: the ``proposed`` update (alpha, b, c)
+        of the ``current`` data, relaxed when ``relax`` < 1 (:func:`~.shift_update.relaxed_update`;
+        ``blend``: the directions too, phase-aligned, as the engaged safeguard asks).
+        A variant may take another step here (the first-order IRKA: Newton's)."""
+        if relax < 1:
+            return relaxed_update(*current, *proposed, relax, blend_directions=blend)
+        return proposed
+
     def _lu_count(self) -> int:
         return 0
 
@@ -443,10 +452,8 @@ class IRKABase(Reducer):
             prev_change = d_shift
             history[-1]["step"] = relax
             recent = (recent + [alpha.copy()])[-o["cycle_window"]:] if o["cycle_window"] else []
-            if relax < 1:
-                new_alpha, new_b, new_c = relaxed_update(alpha, bdir, cdir, new_alpha, new_b, new_c, relax,
-                                                         blend_directions=guard.engaged)
-            alpha, bdir, cdir = new_alpha, new_b, new_c
+            alpha, bdir, cdir = self._next_data(it, (alpha, bdir, cdir), (new_alpha, new_b, new_c), relax,
+                                                blend=guard.engaged)
         if chosen is None:
             score = getattr(self, "iterate_score", None) if guard.active else None
             chosen = shortlist.choose(None if score is None else (lambda m: score(self.fom, m)))
@@ -471,8 +478,9 @@ class IRKABase(Reducer):
                       RankWarning, stacklevel=4)
         if not converged:
             why = "a cycle of shift sets was detected" if cycled else f"maxit = {o['maxit']} was reached"
-            self.warn(f"{self.name} did not converge at r = {r}: {why}; returning iteration {best_it} "
-                      f"(shift change {history[best_it - 1]['measure']:.2e}, tol {o['tol']:g})",
+            what = (f"iteration {best_it} (shift change {history[best_it - 1]['measure']:.2e}, tol {o['tol']:g})"
+                    if best_it else "its start")
+            self.warn(f"{self.name} did not converge at r = {r}: {why}; returning {what}",
                       ConvergenceWarning, stacklevel=4)
         stable = bool(rom.is_stable())
         if not stable:
