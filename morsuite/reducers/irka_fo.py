@@ -156,6 +156,7 @@ class IRKAFO(IRKA):
 
     # -- orders ------------------------------------------------------------
     def max_order(self) -> int:
+        """Largest number of first-order states: twice the hidden manifold's dimension, 2 (n1 - n2)."""
         return 2 * self.fom.order
 
     def _validate_r(self, r):

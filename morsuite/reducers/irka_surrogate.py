@@ -139,6 +139,8 @@ class Chart:
 
     @property
     def size(self) -> int:
+        """Number of real coordinates of the chart: per real shift 1 + (m - 1) + (p - 1) (the shift and
+        the normalised directions), per complex pair twice that."""
         nr, nc = self.n_real, self.shifts.size - self.n_real
         return nr * (1 + (self.m - 1) + (self.p - 1)) + 2 * nc * (1 + (self.m - 1) + (self.p - 1))
 
