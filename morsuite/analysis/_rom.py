@@ -17,17 +17,17 @@ eigenvectors :math:`X` of :math:`(A, E)` (for a second-order model those of
 valid when :math:`X` is well conditioned. Its rounding perturbs the reduced
 model by about :math:`\varepsilon\,\kappa(X)` (:math:`\kappa` of the
 column-normalised :math:`X`), which is reported and bounds the trust in
-every quantity computed from it.
+every quantity computed from it. The form itself (:class:`Modal`,
+:func:`modal_form`) lives in :mod:`morsuite.linalg.h2`, where the reducers
+that track H2 errors use it too.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
-import scipy.linalg as sla
 
 from ..errors import InputError, ShapeError
+from ..linalg.h2 import Modal, modal_form  # noqa: F401  (re-exported: the core moved to linalg)
 from ._fom import refined_unit
 
 __all__ = ["first_order_arrays", "Modal", "modal_form", "RomResponse"]
@@ -70,59 +70,6 @@ def first_order_arrays(fom, rom, name: str = "rom"):
             raise InputError(f"{name}: E (or the reduced mass matrix) is singular (reciprocal condition "
                              f"{rc:.1e}); descriptor reduced models with infinite poles are not supported")
     return E, A, B, C, D
-
-
-@dataclass
-class Modal:
-    """Pole-residue form :math:`T_r(s) = \\sum_k c_k b_k^T / (s - \\lambda_k) + D` (see the module docstring)."""
-
-    poles: np.ndarray     # (n,) complex
-    C: np.ndarray         # (p, n) complex, columns c_k
-    B: np.ndarray         # (n, m) complex, rows b_k^T
-    D: np.ndarray         # (p, m)
-    kappa: float          # condition number of the column-normalised eigenvector matrix
-
-    def pairs(self):
-        """Indices of the poles with Im >= 0 and their weights: 2 for one of a conjugate pair, 1 for a real pole.
-
-        Falls back to every pole with weight 1 (and complex sums) when the set is not closed under
-        conjugation to rounding.
-        """
-        lam = self.poles
-        up = np.flatnonzero(lam.imag > 0)
-        down = np.flatnonzero(lam.imag < 0)
-        real = np.flatnonzero(lam.imag == 0)
-        if up.size == down.size and np.allclose(np.sort_complex(lam[up]), np.sort_complex(np.conj(lam[down])),
-                                                rtol=1e-12, atol=0):
-            idx = np.concatenate([real, up])
-            return idx, np.concatenate([np.ones(real.size), 2.0 * np.ones(up.size)]), True
-        return np.arange(lam.size), np.ones(lam.size), False
-
-    def self_inner(self):
-        r""":math:`\|T_r - D\|_{\mathcal H_2}^2 = \sum_{k,l} (c_k^Tc_l)(b_l^Tb_k)/(-\lambda_k-\lambda_l)`
-        and the sum of the moduli of its terms (for the rounding estimate)."""
-        lam = self.poles
-        terms = (self.C.T @ self.C) * (self.B @ self.B.T).T / (-(lam[:, None] + lam[None, :]))
-        return float(np.sum(terms).real), float(np.sum(np.abs(terms)))
-
-
-def modal_form(E, A, B, C, D, rom=None) -> Modal:
-    """Pole-residue form of the realization (``rom.eig()`` for a second-order ``rom``)."""
-    if rom is not None and rom.kind == "second-order":
-        lam, X = rom.eig()
-    else:
-        lam, X = sla.eig(A, E)
-    if lam.size != A.shape[0] or not np.all(np.isfinite(lam)):
-        raise InputError("rom: the pencil (A, E) has infinite eigenvalues; E is singular")
-    Xn = X / np.linalg.norm(X, axis=0)
-    with np.errstate(all="ignore"):
-        kappa = float(np.linalg.cond(Xn))
-    if not np.isfinite(kappa):
-        kappa = np.inf
-        Bm = np.full((lam.size, B.shape[1]), np.nan, dtype=complex)
-    else:
-        Bm = np.linalg.solve(Xn, np.linalg.solve(E, B))
-    return Modal(lam, C @ Xn, Bm, np.asarray(D, dtype=float), kappa)
 
 
 class RomResponse:

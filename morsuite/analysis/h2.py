@@ -68,12 +68,13 @@ import warnings
 import numpy as np
 
 from ..errors import AccuracyWarning, OptionError, StabilityWarning
-from ..linalg.gramians import cached_gramian_factors, gramian_factors, h2_tail
+from ..linalg.gramians import cached_gramian_factors
+from ..linalg.h2 import modal_form, norm_squared as _norm_squared, pole_residue_squared
 from ..utils import blas_threads
 from ._common import adi_options, check_fom, infinite, validate_rom
 from ._fom import FomResponse
 from ._quad import integrate_half_axis
-from ._rom import RomResponse, modal_form
+from ._rom import RomResponse
 
 __all__ = ["h2_norm", "h2_error", "h2_rel_error", "METHODS"]
 
@@ -84,37 +85,6 @@ TRUST_FACTOR = 100.0
 TRUST_REL = 1e-4
 #: eigenvector condition number above which the pole-residue route is not used by "auto"
 KAPPA_MAX = 1e8
-
-
-def _norm_squared(fom, adi):
-    """||T||^2 (corrected), its absolute floor, and the record of how it was obtained."""
-    t0 = time.perf_counter()
-    gf = gramian_factors(fom, **adi)
-    cache = getattr(fom, "cache", None)
-    key = ("h2_norm_squared", tuple(sorted(gf.options.items())))
-    if cache is not None and key in cache and not gf.computed:
-        value, floor, rec = cache[key]
-        return value, floor, {**rec, "gramian_cached": True, "gramian_lu_count": 0, "gramian_time_s": 0.0,
-                              "time_s": time.perf_counter() - t0}, gf
-    c, o = gf.controllability, gf.observability
-    raw = float(np.sum((fom.L @ c.position) ** 2))
-    tail = h2_tail(gf, fom)
-    value = raw + tail
-    # the tail estimate misses about tail * (observability residual); the factor's rounding, measured
-    # against long-double quadratures of |T(jw)|^2 (dsms(60), random MIMO models: 2e-16 .. 7e-16 relative,
-    # factor ranks 28 .. 258), is bounded with margin by 2 eps sqrt(rank)
-    floor = 10.0 * tail * max(o.residual, EPS) + 2.0 * EPS * np.sqrt(max(c.rank, 1)) * value
-    if not gf.converged:
-        floor = max(floor, tail)
-    rec = {"method": "gramian", "uncorrected": float(np.sqrt(raw)), "tail": tail,
-           "factor_rank": c.rank, "adi_converged": gf.converged,
-           "adi_residuals": {"controllability": c.residual, "observability": o.residual},
-           "gramian_cached": not gf.computed, "gramian_lu_count": gf.lu_count if gf.computed else 0,
-           "gramian_time_s": gf.time_s if gf.computed else 0.0, "adi_options": dict(gf.options),
-           "time_s": time.perf_counter() - t0}
-    if cache is not None:  # products with the whole factors: once per model (230 MB of them on tcom(2000))
-        cache[key] = (value, floor, rec)
-    return value, floor, rec, gf
 
 
 def h2_norm(fom, *, adi=None, details: bool = False):
@@ -180,13 +150,8 @@ def _pole_residue(fom, arrays, rom, norm2, floor2, refine):
         cross += wk * (t.real if paired else t)
         cross_abs += wk * abs(t)
     cross = complex(cross)
-    self2, self_abs = modal.self_inner()
-    e2 = norm2 - 2.0 * cross.real + self2
-    e_est = np.sqrt(max(e2, 0.0))
-    tr = np.sqrt(max(self2, 0.0))
-    # rounding of the three sums (measured errors are 30-160x below this on dsms(60) and random models),
-    # and the modal form's perturbation of the reduced model, seen through both of its terms alike
-    floor = floor2 + 2.0 * EPS * (norm2 + 2.0 * cross_abs + self_abs) + 2.0 * EPS * modal.kappa * tr * max(e_est, 1e-300)
+    e2, floor, parts = pole_residue_squared(norm2, floor2, cross, cross_abs, modal)
+    e_est, tr = np.sqrt(max(e2, 0.0)), parts["rom_norm"]
     rec = {"value": float(e_est), "squared": float(e2), "cross": cross.real, "cross_imag": cross.imag,
            "rom_norm": float(tr), "kappa": modal.kappa, "poles": int(modal.poles.size),
            "solves": int(idx.size), "lu_count": ev.lu_count, "lu_shifts": list(ev.shifts),
