@@ -4,5 +4,6 @@ from .base import Option, Reducer, Reduction, available, get_class, make, regist
 from .irka import IRKA
 from .irka_projected import IRKAProjected  # noqa: F401  (registers "irka-projected")
 from .bt import BT  # noqa: F401  (registers "bt")
+from .so_h2 import SOH2  # noqa: F401  (registers "so-h2")
 
 __all__ = ["Option", "Reducer", "Reduction", "make", "available", "register", "get_class", "IRKA"]
