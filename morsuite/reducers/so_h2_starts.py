@@ -87,6 +87,7 @@ class Surrogates:
         self._distance = {}     # N -> ||T_2N - T_N||
 
     def target(self, n):
+        n = min(int(n), self.bt.max_order())
         if n not in self._targets:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RankWarning)  # capped: the order returned says so
