@@ -119,7 +119,8 @@ def test_unstable_model_is_infinite_without_solves(mimo):
 
 def test_gauss_newton_diagonal_against_gramians(mimo):
     r"""For F and L the Gauss-Newton diagonal is exact: 2 ||L R(s) e_j||^2 = 2 (Q_r)_{vv,jj} and
-    2 ||e_i^T R(s) F||^2 = 2 (P_r)_{pp,ii}; the trapezoidal quadrature reproduces them to 5% (a preconditioner needs no more)."""
+    2 ||e_i^T R(s) F||^2 = 2 (P_r)_{pp,ii}; the trapezoidal quadrature reproduces them to 5% (a
+    preconditioner needs no more)."""
     fom = mimo
     rom = reduce(fom, "bt", 4, form="vv").rom
     p = General(rom.order, fom.m, fom.p)

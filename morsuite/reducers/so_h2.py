@@ -192,131 +192,142 @@ class SOH2(Reducer):
         return theta, cur, pairs, done, reason, hist, counter, h
 
     # -- the reduction ----------------------------------------------------------
-    def _reduce(self, r):
-        o = self.options
-        fom = self.fom
-        adi = {k: o[k] for k in ADI_OPTIONS}
-        t0 = time.perf_counter()
-        param_cls = PARAMETRISATIONS[o["parametrization"]]
+    def _start(self, r, adi, param_cls):
+        """Candidates, surrogate, and the start: its label, ROM and exact evaluation (module docstring)."""
+        o, fom = self.options, self.fom
         roms, cands, bt = candidate_roms(fom, r, self._labels(), adi, keep=param_cls.accepts)
         if not roms:
             raise InputError(f"so-h2: no stable candidate start at r = {r} "
                              "(" + ", ".join(f"{k}: {v.get('dropped')}" for k, v in cands.items()) + ")")
-        gram = bt._gram
-        adi_fresh = bool(gram.get("adi_computed"))
-        t_starts = time.perf_counter()
-        if self._surrogates is None or self._surrogates.bt.fom is not fom:
+        if self._surrogates is None:
             self._surrogates = Surrogates(bt)
         full = self._full_target(adi)
-        lu0 = full.lu_count
-        # rank the candidates on a first surrogate, exact errors for those it cannot separate
         sur, srec = self._surrogates.choose(r, roms, o["surrogate_tol"], o["surrogate_states"])
-        delta = srec["distance"] or 0.0
+        unresolved = False
         for label, rom in roms.items():
             ev = h2_value(sur, *standard_realization(rom))
             cands[label]["surrogate_h2_error"] = float(np.sqrt(max(ev.value, 0.0)))
+            unresolved |= bool(ev.floor > o["resolution"] * abs(ev.value))
+        # |e - e_surrogate| <= delta for every model: only candidates within 2 delta of the best can be
+        # in the wrong order, and only they get exact errors (r LUs each); all of them where the surrogate
+        # values are rounding
         best_s = min(cands[k]["surrogate_h2_error"] for k in roms)
+        band = np.inf if unresolved else best_s + 2.0 * (srec["distance"] or 0.0) + 1e-3 * best_s
         exact = {}
-        for label, rom in roms.items():
-            if cands[label]["surrogate_h2_error"] <= best_s + 2.0 * delta + 1e-3 * best_s:
-                p = param_cls(rom.order, fom.m, fom.p)
-                ev = h2_objective(full, *p.matrices(p.from_rom(rom)))
-                exact[label] = ev
-                cands[label]["h2_error"] = float(np.sqrt(max(ev.value, 0.0)))
-                cands[label]["h2_error_floor"] = float(np.sqrt(ev.floor))
+
+        def evaluate(label):
+            rom = roms[label]
+            p = param_cls(rom.order, fom.m, fom.p)
+            exact[label] = ev = h2_objective(full, *p.matrices(p.from_rom(rom)))
+            cands[label]["h2_error"] = float(np.sqrt(max(ev.value, 0.0)))
+            cands[label]["h2_error_floor"] = float(np.sqrt(ev.floor))
+
+        for label in roms:
+            if cands[label]["surrogate_h2_error"] <= band:
+                evaluate(label)
         start = min(exact, key=lambda k: exact[k].value)
-        if exact[start].floor > o["resolution"] * abs(exact[start].value):
+        resolved = exact[start].floor <= o["resolution"] * abs(exact[start].value)
+        if not resolved:
             # every error is below what the formula resolves (errors near sqrt(eps) ||T||): the ranking is
             # rounding, so take the first of the preference order, the paper's level first
-            start = next(k for k in PREFERENCE if k in exact)
-            info_unresolved = True
-        else:
-            info_unresolved = False
-        start_rom = roms[start]
-        rr = start_rom.order
-        param = param_cls(rr, fom.m, fom.p)
-        theta0 = param.from_rom(start_rom)
-        ev0 = exact[start]
-        first0 = Evaluation(ev0.value, ev0.floor, param.gradient(theta0, ev0.gradient), ev0)
+            start = next(k for k in PREFERENCE if k in roms)
+            if start not in exact:
+                evaluate(start)
+        return start, roms[start], exact[start], resolved, cands, sur, srec, bt._gram
+
+    def _phases(self, r, param, theta0, ev0, sur, srec, roms_for_refinement):
+        """Surrogate phase, exact check (refining the surrogate if needed), full phase; returns
+        (theta, evaluation, record)."""
+        o, full = self.options, self._full
+        rec = {"iterations_surrogate": 0, "iterations_full": 0, "evaluations": 0, "refinements": 0,
+               "history": [], "history_full": [], "stop_reason_full": None, "precond": None}
+        while True:
+            ev_s = h2_objective(sur, *param.matrices(theta0))
+            first_s = Evaluation(ev_s.value, ev_s.floor, param.gradient(theta0, ev_s.gradient), ev_s)
+            th, cur_s, pairs, its, reason_s, hs, cnt, h = self._descend(sur, param, theta0, first_s, o["maxit"])
+            rec.update({"iterations_surrogate": rec["iterations_surrogate"] + its, "stop_reason": reason_s,
+                        "history": [float(np.sqrt(max(v, 0.0))) for v in hs], "precond": h, "surrogate": srec,
+                        "h2_error_surrogate": float(np.sqrt(max(cur_s.value, 0.0))),
+                        "h2_error_surrogate_start": float(np.sqrt(max(ev_s.value, 0.0)))})
+            rec["evaluations"] += cnt["evaluations"] + 2
+            ev_f = h2_objective(full, *param.matrices(th))
+            if ev_f.stable and ev_f.value < ev0.value - ev0.floor:
+                break
+            if rec["refinements"] >= o["refinements"] or srec["all_hankel_values"]:
+                rec["stop_reason_full"] = "surrogate result not better than the start in exact error"
+                return theta0, Evaluation(ev0.value, ev0.floor, param.gradient(theta0, ev0.gradient), ev0), rec
+            rec["refinements"] += 1
+            sur, srec = self._surrogates.choose(r, roms_for_refinement, o["surrogate_tol"], 2 * srec["states_asked"])
+        cur = Evaluation(ev_f.value, ev_f.floor, param.gradient(th, ev_f.gradient), ev_f)
+        rec["history_full"] = [float(np.sqrt(max(ev_f.value, 0.0)))]
+        if not o["full_maxit"]:
+            rec["stop_reason_full"] = "full_maxit = 0"
+            return th, cur, rec
+        cnt = {"evaluations": 0, "lu": 0}
+        res = lbfgs_descent(self._objective(full, param, cnt), th, precond=h, maxit=o["full_maxit"],
+                            memory=o["memory"], rtol=o["rtol"], window=o["window"], first=cur, pairs=pairs,
+                            max_backtracks=o["full_backtracks"])
+        rec["history_full"] += [float(np.sqrt(max(v, 0.0))) for v in res.history[1:]]
+        rec.update({"iterations_full": res.iterations, "stop_reason_full": res.reason})
+        rec["evaluations"] += cnt["evaluations"]
+        return res.x, res.best, rec
+
+    def _reduce(self, r):
+        o = self.options
+        adi = {k: o[k] for k in ADI_OPTIONS}
+        t0 = time.perf_counter()
+        param_cls = PARAMETRISATIONS[o["parametrization"]]
+        lu0 = self._full.lu_count if self._full is not None else 0
+        start, start_rom, ev0, resolved, cands, sur, srec, gram = self._start(r, adi, param_cls)
+        adi_fresh = bool(gram.get("adi_computed"))
         t_ranked = time.perf_counter()
-        info = {"start": start, "start_ranking_resolved": not info_unresolved, "start_h2_error": float(np.sqrt(max(ev0.value, 0.0))), "candidates": cands,
-                "parametrization": param.name, "h2_norm": float(np.sqrt(full.norm2)), "variables": param.size}
+        param = param_cls(start_rom.order, self.fom.m, self.fom.p)
+        theta0 = param.from_rom(start_rom)
         skipped = None
         if ev0.floor > o["resolution"] * ev0.value:
             skipped = (f"the start's exact H2 error {np.sqrt(max(ev0.value, 0.0)):.3e} is below the resolution "
                        f"of the objective (floor of J {ev0.floor:.1e} > {o['resolution']:g} J): returned unchanged")
-        theta, cur_full, hist_s, hist_f = theta0, first0, [], []
-        it_s = it_f = evals = lu_desc = 0
-        reason_s = reason_f = "skipped" if skipped else None
-        refine = 0
-        h = None
-        while skipped is None:
-            # surrogate phase from the start
-            ev_s = h2_objective(sur, *param.matrices(theta0))
-            first_s = Evaluation(ev_s.value, ev_s.floor, param.gradient(theta0, ev_s.gradient), ev_s)
-            th, cur_s, pairs, its, reason_s, hs, cnt, h = self._descend(sur, param, theta0, first_s, o["maxit"])
-            it_s += its
-            evals += cnt["evaluations"] + 1
-            hist_s = [float(np.sqrt(max(v, 0.0))) for v in hs]
-            info["h2_error_surrogate"] = float(np.sqrt(max(cur_s.value, 0.0)))
-            info["h2_error_surrogate_start"] = float(np.sqrt(max(ev_s.value, 0.0)))
-            ev_f = h2_objective(full, *param.matrices(th))
-            evals += 1
-            if ev_f.stable and ev_f.value < ev0.value - ev0.floor:
-                first_f = Evaluation(ev_f.value, ev_f.floor, param.gradient(th, ev_f.gradient), ev_f)
-                hist_f = [float(np.sqrt(max(ev_f.value, 0.0)))]
-                theta, cur_full = th, first_f
-                if o["full_maxit"]:
-                    cnt2 = {"evaluations": 0, "lu": 0}
-                    res = lbfgs_descent(self._objective(full, param, cnt2), th, precond=h, maxit=o["full_maxit"], memory=o["memory"], rtol=o["rtol"],
-                                        window=o["window"], first=first_f, pairs=pairs,
-                                        max_backtracks=o["full_backtracks"])
-                    theta, cur_full, it_f, reason_f = res.x, res.best, res.iterations, res.reason
-                    hist_f += [float(np.sqrt(max(v, 0.0))) for v in res.history[1:]]
-                    evals += cnt2["evaluations"]
-                else:
-                    reason_f = "full_maxit = 0"
-                break
-            if refine >= o["refinements"]:
-                reason_f = "surrogate result not better than the start in exact error"
-                break
-            refine += 1
-            if srec["all_hankel_values"]:
-                reason_f = "surrogate result not better than the start in exact error"
-                break
-            sur, srec = self._surrogates.choose(r, roms, o["surrogate_tol"], 2 * srec["states_asked"])
+            theta = theta0
+            cur = Evaluation(ev0.value, ev0.floor, param.gradient(theta0, ev0.gradient), ev0)
+            rec = {"iterations_surrogate": 0, "iterations_full": 0, "evaluations": 0, "refinements": 0,
+                   "history": [], "history_full": [], "stop_reason": "skipped", "stop_reason_full": "skipped",
+                   "precond": None, "surrogate": srec}
+        else:
+            theta, cur, rec = self._phases(r, param, theta0, ev0, sur, srec, {start: start_rom})
         t_desc = time.perf_counter()
-        lu_exact = full.lu_count - lu0
-        lu_irka = cands.get("irka", {}).get("lu_count", 0)
-        lu_gram = int(gram["c"].lu_count) if adi_fresh else 0
-        ok = reason_f not in ("surrogate result not better than the start in exact error",)
-        converged = bool(skipped or (ok and reason_s != "maxit"))
-        final_ev = cur_full.data
+        h = rec.pop("precond")
         if h is None:
             h = self._precond(param, theta)
-        g = cur_full.gradient
-        info.update({
-            "h2_error": float(np.sqrt(max(cur_full.value, 0.0))), "h2_error_floor": float(np.sqrt(cur_full.floor)),
-            "surrogate": srec, "surrogate_refinements": refine, "skipped": skipped,
-            "iterations": it_s + it_f, "iterations_surrogate": it_s, "iterations_full": it_f, "evaluations": evals,
-            "stop_reason": reason_s, "stop_reason_full": reason_f, "converged": converged,
+        g = cur.gradient
+        failed = rec["stop_reason_full"] == "surrogate result not better than the start in exact error"
+        lu_exact = self._full.lu_count - lu0
+        lu_irka = cands.get("irka", {}).get("lu_count", 0)
+        lu_gram = int(gram["c"].lu_count) if adi_fresh else 0
+        info = {
+            "start": start, "start_ranking_resolved": bool(resolved),
+            "start_h2_error": float(np.sqrt(max(ev0.value, 0.0))), "candidates": cands,
+            "parametrization": param.name, "variables": param.size, "h2_norm": float(np.sqrt(self._full.norm2)),
+            "h2_error": float(np.sqrt(max(cur.value, 0.0))), "h2_error_floor": float(np.sqrt(cur.floor)),
+            **rec, "skipped": skipped,
+            "iterations": rec["iterations_surrogate"] + rec["iterations_full"],
+            "converged": bool(skipped or (not failed and rec["stop_reason"] != "maxit")),
             "gradient_norm": float(np.linalg.norm(g)),
-            "gradient_norm_scaled": float(np.sqrt(g @ (h * g)) / max(cur_full.value, 1e-300)),
-            "history": hist_s, "history_full": hist_f,
-            "max_pole_real": float(final_ev.details["max_pole_real"]) if final_ev is not None else None,
+            "gradient_norm_scaled": float(np.sqrt(g @ (h * g)) / max(cur.value, 1e-300)),
+            "max_pole_real": float(cur.data.details["max_pole_real"]),
             "lu_count": lu_gram + lu_irka + lu_exact,
             "lu_breakdown": {"gramians": lu_gram, "irka": lu_irka, "exact": lu_exact},
             "lu_count_gramians": int(gram["c"].lu_count),
-            "time_breakdown": {"adi": gram["times"]["adi"] if adi_fresh else 0.0, "starts": t_starts - t0,
-                               "ranking": t_ranked - t_starts, "descent": t_desc - t_ranked},
+            "time_breakdown": {"adi": gram["times"]["adi"] if adi_fresh else 0.0,
+                               "starts_and_ranking": t_ranked - t0, "descent": t_desc - t_ranked},
             "setup_reused": not adi_fresh, "setup_cost": {"adi": gram["times"]["adi"]},
-        })
+        }
         if skipped:
             self.warn(f"so-h2: {skipped}", AccuracyWarning)
-        elif not ok:
-            self.warn(f"so-h2 at r = {r}: {reason_f} after {refine} surrogate refinements; the start "
-                      f"({start}, H2 error {info['start_h2_error']:.4e}) is returned", ConvergenceWarning)
-        elif reason_s == "maxit":
+        elif failed:
+            self.warn(f"so-h2 at r = {r}: the surrogate phase's result is not better than the start in exact H2 "
+                      f"error after {rec['refinements']} surrogate refinements; the start ({start}, H2 error "
+                      f"{info['start_h2_error']:.4e}) is returned", ConvergenceWarning)
+        elif rec["stop_reason"] == "maxit":
             self.warn(f"so-h2 at r = {r}: the surrogate phase stopped at maxit = {o['maxit']} (H2 error "
                       f"{info['h2_error']:.4e}, start {info['start_h2_error']:.4e})", ConvergenceWarning)
         return param.rom(theta), info
