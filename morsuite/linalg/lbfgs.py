@@ -79,7 +79,7 @@ def _two_loop(g, S, Y, h):
 
 def lbfgs_descent(fun: Callable[[np.ndarray], Evaluation], x0, *, precond=None, maxit: int = 1000,
                   memory: int = 20, rtol: float = 1e-6, window: int = 20, c1: float = 1e-4,
-                  max_backtracks: int = 40, first: Evaluation | None = None, pairs=None,
+                  max_backtracks: int = 40, retry: bool = True, first: Evaluation | None = None, pairs=None,
                   callback=None) -> LBFGSResult:
     r"""Minimise ``fun`` from ``x0`` by monotone preconditioned L-BFGS (module docstring).
 
@@ -95,6 +95,10 @@ def lbfgs_descent(fun: Callable[[np.ndarray], Evaluation], x0, *, precond=None, 
     maxit, memory, rtol, window, c1, max_backtracks
         Iteration cap, number of kept pairs, the small-decrease test, Armijo
         constant, backtracking steps per line search.
+    retry : bool
+        After a failed line search along the quasi-Newton direction, try the
+        preconditioned gradient once (default); False stops at once (where an
+        evaluation is expensive).
     first : Evaluation, optional
         ``fun(x0)`` if already known (saves one evaluation).
     pairs : (S, Y), optional
@@ -143,7 +147,7 @@ def lbfgs_descent(fun: Callable[[np.ndarray], Evaluation], x0, *, precond=None, 
                     t *= 0.5
                 else:
                     t *= 0.1
-            if accepted is not None or not S:
+            if accepted is not None or not S or not retry:
                 break
             # the quasi-Newton direction failed: forget the memory, try the preconditioned gradient
             S, Y = [], []

@@ -99,7 +99,7 @@ class SOH2(Reducer):
         "maxit": Option(3000, "int", "iterations of the surrogate phase", low=0),
         "full_maxit": Option(3, "int", "iterations against the full model after the surrogate phase "
                              "(r LUs per evaluation)", low=0),
-        "full_backtracks": Option(4, "int", "step halvings per line search against the full model (each "
+        "full_backtracks": Option(3, "int", "step halvings per line search against the full model (each "
                                   "costs r LUs)", low=1),
         "refinements": Option(2, "int", "times the surrogate is doubled when its result is not better than "
                               "the start in exact error", low=0),
@@ -264,9 +264,11 @@ class SOH2(Reducer):
             rec["stop_reason_full"] = "full_maxit = 0"
             return th, cur, rec
         cnt = {"evaluations": 0, "lu": 0}
+        # each evaluation costs r LUs: stop after the first iteration that gains less than rtol, and after
+        # the first failed line search (the surrogate's optimum is within its distance of this one)
         res = lbfgs_descent(self._objective(full, param, cnt), th, precond=h, maxit=o["full_maxit"],
-                            memory=o["memory"], rtol=o["rtol"], window=o["window"], first=cur, pairs=pairs,
-                            max_backtracks=o["full_backtracks"])
+                            memory=o["memory"], rtol=o["rtol"], window=1, first=cur, pairs=pairs,
+                            max_backtracks=o["full_backtracks"], retry=False)
         rec["history_full"] += [float(np.sqrt(max(v, 0.0))) for v in res.history[1:]]
         rec.update({"iterations_full": res.iterations, "stop_reason_full": res.reason})
         rec["evaluations"] += cnt["evaluations"]
