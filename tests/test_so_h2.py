@@ -169,6 +169,11 @@ def test_lbfgs_is_monotone_and_stays_in_the_domain():
     assert all(x @ x < 1.6 ** 2 for x, _ in seen)
     assert np.all(np.diff(res.history) < 0)
     np.testing.assert_allclose(res.x, [1.0, 1.0], atol=1e-6)
+    # an initial inverse Hessian given as a product (here that of Rosenbrock's Hessian at the start)
+    H = np.array([[1330.0, 480.0], [480.0, 200.0]])
+    res2 = lbfgs_descent(fun, np.array([-1.2, 1.0]), precond=lambda v: np.linalg.solve(H, v), maxit=500, rtol=1e-14)
+    assert res2.converged and np.all(np.diff(res2.history) < 0)
+    np.testing.assert_allclose(res2.x, [1.0, 1.0], atol=1e-6)
 
 
 @pytest.fixture(scope="module")

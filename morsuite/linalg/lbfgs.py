@@ -67,10 +67,10 @@ def _two_loop(g, S, Y, h):
         q -= a * y
     if S:
         s, y = S[-1], Y[-1]
-        gam = (s @ y) / (y @ (h * y))
+        gam = (s @ y) / (y @ h(y))
     else:
         gam = 1.0
-    z = gam * h * q
+    z = gam * h(q)
     for s, y, a in zip(S, Y, reversed(alpha)):
         b = (y @ z) / (y @ s)
         z += s * (a - b)
@@ -89,9 +89,10 @@ def lbfgs_descent(fun: Callable[[np.ndarray], Evaluation], x0, *, precond=None, 
         Value, absolute accuracy and gradient; ``value = inf`` marks a point
         outside the domain (its gradient is not read).
     x0 : (n,) array
-    precond : (n,) array of positive numbers, optional
-        Diagonal :math:`h` of the initial inverse Hessian (default ones). The very
-        first step is scaled so that its predicted decrease is 1e-3 of the value.
+    precond : (n,) array of positive numbers, or callable v -> H0 v, optional
+        The initial inverse Hessian :math:`H_0`: its diagonal, or its product with a
+        vector (symmetric positive definite; default the identity). The very first
+        step is scaled so that its predicted decrease is 1e-3 of the value.
     maxit, memory, rtol, window, c1, max_backtracks
         Iteration cap, number of kept pairs, the small-decrease test, Armijo
         constant, backtracking steps per line search.
@@ -112,7 +113,13 @@ def lbfgs_descent(fun: Callable[[np.ndarray], Evaluation], x0, *, precond=None, 
         objective in either direction), "maxit", or "infinite start".
     """
     x = np.array(x0, dtype=float)
-    h = np.ones_like(x) if precond is None else np.asarray(precond, dtype=float)
+    if precond is None:
+        h = lambda v: v  # noqa: E731
+    elif callable(precond):
+        h = precond
+    else:
+        diag = np.asarray(precond, dtype=float)
+        h = lambda v: diag * v  # noqa: E731
     cur = first if first is not None else fun(x)
     nfev = 0 if first is not None else 1
     if not np.isfinite(cur.value):
@@ -132,7 +139,7 @@ def lbfgs_descent(fun: Callable[[np.ndarray], Evaluation], x0, *, precond=None, 
             gd = g @ d
             if not gd < 0:
                 S, Y = [], []
-                d = -h * g
+                d = -h(g)
                 d *= 1e-3 * max(cur.value, 1e-300) / max(-(g @ d), 1e-300)
                 continue
             t = 1.0
@@ -151,7 +158,7 @@ def lbfgs_descent(fun: Callable[[np.ndarray], Evaluation], x0, *, precond=None, 
                 break
             # the quasi-Newton direction failed: forget the memory, try the preconditioned gradient
             S, Y = [], []
-            d = -h * g
+            d = -h(g)
             d *= 1e-3 * max(cur.value, 1e-300) / max(-(g @ d), 1e-300)
         if accepted is None:
             reason = "stalled"

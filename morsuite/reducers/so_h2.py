@@ -45,18 +45,32 @@ stability, surrogate and exact errors, LUs), ``h2_error`` (exact, of the result)
 (states, estimated distance, eigenvector condition), ``iterations``
 (``iterations_surrogate`` + ``iterations_full``), ``evaluations``,
 ``gradient_norm`` (of :math:`J` in the parameters, exact, at the result) and
-``gradient_norm_scaled`` (:math:`\sqrt{g^Thg}/J`, the relative decrease a
-preconditioned step predicts), ``stop_reason``, ``history`` (:math:`\sqrt J` after
-each accepted step: surrogate, then exact), ``lu_count`` (made by this call) with
-``lu_breakdown`` (gramians, irka, exact) and ``lu_count_gramians`` (the ADI LUs of
-second-order BT, for comparison), ``time_breakdown``, ``setup_reused``,
-``setup_cost``.
+``gradient_norm_scaled`` (:math:`g^Thg/(2J)`, the relative decrease that a Newton step
+with the Gauss-Newton diagonal :math:`h^{-1}` predicts), ``stop_reason`` and
+``stop_reason_full``, ``history`` and ``history_full`` (:math:`\sqrt J` after each
+accepted step against the surrogate and against the model), ``lu_count`` (made by
+this call) with ``lu_breakdown`` (gramians, irka, exact) and ``lu_count_gramians``
+(the ADI LUs of second-order BT, for comparison), ``time_breakdown``,
+``setup_reused``, ``setup_cost``.
+
+Options (:attr:`SOH2.OPTIONS`, defaults): ``start="best"``, ``levels`` (all five),
+``irka_start=True``, ``parametrization="general"``, ``surrogate_tol=0.01``,
+``surrogate_states=None``, ``maxit=3000``, ``full_maxit=3``, ``full_backtracks=3``,
+``refinements=2``, ``rtol=1e-6``, ``window=20``, ``memory=100``,
+``precondition="gauss-newton"``, ``precond_every=200``, ``resolution=0.25``, and the
+LR-ADI options of ``bt``.
+
+Cost: the Gramian factors (shared with ``bt`` through the model's cache), one SVD per
+BT level, the paper's IRKA when it is a candidate (its LUs), r LUs per exact
+evaluation (the candidates that the surrogate cannot separate, the surrogate phase's
+result, at most ``1 + full_maxit * full_backtracks`` in the full phase), and
+:math:`O(N(2r)^2 + r^3)` dense work per surrogate evaluation (``maxit`` at most).
+Measurements: ``docs/design/so_h2.md``.
 """
 
 from __future__ import annotations
 
 import time
-import warnings
 
 import numpy as np
 
@@ -314,7 +328,7 @@ class SOH2(Reducer):
             "iterations": rec["iterations_surrogate"] + rec["iterations_full"],
             "converged": bool(skipped or (not failed and rec["stop_reason"] != "maxit")),
             "gradient_norm": float(np.linalg.norm(g)),
-            "gradient_norm_scaled": float(np.sqrt(g @ (h * g)) / max(cur.value, 1e-300)),
+            "gradient_norm_scaled": float((g @ (h * g)) / (2.0 * max(cur.value, 1e-300))),
             "max_pole_real": float(cur.data.details["max_pole_real"]),
             "lu_count": lu_gram + lu_irka + lu_exact,
             "lu_breakdown": {"gramians": lu_gram, "irka": lu_irka, "exact": lu_exact},
