@@ -31,11 +31,15 @@ def test_peers_quick_against_pymor(tmp_path):
     assert set(df["peer"]) == {"pymor-irka-fo", "pymor-sor-irka", "pymor-sobt-v"}
     assert np.all(np.isfinite(df["ours_time_s"])) and np.all(np.isfinite(df["ours_error"]))
     ran = df[df["peer_time_s"].notna()]
-    assert len(ran) == 4 and np.all(np.isfinite(ran["time_ratio"]))
+    assert len(ran) == 5 and np.all(np.isfinite(ran["time_ratio"]))
     # pyMOR's first-order IRKA also against irka-fo with as many states (2r), with exact H2 errors
     fo = df[df["ours"] == "irka-fo"]
     assert len(fo) == 1 and fo["ours_states"].iloc[0] == 2 * fo["r"].iloc[0]
     assert np.isfinite(fo["ours_h2_error"].iloc[0]) and np.isfinite(fo["peer_h2_error"].iloc[0])
+    # the same SOR-IRKA run against so-h2 at r (2r states), with its exact H2 error
+    so = df[df["ours"] == "so-h2"]
+    assert len(so) == 1 and so["ours_states"].iloc[0] == 2 * so["r"].iloc[0]
+    assert so["peer"].iloc[0] == "pymor-sor-irka" and np.isfinite(so["ours_h2_error"].iloc[0])
     assert all(np.isfinite(r["value"]) for r in res["ratios"].values())
     # same transfer function: the dense projected model the peers use matches the full one
     assert res["models"]["dsms:g=60"]["projected_model_rel_difference"] < 1e-10
