@@ -32,7 +32,6 @@ extensions = [
     "numpydoc",
     "morsuite_api",
     "morsuite_tables",
-    "docstring_patches",
 ]
 # MathJax copied into the built site (the docs extra installs it), so that pages read
 # offline show their formulas; without it sphinx.ext.mathjax loads MathJax from its CDN
