@@ -74,7 +74,7 @@ html_theme = "pydata_sphinx_theme"
 html_title = "morsuite"
 html_show_sourcelink = False
 # pages without sub-pages: no empty section navigation on the left
-html_sidebars = {"index": [], "getting_started": []}
+html_sidebars = {"index": [], "getting_started": [], "results": [], "benchmarks": []}
 html_theme_options = {
     "navigation_with_keys": False,
     "navbar_align": "left",
