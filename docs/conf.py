@@ -32,7 +32,6 @@ extensions = [
     "numpydoc",
     "morsuite_api",
     "morsuite_tables",
-    "docstring_patches",
 ]
 # MathJax copied into the built site (the docs extra installs it), so that pages read
 # offline show their formulas; without it sphinx.ext.mathjax loads MathJax from its CDN
@@ -75,7 +74,7 @@ html_theme = "pydata_sphinx_theme"
 html_title = "morsuite"
 html_show_sourcelink = False
 # pages without sub-pages: no empty section navigation on the left
-html_sidebars = {"index": [], "getting_started": []}
+html_sidebars = {"index": [], "getting_started": [], "results": [], "benchmarks": []}
 html_theme_options = {
     "navigation_with_keys": False,
     "navbar_align": "left",

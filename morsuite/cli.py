@@ -133,12 +133,17 @@ def _direction_arg(text):
 
 
 def cmd_info(args) -> int:
+    """``morsuite info MODEL``: print the model's summary (sizes, band, name) as JSON; returns 0.
+
+    Builds the model (a catalog spec or a file); no factorization.
+    """
     from . import models
     print(json.dumps(models.parse(args.model).summary(), indent=2))
     return 0
 
 
 def cmd_list(args) -> int:
+    """``morsuite list``: print the catalog models and the registered reducers; returns 0."""
     from . import models, reducers
     print("models:   " + ", ".join(models.available()))
     print("reducers: " + ", ".join(reducers.available()))
@@ -233,6 +238,21 @@ MODEL_HELP = "catalog spec (dsms:g=6000) or a path: .mat, .npz, a Matrix Market 
 
 
 def build_parser():
+    """Build the ``morsuite`` argument parser.
+
+    Subcommands: ``info MODEL`` (a model's summary as JSON), ``list`` (models and
+    reducers), ``reduce`` (one reduction, its band errors and exact norms),
+    ``simulate`` (time-domain output errors), ``bench`` (the benchmarks of
+    :mod:`morsuite.bench`) and ``run`` (study specs, :mod:`morsuite.studies`). Each
+    subparser stores its command function as ``func``.
+
+    Returns
+    -------
+    parser : argparse.ArgumentParser
+        The top-level parser.
+    sub : argparse._SubParsersAction
+        Its subparsers, so that a caller can add commands.
+    """
     parser = argparse.ArgumentParser(prog="morsuite", description="Model reduction of second-order index-3 systems.")
     sub = parser.add_subparsers(dest="cmd", required=True)
     p = sub.add_parser("info", help="summary of a model")
@@ -258,6 +278,21 @@ def build_parser():
 
 
 def main(argv=None):
+    """Entry point of the ``morsuite`` script and of ``python -m morsuite``.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after the program name; default ``sys.argv[1:]``.
+
+    Returns
+    -------
+    int
+        The exit status: 0 on success, 2 when the input was refused (any
+        :class:`~morsuite.errors.MorsuiteError`; its message, which names the
+        argument at fault, is printed to stderr without a traceback). A usage error
+        exits through argparse with status 2 as well.
+    """
     parser, _ = build_parser()
     args = parser.parse_args(argv)
     from .errors import MorsuiteError

@@ -163,6 +163,7 @@ class Impulse:
 
     @property
     def m(self) -> int:
+        """Number of inputs, the length of :attr:`direction`."""
         return int(self.direction.size)
 
     def samples(self, t) -> np.ndarray:

@@ -89,7 +89,7 @@ def _lu_view(f):
 
 
 def march_index3(fom, t, h, U, *, scheme="trapezoidal", impulse=None, return_state=False, solver_options=None):
-    """Step the full model over the grid ``t``; returns ``(Y, info)``.
+    r"""Step the full model over the grid ``t``; returns ``(Y, info)``.
 
     Parameters
     ----------

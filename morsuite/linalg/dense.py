@@ -30,6 +30,7 @@ class BTResult:
 
     @property
     def order(self):
+        """Number of states of the reduced realization, ``A.shape[0]``."""
         return self.A.shape[0]
 
     def bound(self) -> float:

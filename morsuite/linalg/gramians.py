@@ -68,6 +68,7 @@ class GramianFactors:
 
     @property
     def converged(self) -> bool:
+        """True if both LR-ADI runs reached their tolerance (the Gramian factors are then trusted)."""
         return bool(self.controllability.converged and self.observability.converged)
 
 

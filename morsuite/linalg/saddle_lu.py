@@ -49,9 +49,11 @@ class SolverStats:
     assemble_time_s: float = 0.0
 
     def as_dict(self) -> dict:
+        """The counters as a plain dict (for ``info`` and manifests)."""
         return dict(self.__dict__)
 
     def copy(self) -> "SolverStats":
+        """A snapshot of the counters, for :meth:`since`."""
         return SolverStats(**self.__dict__)
 
     def since(self, earlier: "SolverStats") -> dict:
@@ -236,10 +238,10 @@ def rcond_estimate(A, solve, n1: int, mag) -> float:
     """Reciprocal 1-norm condition estimate of the equilibrated matrix D S D, through the LU.
 
     D = blkdiag(D1, D2): D1 scales the rows and columns of the magnitudes
-    ``mag`` = |a||M| + |b||D| + |c||K| of the (1,1) block to unit row maxima
+    ``mag = |a||M| + |b||D| + |c||K|`` of the (1,1) block to unit row maxima
     (magnitudes of the terms, not of their sum, so that the cancellation
     that makes s a pole is not scaled away), D2 then scales G D1 likewise. The
-    condition of S itself mixes the scales |s|^2 M and G (1e31 at s = 1e7j on
+    condition of S itself mixes the scales ``|s|^2 M`` and G (1e31 at s = 1e7j on
     the DSMS, whose solve is accurate to 4e-16): only the equilibrated one says
     whether s is near a pole.
     """

@@ -51,6 +51,11 @@ class Option:
     nullable: bool = False
 
     def describe(self) -> str:
+        """The admissible values in words, as error messages and option tables show them.
+
+        For example ``"a float in (0, 1)"``, ``"an int in [1, inf)"`` or
+        ``"one of 'auto', 'bt', 'residue'"``.
+        """
         if self.kind == "choice":
             return "one of " + ", ".join(repr(c) for c in self.choices)
         if self.kind in ("int", "float"):
@@ -62,6 +67,32 @@ class Option:
         return {"bool": "a bool", "array": "an array of numbers", "any": "a value"}[self.kind]
 
     def validate(self, owner: str, name: str, value):
+        """Check ``value`` against this option's constraint and return it normalised.
+
+        Parameters
+        ----------
+        owner : str
+            The reducer's class name, for the message.
+        name : str
+            The option's name, for the message.
+        value
+            The value given.
+
+        Returns
+        -------
+        value
+            The value as the reducer uses it: ``bool``, ``int`` or ``float`` for those kinds
+            (NumPy scalars converted), an ndarray for ``"array"``, the value itself
+            otherwise; None if ``nullable``.
+
+        Raises
+        ------
+        OptionError
+            If the value is outside the constraint, in the form
+            ``The 'tol' parameter of IRKA must be a float in (0, 1). Got -1 instead.``
+            A bool is never accepted as a number; non-finite numbers and arrays with
+            non-finite or non-numeric entries are refused.
+        """
         def fail():
             raise OptionError(f"The {name!r} parameter of {owner} must be {self.describe()}"
                               f"{' or None' if self.nullable else ''}. Got {value!r} instead.")
@@ -110,6 +141,12 @@ class Reduction:
 
     @property
     def converged(self) -> bool:
+        """``info["converged"]``: False if the method stopped at its iteration cap or on a cycle.
+
+        A reduction that did not converge still returns its best iterate (with a
+        :class:`~morsuite.errors.ConvergenceWarning`); a method that does not
+        iterate, or does not say, counts as converged.
+        """
         return bool(self.info.get("converged", True))
 
 
@@ -238,6 +275,13 @@ def available() -> list[str]:
 
 
 def get_class(name: str):
+    """The reducer class registered as ``name`` (also from ``morsuite.reducers`` entry points).
+
+    Raises
+    ------
+    OptionError
+        If no reducer has that name; the message lists the available ones.
+    """
     _load_entry_points()
     if name not in _REGISTRY:
         raise OptionError(f"unknown reducer {name!r}; available: {', '.join(available())}")

@@ -31,15 +31,15 @@ costs one pair of ADI runs plus small dense work per r.
     1996 for free velocity), with r the second-order dimension (2r states).
     The level's SVD picks the right basis :math:`V` and the left basis :math:`W`:
 
-    ===== ==================================== ===================================
+    ===== ===================================== ===================================
     form  V from (right singular vectors)       W from (left singular vectors)
-    ===== ==================================== ===================================
-    pp    :math:`Z_p`, SVD of :math:`Y_p^TZ_p`   :math:`Y_v`, SVD of :math:`Y_v^TMZ_v`
-    pv    :math:`Z_p`, SVD of :math:`Y_v^TMZ_p`  :math:`Y_v`, same SVD
-    vp    :math:`Z_v`, SVD of :math:`Y_p^TZ_v`   :math:`Y_v`, SVD of :math:`Y_v^TMZ_v`
-    vv    :math:`Z_v`, SVD of :math:`Y_v^TMZ_v`  :math:`Y_v`, same SVD
-    fv    :math:`Z_p`, SVD of :math:`Y_p^TZ_p`   :math:`W = V`
-    ===== ==================================== ===================================
+    ===== ===================================== ===================================
+    pp    :math:`Z_p`, SVD of :math:`Y_p^TZ_p`  :math:`Y_v`, SVD of :math:`Y_v^TMZ_v`
+    pv    :math:`Z_p`, SVD of :math:`Y_v^TMZ_p` :math:`Y_v`, same SVD
+    vp    :math:`Z_v`, SVD of :math:`Y_p^TZ_v`  :math:`Y_v`, SVD of :math:`Y_v^TMZ_v`
+    vv    :math:`Z_v`, SVD of :math:`Y_v^TMZ_v` :math:`Y_v`, same SVD
+    fv    :math:`Z_p`, SVD of :math:`Y_p^TZ_p`  :math:`W = V`
+    ===== ===================================== ===================================
 
     (pyMOR's ``SOBT*Reductor`` conventions). V and W are orthonormalised
     (balancing-free square root) and
@@ -157,6 +157,7 @@ class BT(Reducer):
 
     # -- orders ------------------------------------------------------------
     def max_order(self) -> int:
+        """Largest admissible r: :math:`2(n_1 - n_2)` states for ``form="first-order"``, else :math:`n_1 - n_2`."""
         order = self.fom.order
         return 2 * order if self.options["form"] == "first-order" else order
 

@@ -226,6 +226,7 @@ class ProjectedModel:
 
     @property
     def order(self) -> int:
+        """The order :math:`k = n_1 - n_2` of the projected model."""
         return self.M.shape[0]
 
     def pencil(self, s) -> np.ndarray:

@@ -100,9 +100,11 @@ class UpdateSchedule:
         return self.STAGES[self.stage] if self.update == "auto" else (self.update, self.relaxation)
 
     def can_switch(self) -> bool:
+        """Whether a cycle may move ``update="auto"`` on to a next stage (there is one left)."""
         return self.update == "auto" and self.stage < len(self.STAGES) - 1
 
     def switch(self, it):
+        """Move to the next stage at iteration ``it`` (recorded in ``switched_at``)."""
         self.stage += 1
         self.switched_at.append(it)
 
@@ -200,8 +202,8 @@ def shifts_from_poles(lam, bdir, cdir, band):
 
     Non-finite poles give the band's upper end, zero poles its lower end (a reduced model
     can produce both: stress suite K5); shifts in the closed left half-plane are mirrored
-    (their count is returned), undamped ones nudged to a real part 1e-8 |alpha| (at least
-    1e-8 lo). Returns (alpha, b, c, mirrored).
+    (their count is returned), undamped ones nudged to a real part ``1e-8 |alpha|`` (at
+    least ``1e-8 lo``). Returns (alpha, b, c, mirrored).
     """
     alpha = -lam
     lo, hi = band

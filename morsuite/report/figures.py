@@ -82,10 +82,12 @@ class CsvSource:
         self._frame = None
 
     def digest(self) -> str:
+        """SHA-256 of the file's bytes (hex): the identity of the data in cache keys, without parsing it."""
         import hashlib
         return hashlib.sha256(self.path.read_bytes()).hexdigest()
 
     def frame(self):
+        """The curve as a DataFrame with columns ``x`` and ``value`` (parsed once, then kept)."""
         if self._frame is None:
             import pandas as pd
             df = pd.read_csv(self.path)

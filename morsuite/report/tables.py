@@ -45,10 +45,17 @@ class TableData:
 
     @property
     def df(self):
+        """The table as a DataFrame; the same as :meth:`frame`."""
         return self.frame()
 
 
 def format_cell(value, floatfmt: str = ".6g") -> str:
+    """One table cell as Markdown text.
+
+    Missing values (None, ``pd.NA``, NaN) give an empty cell, bools ``True``/``False``,
+    integers their digits, other reals ``format(value, floatfmt)`` (default ``".6g"``)
+    and anything else its ``str`` with ``|`` escaped and newlines as spaces.
+    """
     import pandas as pd
 
     if value is None or value is pd.NA or value is pd.NaT or (isinstance(value, float) and math.isnan(value)):

@@ -32,6 +32,12 @@ __all__ = ["write_figure", "write_table_data", "csv_names", "figure_files", "tab
 
 
 def csv_names(figdata: FigureData) -> dict:
+    """File name of each curve's CSV: curve name -> ``NAME.csv`` or ``NAME__CURVE.csv``.
+
+    A figure with a single curve of its own writes ``NAME.csv``; otherwise, and for the
+    overlaid curves (the paper's data, flagged points), each curve gets
+    ``NAME__CURVE.csv``.
+    """
     overlay = ("paper", "flagged")
     own = [c for c in figdata.curves if c.style not in overlay]
     single = len(own) == 1

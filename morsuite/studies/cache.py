@@ -100,6 +100,10 @@ class Cache:
         return arrays, meta
 
     def put(self, kind: str, key: str, arrays: dict, meta: dict) -> None:
+        """Store ``arrays`` (an npz) and ``meta`` (JSON, with ``key`` added) under ``kind``/``key``.
+
+        Both files are written atomically; nothing is written when ``write`` is False.
+        """
         if not self.write:
             return
         npz, js = self._paths(kind, key)
@@ -120,9 +124,11 @@ class Cache:
         return meta if isinstance(meta, dict) and meta.get("key") == key else None
 
     def put_json(self, kind: str, key: str, meta: dict) -> None:
+        """Store a JSON-only entry ``meta`` (with ``key`` added), atomically; nothing when ``write`` is False."""
         if self.write:
             atomic_write_text(self._paths(kind, key)[1], json.dumps(plain({**meta, "key": key}), sort_keys=True))
 
     def has(self, kind: str, key: str) -> bool:
+        """Whether both files of entry ``kind``/``key`` exist (whatever ``read`` says; nothing is parsed)."""
         npz, js = self._paths(kind, key)
         return npz.is_file() and js.is_file()

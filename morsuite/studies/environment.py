@@ -59,6 +59,16 @@ def _threads() -> dict:
 
 
 def environment() -> dict:
+    """The machine and software a run used, for ``manifest.json``.
+
+    Returns
+    -------
+    dict
+        ``versions`` (morsuite, Python and the numerical packages), ``blas`` (the
+        BLAS/LAPACK NumPy is linked to), ``host`` (name, platform, machine,
+        processor) and ``threads`` (CPU count, affinity, the thread environment
+        variables set, threadpoolctl's pools when it is installed).
+    """
     from .. import __version__
     return {
         "versions": {"morsuite": __version__, "python": sys.version.split()[0],

@@ -32,6 +32,7 @@ class SchedulerChoice:
         return self.name != "distributed"
 
     def describe(self) -> dict:
+        """The scheduler as plain data for the manifest: name, workers, Dask's version (and the address and distributed's version for a cluster)."""
         import importlib.metadata
         # the version from the metadata: a run that computes nothing does not import dask
         d = {"name": self.name, "workers": self.workers, "dask": importlib.metadata.version("dask")}

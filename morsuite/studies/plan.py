@@ -135,6 +135,7 @@ class Plan:
     sim_group_of: dict = field(default_factory=dict)   # (scene name, method alias) -> simulation group id
 
     def describe(self) -> list[str]:
+        """One line per artifact the plan computes (full-order responses, reducer runs, metrics, norms, simulations, outputs), as ``morsuite run --dry-run`` prints them."""
         lines = []
         for f in self.foms.values():
             lo, hi, n = f.bounds

@@ -82,6 +82,7 @@ class Kind:
     with_full: bool = False
 
     def curve_names(self, methods) -> list:
+        """The scene's curves: ``"full"`` first if the kind draws the full model, then one per method alias."""
         return (["full"] if self.with_full else []) + list(methods)
 
     def grid_needed(self, params) -> bool:

@@ -85,21 +85,27 @@ class ModelEntry:
 
 @dataclass(frozen=True)
 class GridEntry:
+    """One frequency grid of a study: ``n`` log-spaced points on ``band`` (None: each model's default band)."""
+
     name: str
     band: tuple | None   # None: the model's default band
     n: int
 
     def omega_for(self, model: ModelEntry) -> np.ndarray:
+        """The grid's ``n`` log-spaced frequencies (rad/s) on its band, or on the model's default band."""
         lo, hi = self.band or model.band
         return np.logspace(np.log10(lo), np.log10(hi), self.n)
 
     def bounds_for(self, model: ModelEntry) -> tuple:
+        """``(lo, hi, n)`` of the grid on ``model``: what identifies it in cache keys."""
         lo, hi = self.band or model.band
         return float(lo), float(hi), int(self.n)
 
 
 @dataclass(frozen=True)
 class MethodEntry:
+    """One method of a study: a registered ``reducer`` with ``options``, shown as ``label``."""
+
     alias: str
     reducer: str
     options: dict        # the options as written (passed to the reducer)
@@ -108,11 +114,14 @@ class MethodEntry:
 
     @property
     def method_id(self) -> str:
+        """``REDUCER:DIGEST``, the method's identity in cache keys: the first 16 hex digits of the SHA-256 of the reducer name and every option with defaults filled in (so an alias or a default written out does not change it)."""
         return self.reducer + ":" + _digest({"reducer": self.reducer, "options": self.full_options})[:16]
 
 
 @dataclass
 class SceneEntry:
+    """One validated scene: a figure or table of ``kind`` on one model, for ``methods`` and orders ``rs``."""
+
     name: str
     kind: str
     model: str
@@ -160,6 +169,7 @@ class Study:
 
     @property
     def config_hash(self) -> str:
+        """SHA-256 of :meth:`canonical`, the validated spec; recorded in ``manifest.json``."""
         return _digest(self.canonical())
 
 

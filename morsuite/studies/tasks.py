@@ -54,6 +54,7 @@ def rom_payload(rom) -> dict:
 
 
 def rom_from_payload(payload: dict):
+    """The reduced model of a :func:`rom_payload` (a :class:`~morsuite.rom.SecondOrderROM` or :class:`~morsuite.rom.FirstOrderROM`)."""
     from ..rom import FirstOrderROM, SecondOrderROM
     cls = {"second-order": SecondOrderROM, "first-order": FirstOrderROM}[payload["kind"]]
     return cls(*(payload["arrays"][f] for f in cls._fields))
