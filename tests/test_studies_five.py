@@ -183,8 +183,9 @@ def test_table_verdict_compares_at_equal_states(study):
     labels = {"irka": "IRKA", "irka_fo": "irka-fo", "so_h2": "so-h2", "bt": "BT (vv)", "bt_fo": "BT, first-order"}
     for col in ("h2_error", "hinf_error", "max_abs_error"):
         best = min(FIVE, key=lambda m: rows[m][col])
-        assert f"8 states (" in md and f", {col}: {labels[best]} (" in md
+        assert f"8 states, {col}: {labels[best]} (" in md
     assert "r = 4, h2_error" not in md   # not grouped by r: irka-fo at r = 8 would have no rival
+    assert "Compared at equal first-order states" in md and "irka_fo r = 8" in md and "so_h2 r = 4" in md
 
 
 def test_compare_scene_one_order_per_method(study):

@@ -421,10 +421,11 @@ def _verdict(rows, study) -> str:
     ok = [row for row in rows if row["status"] == "ok"]
     by_states = len({row["states"] // row["r"] for row in ok if row.get("r")}) > 1
     group = _requested_states if by_states else (lambda row: row["r_requested"])
+    orders = []
     for r in sorted({group(row) for row in ok}):
         at = [row for row in ok if group(row) == r]
-        where = (f"{r} states (" + ", ".join(f"{row['method']} r = {row['r_requested']}" for row in at) + ")"
-                 if by_states else f"r = {r}")
+        where = f"{r} states" if by_states else f"r = {r}"
+        orders.append(f"{where}: " + ", ".join(f"{row['method']} r = {row['r_requested']}" for row in at))
         for col in VERDICT_COLUMNS:
             vals = [(row[col], row["method"]) for row in at if isinstance(row.get(col), float) and row[col] == row[col]]
             if len(vals) < 2:
@@ -436,7 +437,11 @@ def _verdict(rows, study) -> str:
             flag = " (an untrusted value among them)" if col == "h2_error" and any(
                 row.get("h2_trusted") is False for row in at) else ""
             lines.append(f"{where}, {col}: {study.methods[who].label} ({best:.3g}; {ratio}){flag}")
-    return ("Smallest error per measure: " + "; ".join(lines) + ".") if lines else ""
+    if not lines:
+        return ""
+    head = ("Compared at equal first-order states (a second-order ROM of order r has 2r): " + "; ".join(orders)
+            + ". ") if by_states else ""
+    return head + "Smallest error per measure: " + "; ".join(lines) + "."
 
 
 def _table_scene(scene, study, res):
