@@ -87,7 +87,10 @@ SCENE_KEY_DOCS = {
     "rom_method": "time scene: ROMs stepped by the same scheme or by python-control's forced_response",
     "direction": "time scene: input direction b (u(t) = b s(t)) for a model with several inputs (default: ones)",
     "channel": "time scene: output channel drawn (1-based; the errors use all channels)",
-    "axis": "x axis: the reduced order r or the number of first-order states",
+    "axis": "error_vs_r, time_vs_r: x axis, the reduced order r or the number of first-order states (2r for a "
+            "second-order ROM); pareto: which of the two is written beside each point (default: r)",
+    "r_by_method": "orders of their own for some of the scene's methods, a table { alias = r } with r as in "
+                   "'r' (e.g. a first-order reducer at 2r states beside second-order ones at r; default: none)",
     "time": "reduction time at this r alone (standalone) or of the reduce(r) call with shared work reused",
     "count": "number of Hankel singular values shown (default: all)",
 }

@@ -134,7 +134,9 @@ def manifest(study, plan, choice, cache, res, outputs, files, outdir, notes, sta
         "seeds": {a: m.full_options["seed"] for a, m in study.methods.items() if "seed" in m.full_options},
         "scenes": [{"name": s.name, "kind": s.kind, "model": s.model, "methods": list(s.methods),
                     "r": list(s.rs), "grid": s.grid, "params": s.params,
-                    "paper_csv": {k: str(v) for k, v in s.paper.items()}} for s in study.scenes],
+                    "paper_csv": {k: str(v) for k, v in s.paper.items()},
+                    **({"r_by_method": {k: list(v) for k, v in s.r_by_method.items()}} if s.r_by_method else {})}
+                   for s in study.scenes],
         "artifacts": arts,
         "reused": [a["id"] for a in arts if a["reused"]],
         "computed": [a["id"] for a in arts if not a["reused"]],

@@ -107,7 +107,7 @@ class Results:
     def time_columns(self, model, method, r) -> dict:
         """The time-domain errors of the first time scene that simulated this reduction (or {})."""
         for s in self.study.scenes:
-            if s.kind == "time" and s.model == model and method in s.methods and r in s.rs:
+            if s.kind == "time" and s.model == model and method in s.methods and r in s.rs_of(method):
                 e = self.sim_error(s.name, method, r)
                 if e is not None and "error" not in e:
                     return {**{c: e.get(c) for c in ERROR_COLUMNS}, "time_scene": s.name}

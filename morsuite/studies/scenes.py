@@ -37,7 +37,13 @@ norms are computed only for the reductions that a measure, a table or the study'
 
 Curves against r use the x column ``r`` (the order of the reduced model, from
 ``info["r"]``) or ``states`` (first-order states: 2r for a second-order ROM), as
-the scene's ``axis`` says; the CSV files carry both and ``r_requested``.
+the scene's ``axis`` says; the CSV files carry both and ``r_requested``. A
+``pareto`` scene writes the same quantity beside each point. First-order and
+second-order ROMs meet on the states axis: ``r_by_method = { fo = { from = 4, to = 80,
+step = 4 } }`` gives a method orders of its own (every scene kind; one per method in
+the kinds that show one r), so that a first-order reducer runs at 2r states beside
+second-order ones at r. A table whose methods differ in the states per order
+compares them in its verdict at equal requested states.
 
 A scene's curves are plain columns (name -> values), no DataFrames: building a
 scene is cheap and imports neither pandas nor matplotlib, so that a study can key
@@ -60,7 +66,7 @@ from .timedomain import TIME_KEYS
 __all__ = ["KINDS", "COMMON_KEYS", "Kind", "TableData", "needs", "build", "output_names", "MEASURES", "AXES",
            "TIMES", "MAX_POINTS"]
 
-COMMON_KEYS = ("name", "kind", "title", "model", "methods")
+COMMON_KEYS = ("name", "kind", "title", "model", "methods", "r_by_method")
 MEASURES = ("max_abs", "max_rel") + tuple(NORM_MEASURES)
 #: a time-domain curve is thinned to at most this many samples for its figure and CSV
 MAX_POINTS = 4000
@@ -105,7 +111,8 @@ KINDS = {
                       {"r": _R, "paper_csv": _PAPER, "axis": ("r", AXES), "time": ("standalone", TIMES)},
                       False, False),
     "pareto": Kind("time against error, one point per method and r",
-                   {"r": _R, "grid": _GRID, "measure": ("max_abs", MEASURES), "time": ("standalone", TIMES)},
+                   {"r": _R, "grid": _GRID, "measure": ("max_abs", MEASURES), "time": ("standalone", TIMES),
+                    "axis": ("r", AXES)},
                    True, False),
     "convergence": Kind("IRKA convergence history (shift change per iteration)", {"r": _R}, False, False),
     "hsv": Kind("Hankel singular value decay", {"r": _R, "count": (None, None)}, False, True),
@@ -143,7 +150,7 @@ def needs(scene):
     if scene.params.get("measure") in NORM_MEASURES:
         norms.append(NORM_MEASURES[scene.params["measure"]][0])
     for m in scene.methods:
-        for r in scene.rs:
+        for r in scene.rs_of(m):
             yield ("metrics", scene.model, scene.grid, m, r) if scene.grid else ("reduce", scene.model, m, r)
             for n in norms:
                 yield ("norm", scene.model, m, r, n)
@@ -206,10 +213,17 @@ def _missing(notes, scene, method, r, what):
     notes.append(f"scene {scene.name!r}: {method} at r = {r}: {what}; not shown")
 
 
+def _orders_text(scene) -> str:
+    """'r = 30' for a one-r scene, with the methods of other orders: 'r = 30 (fo: 60)'."""
+    own = {m: scene.rs_of(m)[0] for m in scene.methods if scene.rs_of(m)[0] != scene.rs[0]}
+    return f"r = {scene.rs[0]}" + (" (" + ", ".join(f"{m}: {r}" for m, r in own.items()) + ")" if own else "")
+
+
 def _freq_scene(scene, study, res):
     notes = []
     model = study.models[scene.model]
     r = scene.rs[0]
+    at = _orders_text(scene)
     fom = res.fom(scene.model, scene.grid)
     omega = fom["omega"]
     curves = []
@@ -217,12 +231,13 @@ def _freq_scene(scene, study, res):
         curves.append(Curve("full", f"full ($n_1 = {model.n1}$)", {"omega": omega, "value": fom["sigma_full"]},
                             style="full"))
         ylabel, col = YLABEL["sigma"], "sigma_rom"
-        default = f"{model.name}: full and reduced models at r = {r}"
+        default = f"{model.name}: full and reduced models at {at}"
     else:
         err = scene.params["error"]
         ylabel, col = YLABEL[err], f"{err}_error"
-        default = f"{model.name}: {'absolute' if err == 'abs' else 'relative'} error at r = {r}"
+        default = f"{model.name}: {'absolute' if err == 'abs' else 'relative'} error at {at}"
     for m in scene.methods:
+        r = scene.rs_of(m)[0]
         met = res.metrics(scene.model, scene.grid, m, r)
         if met is None or "error" in met:
             _missing(notes, scene, m, r, met["error"] if met else "not computed")
@@ -241,7 +256,7 @@ def _r_rows(scene, study, res, m):
     the norm columns (:meth:`~morsuite.studies.results.Results.norm_columns`)."""
     rows = []
     measure = scene.params.get("measure")
-    for r in scene.rs:
+    for r in scene.rs_of(m):
         red = res.reduction(scene.model, m, r)
         if red is None or "error" in red:
             rows.append((r, None, red["error"] if red else "not computed"))
@@ -326,7 +341,7 @@ def _against_r_scene(scene, study, res):
 def _pareto_scene(scene, study, res):
     notes = []
     model = study.models[scene.model]
-    measure, tmode = scene.params["measure"], scene.params["time"]
+    measure, tmode, axis = scene.params["measure"], scene.params["time"], scene.params["axis"]
     col = MEASURE_COLUMN[measure]
     curves = []
     for m in scene.methods:
@@ -340,9 +355,10 @@ def _pareto_scene(scene, study, res):
             recs.append({col: met[col], "value": t, **_r_frame(red, _trust(met, measure, notes, scene, m, r))})
         if recs:
             curves.append(Curve(m, study.methods[m].label, _columns(recs), x=col, style="points",
-                                annotate="r"))
+                                annotate=axis))
             curves += _flagged(m, study, recs, col, "value")
-    return FigureData(scene.name, _title(scene, study, f"{model.name}: time against error, one point per r"),
+    per = "r" if axis == "r" else "order (first-order states written beside each point)"
+    return FigureData(scene.name, _title(scene, study, f"{model.name}: time against error, one point per {per}"),
                       YLABEL[measure], TIME_LABEL[tmode], curves, notes=notes)
 
 
@@ -392,11 +408,25 @@ def _hsv_scene(scene, study, res):
 VERDICT_COLUMNS = ("max_abs_error", "max_rel_error", "h2_error", "hinf_error", "max_output_error", "l2_output_error")
 
 
+def _requested_states(row):
+    """First-order states asked for: r_requested times the ROM's states per order (1 or 2)."""
+    return row["r_requested"] * (row["states"] // row["r"]) if row.get("r") else None
+
+
 def _verdict(rows, study) -> str:
-    """Which method has the smallest error, per r and measure, among the table's methods."""
+    """Which method has the smallest error, per r and measure, among the table's methods.
+
+    When the methods' ROMs differ in states per order (first-order beside second-order),
+    reductions are compared at equal requested first-order states instead of equal r."""
     lines = []
-    for r in sorted({row["r_requested"] for row in rows}):
-        at = [row for row in rows if row["r_requested"] == r and row["status"] == "ok"]
+    ok = [row for row in rows if row["status"] == "ok"]
+    by_states = len({row["states"] // row["r"] for row in ok if row.get("r")}) > 1
+    group = _requested_states if by_states else (lambda row: row["r_requested"])
+    orders = []
+    for r in sorted({group(row) for row in ok}):
+        at = [row for row in ok if group(row) == r]
+        where = f"{r} states" if by_states else f"r = {r}"
+        orders.append(f"{where}: " + ", ".join(f"{row['method']} r = {row['r_requested']}" for row in at))
         for col in VERDICT_COLUMNS:
             vals = [(row[col], row["method"]) for row in at if isinstance(row.get(col), float) and row[col] == row[col]]
             if len(vals) < 2:
@@ -407,13 +437,17 @@ def _verdict(rows, study) -> str:
                      f"{second / best:.3g}x smaller than the next" if best > 0 else "zero")
             flag = " (an untrusted value among them)" if col == "h2_error" and any(
                 row.get("h2_trusted") is False for row in at) else ""
-            lines.append(f"r = {r}, {col}: {study.methods[who].label} ({best:.3g}; {ratio}){flag}")
-    return ("Smallest error per measure: " + "; ".join(lines) + ".") if lines else ""
+            lines.append(f"{where}, {col}: {study.methods[who].label} ({best:.3g}; {ratio}){flag}")
+    if not lines:
+        return ""
+    head = ("Compared at equal first-order states (a second-order ROM of order r has 2r): " + "; ".join(orders)
+            + ". ") if by_states else ""
+    return head + "Smallest error per measure: " + "; ".join(lines) + "."
 
 
 def _table_scene(scene, study, res):
     columns = res.summary_columns()
-    rows = [res.summary_row(scene.model, m, r, scene.grid) for m in scene.methods for r in scene.rs]
+    rows = [res.summary_row(scene.model, m, r, scene.grid) for m in scene.methods for r in scene.rs_of(m)]
     title = _title(scene, study, f"{study.models[scene.model].name}: reductions")
     note = _verdict(rows, study) if len(scene.methods) > 1 else ""
     return TableData(scene.name, title, rows, columns=columns, note=note)

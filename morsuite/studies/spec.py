@@ -27,6 +27,7 @@ choices. Example::
     model = "dsms"
     grid = "fig"
     r = 30                               # int, list, or { from = 2, to = 40, step = 2 }
+    # r_by_method = { irka_fo = 60 }     # other orders for some methods (first-order ROMs at 2r states)
     error = "abs"
     paper_csv = "../shared/paper_figures/dsms_r30_abs_error_irka.csv"
 
@@ -131,6 +132,13 @@ class SceneEntry:
     title: str
     params: dict = field(default_factory=dict)     # kind-specific settings, defaults filled
     paper: dict = field(default_factory=dict)      # curve name -> Path (may not exist)
+    #: method alias -> its own orders (``r_by_method``), for methods whose r counts something else
+    #: (a first-order ROM with 2r states beside second-order ROMs of order r); others use ``rs``
+    r_by_method: dict = field(default_factory=dict)
+
+    def rs_of(self, method) -> tuple:
+        """The reduced orders of ``method`` in this scene."""
+        return self.r_by_method.get(method, self.rs)
 
 
 @dataclass
@@ -163,7 +171,9 @@ class Study:
                         for a, m in self.methods.items()},
             "scenes": [{"name": s.name, "kind": s.kind, "title": s.title, "model": s.model, "methods": s.methods,
                         "r": s.rs, "grid": s.grid, "params": s.params,
-                        "paper": {k: str(v) for k, v in s.paper.items()}} for s in self.scenes],
+                        "paper": {k: str(v) for k, v in s.paper.items()},
+                        # only when given: the canonical form (and hash) of other studies is unchanged
+                        **({"r_by_method": s.r_by_method} if s.r_by_method else {})} for s in self.scenes],
             "norms": list(self.norms), "norm_options": self.norm_options,
         })
 
@@ -330,6 +340,7 @@ def _scene_entry(ctx, i, table, study_models, grids, methods, root):
     rs = _r_values(ctx, f"{where}.r", table["r"])
     if spec.one_r and len(rs) != 1:
         ctx.fail(f"{where}.r", f"a {kind!r} scene shows one reduced order; got r = {list(rs)}")
+    by_method = _r_by_method(ctx, f"{where}.r_by_method", table.get("r_by_method", {}), mlist, spec, kind)
     params = {}
     for key, (default, check) in spec.keys.items():
         if key in ("r", "grid", "paper_csv"):
@@ -369,7 +380,19 @@ def _scene_entry(ctx, i, table, study_models, grids, methods, root):
             path = Path(p)
             paper[curve] = path if path.is_absolute() else (root / path)
     return SceneEntry(name=name, kind=kind, model=model, methods=tuple(mlist), rs=rs, grid=grid,
-                      title=title, params=params, paper=paper)
+                      title=title, params=params, paper=paper, r_by_method=by_method)
+
+
+def _r_by_method(ctx, where, table, mlist, spec, kind):
+    """``{alias: orders}`` of a scene's ``r_by_method``: methods of the scene, orders as ``r``."""
+    ctx.keys(where, table, tuple(mlist))
+    out = {}
+    for alias, value in table.items():
+        rs = _r_values(ctx, f"{where}.{alias}", value)
+        if spec.one_r and len(rs) != 1:
+            ctx.fail(f"{where}.{alias}", f"a {kind!r} scene shows one reduced order per method; got {list(rs)}")
+        out[alias] = rs
+    return out
 
 
 # -- entry points ----------------------------------------------------------
@@ -433,6 +456,13 @@ def study_from_dict(data: dict, *, path=None, source: str | None = None, memo=No
         if s.rs[-1] > order:
             ctx.fail(f"scenes[{i}] ({s.name!r}).r", f"r = {s.rs[-1]} exceeds the order n1 - n2 = {order} "
                                                     f"of model {s.model!r} ({models[s.model].name})")
+        for alias, rs in s.r_by_method.items():
+            # a first-order ROM has up to 2 (n1 - n2) states; which reducers build one is not known
+            # here without importing them, so a second-order one above n1 - n2 fails when it runs
+            if rs[-1] > 2 * order:
+                ctx.fail(f"scenes[{i}] ({s.name!r}).r_by_method.{alias}",
+                         f"r = {rs[-1]} exceeds 2 (n1 - n2) = {2 * order} first-order states of model "
+                         f"{s.model!r} ({models[s.model].name})")
         if s.kind == "time":
             from .timedomain import resolve
             resolve(ctx, f"scenes[{i}] ({s.name!r})", s.params, models[s.model], root, memo)

@@ -59,7 +59,9 @@ def time_figures(scene, study, res, max_points: int) -> list:
     """``[FigureData of y and y_r, FigureData of the error]`` of the time scene ``scene``."""
     notes = []
     model = study.models[scene.model]
-    r = scene.rs[0]
+    from .scenes import _orders_text
+
+    at = _orders_text(scene)
     ch = scene.params["channel"] - 1
     what = _input_text(scene.params["input"])
     sim = res.simulation(scene.name)
@@ -71,6 +73,7 @@ def time_figures(scene, study, res, max_points: int) -> list:
         t, y = np.asarray(sim["t"], float), np.asarray(sim["y"], float)
         out_curves.append(_curve("full", f"full ($n_1 = {model.n1}$)", t, y, ch, max_points, style="full"))
         for m in scene.methods:
+            r = scene.rs_of(m)[0]
             red = res.reduction(scene.model, m, r)
             e = res.sim_error(scene.name, m, r)
             if red is None or "error" in red or e is None or "error" in e:
@@ -92,9 +95,9 @@ def time_figures(scene, study, res, max_points: int) -> list:
             err_curves.append(Curve(m, label, {"t": t[keep], "value": err[keep]}, x="t"))
     setup = f"{what}, step {scene.params['step']:g} s, {scene.params['scheme']}"
     ylab = f"$y_{{{ch + 1}}}(t)$" if model.p > 1 else "$y(t)$"
-    fig_y = FigureData(scene.name, scene.title or f"{model.name}: response to {setup}, r = {r}", "$t$ (s)", ylab,
+    fig_y = FigureData(scene.name, scene.title or f"{model.name}: response to {setup}, {at}", "$t$ (s)", ylab,
                        out_curves, xscale="linear", yscale="linear", notes=notes)
     fig_e = FigureData(f"{scene.name}_error", (scene.title + ": output error") if scene.title else
-                       f"{model.name}: output error, {setup}, r = {r}", "$t$ (s)",
+                       f"{model.name}: output error, {setup}, {at}", "$t$ (s)",
                        r"$\|y(t) - y_r(t)\|_2$", err_curves, xscale="linear", yscale="log", notes=[])
     return [fig_y, fig_e]
