@@ -37,8 +37,11 @@ __all__ = ["ADI_DEFAULTS", "GramianFactors", "gramian_factors", "cached_gramian_
            "h2_tail"]
 
 #: LR-ADI options of the shared factors, with balanced truncation's defaults (``bt`` declares the same);
-#: tol 1e-12 (not lradi's 1e-10): see morsuite.reducers.bt
-ADI_DEFAULTS = {"tol": 1e-12, "maxiter": 3000, "shifts": "projection", "num_shifts": 16, "selection": "residual"}
+#: tol 1e-12 (not lradi's 1e-10): see morsuite.reducers.bt; refine 1 (not lradi's 0): one long-double
+#: refinement step of every shifted solve, without which ||T||_H2^2 from the factor is off by the solves'
+#: forward error (7.9e-12 relative on tcom(2000), docs/design/norms.md)
+ADI_DEFAULTS = {"tol": 1e-12, "maxiter": 3000, "shifts": "projection", "num_shifts": 16, "selection": "residual",
+                "refine": 1}
 
 
 @dataclass
