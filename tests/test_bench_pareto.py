@@ -73,7 +73,10 @@ def test_pareto_quick_through_bench_run(tmp_path):
         assert (tmp_path / name).stat().st_size > 0, name
     df = pd.read_csv(tmp_path / "pareto.csv")
     ok = df[df["status"] == "ok"]
-    assert set(ok["method"]) == {"irka", "bt", "bt-vv", "irka-projected", "irka-fo"}
+    assert set(ok["method"]) == {"irka", "bt", "bt-vv", "irka-projected", "irka-fo", "so-h2"}
+    soh2 = pd.read_csv(tmp_path / "pareto_soh2.csv")
+    assert list(soh2["r"]) == [2, 4] and (soh2["so_h2_lus"] >= soh2["bt_vv_lus"]).all()
+    assert (ok[ok["method"] == "so-h2"]["lu_count_standalone"] > 0).all()
     for col in ("time_s", "time_standalone_s", "max_abs_error", "max_rel_error"):
         assert np.all(np.isfinite(ok[col])), col
     assert (ok["time_standalone_s"] >= ok["time_s"] - 1e-12).all()

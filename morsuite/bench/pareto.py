@@ -4,13 +4,17 @@ r"""Benchmark ``pareto``: wall time against error for every reducer, and each ru
 one reducer per (model, method), so BT keeps its Gramians across r: ``irka``
 (2r first-order states), ``bt`` (first-order square-root BT, r states), ``bt-vv``
 (``bt`` with ``form="vv"``, 2r states), ``irka-fo`` (first-order tangential IRKA, r
-states; ``h2_error_tracked`` is its own exact H2 error) on dsms(6000) and tcom(2000),
-and also ``irka-projected`` (2r states, :math:`O(n_1^3)`) on dsms(1000). Error:
+states; ``h2_error_tracked`` is its own exact H2 error) and ``so-h2`` (the
+structure-preserving H2 descent, 2r states) on dsms(6000) and tcom(2000), and also
+``irka-projected`` (2r states, :math:`O(n_1^3)`) on dsms(1000). Error:
 :math:`\max_\omega \sigma_{\max}(T(j\omega) - T_r(j\omega))` on 200 log-spaced
 frequencies of the band, the full response computed once per model. Time:
 ``time_standalone_s``, the cost of the ROM from scratch (:func:`standalone_time`).
 The paper's claim (IRKA more accurate and faster than BT) is judged pairwise at
-equal numbers of first-order states, and at equal r (:data:`COMPARISONS`).
+equal numbers of first-order states, and at equal r (:data:`COMPARISONS`). ``so-h2``
+is set against second-order BT (``bt-vv``) at equal r in error, time and LUs
+(:func:`soh2_against_bt`; its LUs include the Gramians' ADI, the BT levels'
+nothing, the paper's IRKA it starts from, and its exact evaluations).
 
 **The floor.** At r = 20 on dsms(6000) and tcom(2000) a fresh ``irka``, ``bt``,
 ``bt-vv`` and ``irka-fo`` run is timed against ``lu_count`` x the median of one bare LU with its
@@ -38,7 +42,8 @@ from .output import code_state, resolve_out_dir, rewrite_derived
 from .pareto_report import write_outputs
 from .profiler import profile_categories
 
-__all__ = ["bench_pareto", "derive_verdicts", "rewrite", "standalone_time", "METHODS"]
+__all__ = ["bench_pareto", "derive_verdicts", "rewrite", "standalone_time", "standalone_lus",
+           "soh2_against_bt", "METHODS"]
 
 #: method label -> (registry name, options, what r means)
 METHODS = {
@@ -47,6 +52,7 @@ METHODS = {
     "bt-vv": ("bt", {"form": "vv", "gramian_cache": "reducer"}, "second-order velocity-velocity BT (2r states)"),
     "irka-projected": ("irka-projected", {}, "second-order, dense Pi-projected (2r states)"),
     "irka-fo": ("irka-fo", {}, "first-order tangential IRKA (r states)"),
+    "so-h2": ("so-h2", {}, "second-order H2 descent from the best BT level / IRKA (2r states)"),
 }
 
 #: methods whose r is the number of first-order states (the others: 2r states)
@@ -55,12 +61,12 @@ FIRST_ORDER = ("bt", "irka-fo")
 
 def _plan(quick: bool) -> dict:
     if quick:
-        return {"models": [("dsms:g=200", ("irka", "bt", "bt-vv", "irka-projected", "irka-fo")),
+        return {"models": [("dsms:g=200", ("irka", "bt", "bt-vv", "irka-projected", "irka-fo", "so-h2")),
                            ("tcom:nc=20", ("irka", "bt", "irka-fo"))],
                 "r": (2, 4), "nfreq": 50, "floor_models": ("dsms:g=200",),
                 "floor_methods": ("irka", "bt", "irka-fo"), "floor_r": 4, "floor_samples": 2, "floor_repeat": 1}
-    return {"models": [("dsms:g=6000", ("irka", "bt", "bt-vv", "irka-fo")),
-                       ("tcom:nc=2000", ("irka", "bt", "bt-vv", "irka-fo")),
+    return {"models": [("dsms:g=6000", ("irka", "bt", "bt-vv", "irka-fo", "so-h2")),
+                       ("tcom:nc=2000", ("irka", "bt", "bt-vv", "irka-fo", "so-h2")),
                        ("dsms:g=1000", ("irka", "bt", "bt-vv", "irka-projected", "irka-fo"))],
             "r": tuple(range(2, 41, 2)), "nfreq": 200, "floor_models": ("dsms:g=6000", "tcom:nc=2000"),
             "floor_methods": ("irka", "bt", "bt-vv", "irka-fo"), "floor_r": 20, "floor_samples": 8,
@@ -80,6 +86,15 @@ def standalone_time(info: dict) -> float:
     for key, cost in (info.get("setup_cost") or {}).items():
         t += max(0.0, float(cost) - float(tb.get(key, 0.0) or 0.0))
     return t
+
+
+def standalone_lus(info: dict) -> int:
+    """LUs of the ROM from scratch: ``lu_count`` plus the Gramians' LUs where they were reused
+    (bt: ``lu_count_gramians``; so-h2: its own LUs plus the Gramians')."""
+    lus = int(info.get("lu_count") or 0)
+    if "lu_breakdown" in info:  # so-h2: gramians + IRKA start + exact evaluations
+        return lus - int(info["lu_breakdown"].get("gramians", 0)) + int(info.get("lu_count_gramians", 0))
+    return int(info.get("lu_count_gramians", lus))
 
 
 def _sweep(spec, fom, methods, rs, omega, H, echo):
@@ -112,7 +127,8 @@ def _sweep(spec, fom, methods, rs, omega, H, echo):
                 "kind": info["kind"], "converged": bool(info.get("converged", True)),
                 "stable": bool(info.get("stable", True)), "iterations": info.get("iterations"),
                 "lu_count": info.get("lu_count"),
-                "lu_count_standalone": info.get("lu_count_gramians", info.get("lu_count")),
+                "lu_count_standalone": standalone_lus(info), "lu_count_gramians": info.get("lu_count_gramians"),
+                "h2_error": info.get("h2_error"), "start": info.get("start"),
                 "time_s": info["time_s"], "time_standalone_s": standalone_time(info),
                 "max_abs_error": float(err["abs_error"].max()),
                 "max_rel_error": float(err["rel_error"].max()),
@@ -194,6 +210,38 @@ def _compare(rows, spec, other, noise, tie=1.05, match="states", label=None) -> 
     return pairs, summ
 
 
+def soh2_against_bt(rows) -> list:
+    """so-h2 against second-order BT (``bt-vv``) at equal r: band error, standalone time and LUs (so-h2's
+    include the Gramians' ADI LUs, the BT levels and the paper's IRKA it starts from)."""
+    out = []
+    for spec in dict.fromkeys(x["model"] for x in rows):
+        ok = [x for x in rows if x["model"] == spec and x.get("status") == "ok"]
+        a = {x["r_requested"]: x for x in ok if x["method"] == "so-h2"}
+        b = {x["r_requested"]: x for x in ok if x["method"] == "bt-vv"}
+        for r in sorted(set(a) & set(b)):
+            x, y = a[r], b[r]
+            out.append({"model": spec, "r": r, "so_h2_error": x["max_abs_error"], "bt_vv_error": y["max_abs_error"],
+                        "error_ratio": x["max_abs_error"] / y["max_abs_error"] if y["max_abs_error"] > 0 else np.inf,
+                        "so_h2_h2_error": x.get("h2_error"), "so_h2_start": x.get("start"),
+                        "so_h2_time_s": x["time_standalone_s"], "bt_vv_time_s": y["time_standalone_s"],
+                        "time_ratio": x["time_standalone_s"] / max(y["time_standalone_s"], 1e-300),
+                        "so_h2_lus": x["lu_count_standalone"], "bt_vv_lus": y["lu_count_standalone"],
+                        "lu_ratio": x["lu_count_standalone"] / max(y["lu_count_standalone"], 1),
+                        "so_h2_iterations": x.get("iterations")})
+    return out
+
+
+def _soh2_ratios(cmp) -> dict:
+    ratios = {}
+    for spec in dict.fromkeys(c["model"] for c in cmp):
+        cs = [c for c in cmp if c["model"] == spec]
+        for key, what in (("time_ratio", "standalone time"), ("lu_ratio", "LUs"), ("error_ratio", "max abs error")):
+            ratios[f"{spec} so-h2/bt-vv {what} (median)"] = {
+                "value": float(np.median([c[key] for c in cs])), "target": None,
+                "what": f"median over {len(cs)} values of r of so-h2's {what} / second-order BT's (bt-vv)"}
+    return ratios
+
+
 def derive_verdicts(rows, noise: dict) -> tuple[list, list]:
     """All pairs and verdicts of :data:`COMPARISONS` from the sweep rows; ``noise``: model -> roundoff level."""
     pairs, verdicts = [], []
@@ -223,7 +271,8 @@ def rewrite(out_dir="results/bench") -> list[Path]:
             noise[spec] = info["noise_floor"]
         res["pairs"], res["verdicts"] = derive_verdicts(res["rows"], noise)
         floor_ratios = {k: v for k, v in res["ratios"].items() if k.startswith("floor ")}
-        res["ratios"] = {**_verdict_ratios(res["verdicts"]), **floor_ratios}
+        res["so_h2"] = soh2_against_bt(res["rows"])
+        res["ratios"] = {**_verdict_ratios(res["verdicts"]), **_soh2_ratios(res["so_h2"]), **floor_ratios}
 
     return rewrite_derived(out_dir, "pareto", derive, write_outputs)
 
@@ -291,7 +340,7 @@ def _floor_case(spec, fom, label, r, samples, repeat):
 # ---------------------------------------------------------------------------
 
 def bench_pareto(quick: bool = False, out_dir=None, *, plan: dict | None = None, echo=print) -> dict:
-    """Time against error for irka, bt, bt-vv (and irka-projected on a small DSMS); floors at r = 20."""
+    """Time against error for irka, bt, bt-vv, so-h2 (and irka-projected on a small DSMS); floors at r = 20."""
     from .. import models
     from ..analysis import freq_grid
 
@@ -334,7 +383,8 @@ def bench_pareto(quick: bool = False, out_dir=None, *, plan: dict | None = None,
                      f"{row['lu_count']} LUs x {1e3 * row['lu_floor_s']:.3g} ms -> ratio {row['ratio']:.2f}; "
                      + ", ".join(f"{k} {100 * v / tot:.0f}%" for k, v in g.items()), flush=True)
         del fom
-    ratios = _verdict_ratios(verdicts)
+    soh2 = soh2_against_bt(rows)
+    ratios = {**_verdict_ratios(verdicts), **_soh2_ratios(soh2)}
     for x in floor:
         ratios[f"floor {x['model']} {x['method']} r={x['r']}"] = {
             "value": x["ratio"], "target": 1.5,
@@ -349,7 +399,8 @@ def bench_pareto(quick: bool = False, out_dir=None, *, plan: dict | None = None,
                        for k, v in plan.items()},
               "methods": {k: {"reducer": v[0], "options": v[1], "order": v[2]} for k, v in METHODS.items()},
               "code_start": code_start, "code": code_state(),
-              "full_response": resp, "rows": rows, "pairs": pairs, "verdicts": verdicts, "floor": floor,
+              "full_response": resp, "rows": rows, "pairs": pairs, "verdicts": verdicts, "so_h2": soh2,
+              "floor": floor,
               "ratios": ratios, "note": note}
     files = write_outputs(result, out)
     result["files"] = [str(p) for p in files]
@@ -358,5 +409,5 @@ def bench_pareto(quick: bool = False, out_dir=None, *, plan: dict | None = None,
 
 @benchmark("pareto")
 def _registered(quick: bool) -> dict:
-    """Wall time against error for irka/bt/bt-vv (irka-projected on g=1000), r = 2..40; LU floors at r = 20."""
+    """Wall time against error for irka/bt/bt-vv/so-h2 (irka-projected on g=1000), r = 2..40; LU floors at r = 20."""
     return bench_pareto(quick, resolve_out_dir())

@@ -5,5 +5,6 @@ from .irka import IRKA
 from .irka_projected import IRKAProjected  # noqa: F401  (registers "irka-projected")
 from .bt import BT  # noqa: F401  (registers "bt")
 from .irka_fo import IRKAFO  # noqa: F401  (registers "irka-fo")
+from .so_h2 import SOH2  # noqa: F401  (registers "so-h2")
 
 __all__ = ["Option", "Reducer", "Reduction", "make", "available", "register", "get_class", "IRKA"]

@@ -1,6 +1,6 @@
 r"""First-order tangential IRKA against a dense modal surrogate, and Newton on its fixed-point map.
 
-The first-order IRKA (:mod:`.irka_fo`) maps interpolation data
+The first-order IRKA (:mod:`morsuite.reducers.irka_fo`) maps interpolation data
 :math:`x = (\sigma_i, b_i, c_i)` to the mirrored poles and residue directions
 of the reduced model that interpolates at :math:`x`; its fixed points are the
 stationary points of the H2 error (Meier-Luenberger conditions). On a lightly
@@ -196,7 +196,7 @@ class Chart:
         return np.asarray(al, dtype=complex), np.asarray(bl, dtype=complex), np.asarray(cl, dtype=complex)
 
     def scales(self, x):
-        """Per coordinate: |shift| for a slot's shift coordinates, 1 for direction coordinates."""
+        """Per coordinate: ``|shift|`` for a slot's shift coordinates, 1 for direction coordinates."""
         out = np.ones_like(x)
         i = 0
         nfree = 1 + (self.m - 1) + (self.p - 1)

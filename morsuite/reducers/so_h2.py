@@ -1,0 +1,352 @@
+r"""``so-h2``: structure-preserving H2 descent for second-order reduced models.
+
+Minimises :math:`J = \|T - T_r\|_{\mathcal H_2}^2` over second-order reduced models
+:math:`T_r(s) = \hat L(s^2\hat M + s\hat D + \hat K)^{-1}\hat F` with
+:math:`\hat M = I` (no loss, :mod:`.so_h2_params`), in the spirit of the structured
+H2 literature (Mlinarić, Benner and Gugercin, arXiv 2209.00714 and 2401.10047;
+Sato, arXiv 1803.04097; Schwerdtner and Voigt's SOBMOR, arXiv 2011.07567, for the
+parametrisation). The gradient is Wilson's for the first-order realization,
+carried to :math:`(\hat K, \hat D, \hat F, \hat L)` by the chain rule
+(:mod:`morsuite.linalg.h2_gradient`).
+
+1. **Start**: the best, by exact H2 error, of the second-order BT levels
+   pp, pv, vp, vv, fv and the paper's IRKA at the same r (option ``start``;
+   :mod:`.so_h2_starts`).
+2. **Surrogate phase**: the descent against a first-order BT model :math:`T_N`
+   of the cached Gramian factors whose distance to the model is at most
+   ``surrogate_tol`` times the start's error: dense evaluations,
+   :math:`O(N(2r)^2)` each, no LU; its value without the cancellation of the
+   three-term formula. Monotone L-BFGS (:mod:`morsuite.linalg.lbfgs`) with the
+   inverse Gauss-Newton diagonal as initial Hessian (the variables' scales differ
+   by orders of magnitude where reduced poles are near the axis), refreshed every
+   ``precond_every`` iterations.
+3. **Full phase**: the exact error of the result (one LU per real pole or
+   conjugate pair: r LUs), and up to ``full_maxit`` monotone iterations against
+   the model itself, its gradient from the solves at the mirrored poles, warm
+   started with the surrogate phase's curvature pairs. If the surrogate's result
+   is not better than the start in exact error, the surrogate is refined (twice
+   as many states) and the surrogate phase repeated from the start, at most
+   ``refinements`` times.
+
+The result is never worse than the start in exact H2 error: the start is returned
+otherwise. Every iterate is stable: ``parametrization="general"`` rejects steps
+that leave the stable set (the objective is infinite there),
+``"passive"`` (:math:`\hat K`, :math:`\hat D` symmetric positive definite) is
+stable by construction but can only start from ``fv``.
+
+When the start's exact error is below what the three-term formula resolves
+(its floor above ``resolution`` times :math:`J`: errors near
+:math:`\sqrt{\varepsilon}\,\|T\|`, as on the DSMS at r = 20), the start is returned
+unchanged, with an :class:`~morsuite.errors.AccuracyWarning` and ``info["skipped"]``.
+
+``info``: ``start`` (label), ``start_h2_error``, ``candidates`` (per label: order,
+stability, surrogate and exact errors, LUs), ``h2_error`` (exact, of the result),
+``h2_error_surrogate`` (against the surrogate), ``h2_norm``, ``surrogate``
+(states, estimated distance, eigenvector condition), ``iterations``
+(``iterations_surrogate`` + ``iterations_full``), ``evaluations``,
+``gradient_norm`` (of :math:`J` in the parameters, exact, at the result) and
+``gradient_norm_scaled`` (:math:`g^Thg/(2J)`, the relative decrease that a Newton step
+with the Gauss-Newton diagonal :math:`h^{-1}` predicts), ``stop_reason`` and
+``stop_reason_full``, ``history`` and ``history_full`` (:math:`\sqrt J` after each
+accepted step against the surrogate and against the model), ``lu_count`` (made by
+this call) with ``lu_breakdown`` (gramians, irka, exact) and ``lu_count_gramians``
+(the ADI LUs of second-order BT, for comparison), ``time_breakdown``,
+``setup_reused``, ``setup_cost``.
+
+Options (:attr:`SOH2.OPTIONS`, defaults): ``start="best"``, ``levels`` (all five),
+``irka_start=True``, ``parametrization="general"``, ``surrogate_tol=0.01``,
+``surrogate_states=None``, ``maxit=3000``, ``full_maxit=3``, ``full_backtracks=3``,
+``refinements=2``, ``rtol=1e-6``, ``window=20``, ``memory=100``,
+``precondition="gauss-newton"``, ``precond_every=200``, ``resolution=0.25``, and the
+LR-ADI options of ``bt``.
+
+Cost: the Gramian factors (shared with ``bt`` through the model's cache), one SVD per
+BT level, the paper's IRKA when it is a candidate (its LUs), r LUs per exact
+evaluation (the candidates that the surrogate cannot separate, the surrogate phase's
+result, at most ``1 + full_maxit * full_backtracks`` in the full phase), and
+:math:`O(N(2r)^2 + r^3)` dense work per surrogate evaluation (``maxit`` at most).
+Measurements: ``docs/design/so_h2.md``.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..errors import AccuracyWarning, ConvergenceWarning, InputError, OptionError
+from ..linalg.gramians import ADI_DEFAULTS
+from ..linalg.h2 import norm_squared
+from ..linalg.h2_gradient import FullTarget, gauss_newton_diagonal, h2_objective, h2_value
+from ..linalg.lbfgs import Evaluation, lbfgs_descent
+from .base import Option, Reducer, register
+from .so_h2_params import PARAMETRISATIONS
+from .so_h2_starts import LEVELS, STARTS, Surrogates, candidate_roms, standard_realization
+
+__all__ = ["SOH2"]
+
+ADI_OPTIONS = ("tol", "maxiter", "shifts", "num_shifts", "selection")
+#: start chosen when no candidate's exact error is resolved: the paper's level first
+PREFERENCE = ("vv", "pp", "vp", "pv", "fv", "irka")
+
+
+class SOH2(Reducer):
+    """Structure-preserving H2 descent (see the module docstring); ``reduce(r)`` returns a
+    :class:`~morsuite.rom.SecondOrderROM` of order r (2r states) with :math:`\\hat M = I`."""
+
+    name = "so-h2"
+
+    OPTIONS = {
+        "start": Option("best", "choice", "start model: the best by exact H2 error of the candidates, or one "
+                        "of them (second-order BT level or the paper's IRKA)", choices=("best",) + STARTS),
+        "levels": Option(LEVELS, "any", "second-order BT levels among the candidates of start='best' (a "
+                         "tuple of pp, pv, vp, vv, fv; each level costs one SVD of a product of the factors)"),
+        "irka_start": Option(True, "bool", "include the paper's IRKA among the candidates of start='best' "
+                             "(its LUs are counted)"),
+        "parametrization": Option("general", "choice", "general K, D, F, L with steps leaving the stable set "
+                                  "rejected, or passive: K diagonal positive, D = L_D L_D^T (stable by "
+                                  "construction; starts from the fv level)", choices=tuple(PARAMETRISATIONS)),
+        "surrogate_tol": Option(0.01, "float", "largest estimated H2 distance of the surrogate to the model, "
+                                "relative to the start's error", low=0, high=1, open_low=True, open_high=True),
+        "surrogate_states": Option(None, "int", "first-order states of the surrogate (None: chosen by "
+                                   "surrogate_tol)", low=2, nullable=True),
+        "maxit": Option(3000, "int", "iterations of the surrogate phase", low=0),
+        "full_maxit": Option(3, "int", "iterations against the full model after the surrogate phase "
+                             "(r LUs per evaluation)", low=0),
+        "full_backtracks": Option(3, "int", "step halvings per line search against the full model (each "
+                                  "costs r LUs)", low=1),
+        "refinements": Option(2, "int", "times the surrogate is doubled when its result is not better than "
+                              "the start in exact error", low=0),
+        "rtol": Option(1e-6, "float", "stop when J decreased by less than rtol times its value over the last "
+                       "window iterations", low=0, high=1, open_high=True),
+        "window": Option(20, "int", "iterations over which the decrease is measured", low=1),
+        "memory": Option(100, "int", "curvature pairs kept by L-BFGS", low=1),
+        "precondition": Option("gauss-newton", "choice", "initial inverse Hessian: inverse Gauss-Newton "
+                               "diagonal or the identity", choices=("gauss-newton", "none")),
+        "precond_every": Option(200, "int", "iterations between refreshes of the Gauss-Newton diagonal "
+                                "(0: never)", low=0),
+        "resolution": Option(0.25, "float", "the descent is skipped when the exact error's floor exceeds this "
+                             "fraction of J at the start", low=0, high=1, open_low=True),
+        "tol": Option(ADI_DEFAULTS["tol"], "float", "LR-ADI tolerance of the Gramian factors (as bt)",
+                      low=0, high=1, open_low=True, open_high=True),
+        "maxiter": Option(ADI_DEFAULTS["maxiter"], "int", "LR-ADI iteration cap (as bt)", low=1),
+        "shifts": Option(ADI_DEFAULTS["shifts"], "choice", "LR-ADI shift strategy (as bt)",
+                         choices=("projection", "penzl")),
+        "num_shifts": Option(ADI_DEFAULTS["num_shifts"], "int", "LR-ADI shifts per computation (as bt)", low=1),
+        "selection": Option(ADI_DEFAULTS["selection"], "choice", "LR-ADI projection shift selection (as bt)",
+                            choices=("residual", "gain")),
+    }
+
+    def __init__(self, fom, **options):
+        super().__init__(fom, **options)
+        self._surrogates = None
+        self._full = None
+
+    def _check_options(self):
+        o = self.options
+        lv = o["levels"]
+        if (isinstance(lv, str) or not isinstance(lv, (tuple, list)) or not lv
+                or any(x not in LEVELS for x in lv) or len(set(lv)) != len(lv)):
+            raise OptionError(f"The 'levels' parameter of SOH2 must be a non-empty tuple of distinct levels "
+                              f"from {', '.join(LEVELS)}. Got {lv!r} instead.")
+        o["levels"] = tuple(lv)
+        if o["parametrization"] == "passive" and o["start"] not in ("best", "fv"):
+            raise InputError(f"parametrization='passive' starts from the fv level only (symmetric M, D, K); "
+                             f"got start={o['start']!r}")
+
+    # -- pieces ---------------------------------------------------------------
+    def _labels(self):
+        o = self.options
+        if o["start"] != "best":
+            return (o["start"],)
+        if o["parametrization"] == "passive":
+            return ("fv",)
+        return tuple(o["levels"]) + (("irka",) if o["irka_start"] else ())
+
+    def _full_target(self, adi):
+        if self._full is None:
+            n2, f2, rec, _ = norm_squared(self.fom, adi)
+            self._full = FullTarget(self.fom, n2, f2)
+        return self._full
+
+    def _objective(self, target, param, counter):
+        def fun(theta):
+            ev = h2_objective(target, *param.matrices(theta))
+            counter["evaluations"] += 1
+            counter["lu"] += ev.lu_count
+            if not ev.stable:
+                return Evaluation(np.inf)
+            return Evaluation(ev.value, ev.floor, param.gradient(theta, ev.gradient), ev)
+        return fun
+
+    def _precond(self, param, theta):
+        if self.options["precondition"] == "none":
+            return np.ones(param.size)
+        H = param.gauss_newton(theta, gauss_newton_diagonal(*param.matrices(theta)))
+        return 1.0 / np.maximum(H, 1e-10 * np.max(H))
+
+    def _descend(self, target, param, theta, first, maxit, pairs=None):
+        """Monotone L-BFGS from theta, the preconditioner refreshed every precond_every iterations."""
+        o = self.options
+        counter = {"evaluations": 0, "lu": 0}
+        fun = self._objective(target, param, counter)
+        chunk = o["precond_every"] or maxit
+        done, hist, reason, res = 0, [], "maxit", None
+        cur = first
+        while done < maxit or res is None:
+            h = self._precond(param, theta)
+            res = lbfgs_descent(fun, theta, precond=h, maxit=min(chunk, maxit - done), memory=o["memory"],
+                                rtol=o["rtol"], window=o["window"], first=cur, pairs=pairs)
+            hist += res.history[1:] if hist else res.history
+            done += res.iterations
+            theta, cur, pairs = res.x, res.best, res.memory
+            reason = res.reason
+            if reason != "maxit" or maxit == 0:
+                break
+        return theta, cur, pairs, done, reason, hist, counter, h
+
+    # -- the reduction ----------------------------------------------------------
+    def _start(self, r, adi, param_cls):
+        """Candidates, surrogate, and the start: its label, ROM and exact evaluation (module docstring)."""
+        o, fom = self.options, self.fom
+        roms, cands, bt = candidate_roms(fom, r, self._labels(), adi, keep=param_cls.accepts)
+        if not roms:
+            raise InputError(f"so-h2: no stable candidate start at r = {r} "
+                             "(" + ", ".join(f"{k}: {v.get('dropped')}" for k, v in cands.items()) + ")")
+        if self._surrogates is None:
+            self._surrogates = Surrogates(bt)
+        full = self._full_target(adi)
+        sur, srec = self._surrogates.choose(r, roms, o["surrogate_tol"], o["surrogate_states"])
+        unresolved = False
+        for label, rom in roms.items():
+            ev = h2_value(sur, *standard_realization(rom))
+            cands[label]["surrogate_h2_error"] = float(np.sqrt(max(ev.value, 0.0)))
+            unresolved |= bool(ev.floor > o["resolution"] * abs(ev.value))
+        # |e - e_surrogate| <= delta for every model: only candidates within 2 delta of the best can be
+        # in the wrong order, and only they get exact errors (r LUs each); all of them where the surrogate
+        # values are rounding
+        best_s = min(cands[k]["surrogate_h2_error"] for k in roms)
+        band = np.inf if unresolved else best_s + 2.0 * (srec["distance"] or 0.0) + 1e-3 * best_s
+        exact = {}
+
+        def evaluate(label):
+            rom = roms[label]
+            p = param_cls(rom.order, fom.m, fom.p)
+            exact[label] = ev = h2_objective(full, *p.matrices(p.from_rom(rom)))
+            cands[label]["h2_error"] = float(np.sqrt(max(ev.value, 0.0)))
+            cands[label]["h2_error_floor"] = float(np.sqrt(ev.floor))
+
+        for label in roms:
+            if cands[label]["surrogate_h2_error"] <= band:
+                evaluate(label)
+        start = min(exact, key=lambda k: exact[k].value)
+        resolved = exact[start].floor <= o["resolution"] * abs(exact[start].value)
+        if not resolved:
+            # every error is below what the formula resolves (errors near sqrt(eps) ||T||): the ranking is
+            # rounding, so take the first of the preference order, the paper's level first
+            start = next(k for k in PREFERENCE if k in roms)
+            if start not in exact:
+                evaluate(start)
+        return start, roms[start], exact[start], resolved, cands, sur, srec, bt._gram
+
+    def _phases(self, r, param, theta0, ev0, sur, srec, roms_for_refinement):
+        """Surrogate phase, exact check (refining the surrogate if needed), full phase; returns
+        (theta, evaluation, record)."""
+        o, full = self.options, self._full
+        rec = {"iterations_surrogate": 0, "iterations_full": 0, "evaluations": 0, "refinements": 0,
+               "history": [], "history_full": [], "stop_reason_full": None, "precond": None}
+        while True:
+            ev_s = h2_objective(sur, *param.matrices(theta0))
+            first_s = Evaluation(ev_s.value, ev_s.floor, param.gradient(theta0, ev_s.gradient), ev_s)
+            th, cur_s, pairs, its, reason_s, hs, cnt, h = self._descend(sur, param, theta0, first_s, o["maxit"])
+            rec.update({"iterations_surrogate": rec["iterations_surrogate"] + its, "stop_reason": reason_s,
+                        "history": [float(np.sqrt(max(v, 0.0))) for v in hs], "precond": h, "surrogate": srec,
+                        "h2_error_surrogate": float(np.sqrt(max(cur_s.value, 0.0))),
+                        "h2_error_surrogate_start": float(np.sqrt(max(ev_s.value, 0.0)))})
+            rec["evaluations"] += cnt["evaluations"] + 2
+            ev_f = h2_objective(full, *param.matrices(th))
+            if ev_f.stable and ev_f.value < ev0.value - ev0.floor:
+                break
+            if rec["refinements"] >= o["refinements"] or srec["all_hankel_values"]:
+                rec["stop_reason_full"] = "surrogate result not better than the start in exact error"
+                return theta0, Evaluation(ev0.value, ev0.floor, param.gradient(theta0, ev0.gradient), ev0), rec
+            rec["refinements"] += 1
+            sur, srec = self._surrogates.choose(r, roms_for_refinement, o["surrogate_tol"], 2 * srec["states_asked"])
+        cur = Evaluation(ev_f.value, ev_f.floor, param.gradient(th, ev_f.gradient), ev_f)
+        rec["history_full"] = [float(np.sqrt(max(ev_f.value, 0.0)))]
+        if not o["full_maxit"]:
+            rec["stop_reason_full"] = "full_maxit = 0"
+            return th, cur, rec
+        cnt = {"evaluations": 0, "lu": 0}
+        # each evaluation costs r LUs: stop after the first iteration that gains less than rtol, and after
+        # the first failed line search (the surrogate's optimum is within its distance of this one)
+        res = lbfgs_descent(self._objective(full, param, cnt), th, precond=h, maxit=o["full_maxit"],
+                            memory=o["memory"], rtol=o["rtol"], window=1, first=cur, pairs=pairs,
+                            max_backtracks=o["full_backtracks"], retry=False)
+        rec["history_full"] += [float(np.sqrt(max(v, 0.0))) for v in res.history[1:]]
+        rec.update({"iterations_full": res.iterations, "stop_reason_full": res.reason})
+        rec["evaluations"] += cnt["evaluations"]
+        return res.x, res.best, rec
+
+    def _reduce(self, r):
+        o = self.options
+        adi = {k: o[k] for k in ADI_OPTIONS}
+        t0 = time.perf_counter()
+        param_cls = PARAMETRISATIONS[o["parametrization"]]
+        lu0 = self._full.lu_count if self._full is not None else 0
+        start, start_rom, ev0, resolved, cands, sur, srec, gram = self._start(r, adi, param_cls)
+        adi_fresh = bool(gram.get("adi_computed"))
+        t_ranked = time.perf_counter()
+        param = param_cls(start_rom.order, self.fom.m, self.fom.p)
+        theta0 = param.from_rom(start_rom)
+        skipped = None
+        if ev0.floor > o["resolution"] * ev0.value:
+            skipped = (f"the start's exact H2 error {np.sqrt(max(ev0.value, 0.0)):.3e} is below the resolution "
+                       f"of the objective (floor of J {ev0.floor:.1e} > {o['resolution']:g} J): returned unchanged")
+            theta = theta0
+            cur = Evaluation(ev0.value, ev0.floor, param.gradient(theta0, ev0.gradient), ev0)
+            rec = {"iterations_surrogate": 0, "iterations_full": 0, "evaluations": 0, "refinements": 0,
+                   "history": [], "history_full": [], "stop_reason": "skipped", "stop_reason_full": "skipped",
+                   "precond": None, "surrogate": srec}
+        else:
+            theta, cur, rec = self._phases(r, param, theta0, ev0, sur, srec, {start: start_rom})
+        t_desc = time.perf_counter()
+        h = rec.pop("precond")
+        if h is None:
+            h = self._precond(param, theta)
+        g = cur.gradient
+        failed = rec["stop_reason_full"] == "surrogate result not better than the start in exact error"
+        lu_exact = self._full.lu_count - lu0
+        lu_irka = cands.get("irka", {}).get("lu_count", 0)
+        lu_gram = int(gram["c"].lu_count) if adi_fresh else 0
+        info = {
+            "start": start, "start_ranking_resolved": bool(resolved),
+            "start_h2_error": float(np.sqrt(max(ev0.value, 0.0))), "candidates": cands,
+            "parametrization": param.name, "variables": param.size, "h2_norm": float(np.sqrt(self._full.norm2)),
+            "h2_error": float(np.sqrt(max(cur.value, 0.0))), "h2_error_floor": float(np.sqrt(cur.floor)),
+            **rec, "skipped": skipped,
+            "iterations": rec["iterations_surrogate"] + rec["iterations_full"],
+            "converged": bool(skipped or (not failed and rec["stop_reason"] != "maxit")),
+            "gradient_norm": float(np.linalg.norm(g)),
+            "gradient_norm_scaled": float((g @ (h * g)) / (2.0 * max(cur.value, 1e-300))),
+            "max_pole_real": float(cur.data.details["max_pole_real"]),
+            "lu_count": lu_gram + lu_irka + lu_exact,
+            "lu_breakdown": {"gramians": lu_gram, "irka": lu_irka, "exact": lu_exact},
+            "lu_count_gramians": int(gram["c"].lu_count),
+            "time_breakdown": {"adi": gram["times"]["adi"] if adi_fresh else 0.0,
+                               "starts_and_ranking": t_ranked - t0, "descent": t_desc - t_ranked},
+            "setup_reused": not adi_fresh, "setup_cost": {"adi": gram["times"]["adi"]},
+        }
+        if skipped:
+            self.warn(f"so-h2: {skipped}", AccuracyWarning)
+        elif failed:
+            self.warn(f"so-h2 at r = {r}: the surrogate phase's result is not better than the start in exact H2 "
+                      f"error after {rec['refinements']} surrogate refinements; the start ({start}, H2 error "
+                      f"{info['start_h2_error']:.4e}) is returned", ConvergenceWarning)
+        elif rec["stop_reason"] == "maxit":
+            self.warn(f"so-h2 at r = {r}: the surrogate phase stopped at maxit = {o['maxit']} (H2 error "
+                      f"{info['h2_error']:.4e}, start {info['start_h2_error']:.4e})", ConvergenceWarning)
+        return param.rom(theta), info
+
+
+register("so-h2", SOH2)
