@@ -100,7 +100,7 @@ __all__ = ["BT", "FORMS"]
 FORMS = ("first-order", "pp", "pv", "vp", "vv", "fv")
 
 #: options that change the Gramian factors (reducers agreeing on them can share factors)
-ADI_OPTIONS = ("tol", "maxiter", "shifts", "num_shifts", "selection")
+ADI_OPTIONS = ("tol", "maxiter", "shifts", "num_shifts", "selection", "refine")
 
 #: which products Y_a^T (M) Z_b give the right (V) and left (W) bases of each level
 _LEVELS = {  # form: (svd for V, factor block of V, svd for W)
@@ -142,6 +142,10 @@ class BT(Reducer):
         "selection": Option("residual", "choice", "projection shifts chosen by their share of the current "
                             "residual or by Penzl's greedy rule on the ADI rational function",
                             choices=("residual", "gain")),
+        "refine": Option(1, "int", "long-double refinement steps of each shifted LR-ADI solve (1, not lradi's 0: "
+                         "without it the factors carry the solves' forward error, 8e-12 of ||T||_H2^2 on "
+                         "tcom(2000), which the exact H2 errors sharing them cannot certify; costs no LU, "
+                         "docs/design/norms.md)", low=0),
         "gramian_cache": Option("model", "choice", "where the LR-ADI factors are kept: in the model's cache, "
                                 "shared with every bt reducer and analysis.h2_norm / h2_error on the same model "
                                 "object and ADI options (LR-ADI runs once per model), or on this reducer only (a "
