@@ -122,7 +122,9 @@ def norm_squared(fom, adi: dict):
     (:math:`2\varepsilon\sqrt{\mathrm{rank}}`, measured 2e-16 to 7e-16 relative),
     and the forward error of the shifted solves, :math:`2u` relative with
     :math:`u` the refined solves' estimated error (``solve_error`` of the
-    factor; :data:`UNREFINED_UNIT` for factors computed with ``refine=0``,
+    controllability factor, whose solves are the refined ones; the observability
+    factor enters only the tail, about ``tol`` of the value;
+    :data:`UNREFINED_UNIT` for factors computed with ``refine=0``,
     whose solves are off by up to :math:`\kappa\varepsilon`: 7.9e-12 of
     :math:`\|T\|^2` on tcom(2000), ``docs/design/norms.md``).
     """

@@ -202,19 +202,10 @@ def refined_solve(lu, rhs, trans, a, operator: SaddleOperator, *, steps: int, ex
 
     Parameters
     ----------
-    lu : SaddleLU
-        The LU of S(a).
+    lu, trans, a, operator, steps, ext
+        As in :func:`refine_columns`.
     rhs : ndarray, shape (n1,)
         The first block of the right-hand side (the second is zero).
-    trans : bool
-    a : complex
-        The shift of ``lu``.
-    operator : SaddleOperator
-        S(a) on the pattern of the solver that made ``lu``.
-    steps : int
-        Refinement steps (>= 1).
-    ext : bool
-        Residual in np.longdouble (equals float where longdouble is double), else float.
 
     Returns
     -------
