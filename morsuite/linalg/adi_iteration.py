@@ -37,8 +37,8 @@ same LU and a residual in ``np.longdouble``
 shift next to a lightly damped or slow pole has a forward error of about
 :math:`\kappa\varepsilon`, and the Gramian inherits it: on tcom(nc = 2000)
 :math:`\|LZ_p\|_F^2` was 7.9e-12 relative off the exact
-:math:`\|T\|_{\mathcal H_2}^2` at every ADI tolerance, 3e-15 with one step
-(``docs/design/norms.md``). The largest first correction (relative, per
+:math:`\|T\|_{\mathcal H_2}^2` at every ADI tolerance, 8e-15 with one step
+of the controllability solves (``docs/design/norms.md``). The largest first correction (relative, per
 column: the unrefined solves' forward error) is kept in ``rho``.
 
 Cost per step: one solve (plain or transposed) with an LU made by the driver,

@@ -403,7 +403,7 @@ def lradi_pair(fom, *, tol=1e-10, maxiter=2000, shifts="projection", num_shifts=
     that value only through the ADI tail correction (about ``tol`` of it) and
     balanced truncation through Hankel singular values that are themselves
     accurate to about ``tol``. Refining both costs twice the refinement time
-    (tcom(2000): +32% of the LR-ADI time instead of +16%) for no accuracy that
+    (tcom(2000): +110% of the LR-ADI time instead of +47%) for no accuracy that
     a caller uses.
 
     Returns
