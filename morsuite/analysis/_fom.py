@@ -14,44 +14,14 @@ a response rounded to double has lost all but four digits of the difference
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
+
+from ..linalg.refine import SaddleOperator, refine_columns, refined_unit
 
 __all__ = ["FomResponse", "refined_unit"]
 
 LD = np.longdouble
 CLD = np.clongdouble
-EPS = np.finfo(float).eps
-EPS_LD = float(np.finfo(LD).eps)
-
-
-def refined_unit(rho: float, steps: int) -> float:
-    r"""Estimated relative error of a solution after ``steps`` refinement steps.
-
-    ``rho`` is the relative size of the first correction, i.e. the LU
-    solution's own error (about :math:`\kappa\varepsilon`). Each step
-    multiplies the error by about :math:`\rho` and cannot go below the
-    long-double residual's :math:`\varepsilon_{ld}\kappa \approx
-    \varepsilon_{ld}\rho/\varepsilon`; factor 4 for margin. Without
-    refinement: :math:`16\varepsilon` (the LU's error is then unknown).
-    """
-    if steps <= 0:
-        return 16.0 * EPS
-    return 4.0 * (rho ** (steps + 1) + EPS_LD * max(1.0, rho / EPS))
-
-
-class _Operator:
-    """The long-double product S(a) x on the solver's pattern (:class:`~morsuite.linalg.refine.SaddleOperator`,
-    the one IRKA refines its solves with)."""
-
-    def __init__(self, solver):
-        from ..linalg.refine import SaddleOperator
-
-        self._op = SaddleOperator(solver.pattern)
-
-    def __call__(self, a):
-        return self._op.at(a, False, True)
 
 
 class FomResponse:
@@ -78,9 +48,7 @@ class FomResponse:
         self.fom = fom
         self.refine = int(refine)
         self.solver = fom.new_solver(cache_size=cache_size)
-        self._op = None
-        self._apply = None
-        self._shift = None
+        self._op = None  # the long-double S(s) x on the solver's pattern, made on the first refinement
         self.last_unit = refined_unit(0.0, self.refine)
         #: the shifts at which an LU was made, in order (benchmarks time bare LUs at them)
         self.shifts = []
@@ -88,13 +56,6 @@ class FomResponse:
     @property
     def lu_count(self) -> int:
         return int(self.solver.stats.factorizations)
-
-    def _operator(self, s):
-        if self._op is None:
-            self._op = _Operator(self.solver)
-        if self._shift != s:
-            self._apply, self._shift = self._op(s), s
-        return self._apply
 
     def _first(self, s, rhs):
         before = self.solver.stats.factorizations
@@ -105,29 +66,14 @@ class FomResponse:
 
     def _refined(self, s, lu, rhs, x) -> np.ndarray:
         """``refine`` steps from the LU solution ``x`` (n1 + n2 rows): the primal block in clongdouble."""
-        fom = self.fom
-        apply = self._operator(s)
-        unchecked = replace(lu, matrix=None)  # the corrections need no backward-error check of their own
-        rho = 0.0
-        n = fom.n1 + fom.n2
-        out = np.empty((fom.n1, rhs.shape[1]), dtype=CLD)
-        for j in range(rhs.shape[1]):
-            br = np.zeros(n, dtype=LD)
-            bi = np.zeros(n, dtype=LD)
-            br[: fom.n1] = rhs[:, j].real
-            bi[: fom.n1] = np.imag(rhs[:, j])
-            xr, xi = x[:, j].real.astype(LD), np.imag(x[:, j]).astype(LD)
-            for step in range(self.refine):
-                yr, yi = apply(xr, xi)
-                r = (br - yr).astype(float) + 1j * (bi - yi).astype(float)
-                d = unchecked.solve(r, full=True)
-                if step == 0:
-                    size = np.max(np.abs(x[: fom.n1, j]))
-                    rho = max(rho, float(np.max(np.abs(d[: fom.n1])) / size) if size > 0 else 0.0)
-                xr = xr + d.real.astype(LD)
-                xi = xi + d.imag.astype(LD)
-            out[:, j] = xr[: fom.n1] + 1j * xi[: fom.n1].astype(CLD)
+        if self._op is None:
+            self._op = SaddleOperator(self.solver.pattern)
+        xr, xi, rho = refine_columns(lu, rhs, x, False, s, self._op, steps=self.refine)
+        n1 = self.fom.n1
         self.last_unit = refined_unit(rho, self.refine)
+        out = xr[:n1].astype(CLD)
+        if xi is not None:
+            out = out + 1j * xi[:n1].astype(CLD)
         return out
 
     def solve(self, s, rhs) -> np.ndarray:

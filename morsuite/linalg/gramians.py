@@ -18,6 +18,11 @@ nothing, and the observability factor corrects the ADI truncation of
 :math:`\|T\|_{\mathcal H_2}^2` (:func:`h2_tail`), which is otherwise the
 floor of every H2 error computed from it.
 
+Accuracy: with ``refine=1`` (the default) each controllability solve is
+refined once with a long-double residual, and the factor carries its
+estimated forward error (``solve_error``), which :func:`morsuite.linalg.h2.norm_squared`
+puts into the floor of :math:`\|T\|_{\mathcal H_2}^2` (``docs/design/norms.md``).
+
 Memory: the factors stay with the model (``fom.cache.clear()`` drops them);
 on tcom(2000) at tol 1e-12 they hold about 4 x 6001 x 1200 doubles (230 MB).
 """
@@ -37,8 +42,12 @@ __all__ = ["ADI_DEFAULTS", "GramianFactors", "gramian_factors", "cached_gramian_
            "h2_tail"]
 
 #: LR-ADI options of the shared factors, with balanced truncation's defaults (``bt`` declares the same);
-#: tol 1e-12 (not lradi's 1e-10): see morsuite.reducers.bt
-ADI_DEFAULTS = {"tol": 1e-12, "maxiter": 3000, "shifts": "projection", "num_shifts": 16, "selection": "residual"}
+#: tol 1e-12 (not lradi's 1e-10): see morsuite.reducers.bt; refine 1 (not lradi's 0): one long-double
+#: refinement step of every controllability solve, without which ||T||_H2^2 from the factor is off by the
+#: solves' forward error (7.9e-12 relative on tcom(2000), docs/design/norms.md); it costs no LU, +25% (dsms(6000))
+#: and +47% (tcom(2000)) of the LR-ADI time
+ADI_DEFAULTS = {"tol": 1e-12, "maxiter": 3000, "shifts": "projection", "num_shifts": 16, "selection": "residual",
+                "refine": 1}
 
 
 @dataclass
@@ -111,8 +120,8 @@ def gramian_factors(fom, *, use_cache: bool = True, **adi) -> GramianFactors:
         nothing (benchmarks that time whole runs).
     **adi
         LR-ADI options (``tol``, ``maxiter``, ``shifts``, ``num_shifts``,
-        ``selection``); missing ones take :data:`ADI_DEFAULTS`, the defaults of
-        ``bt``. Factors are shared only between calls with equal options.
+        ``selection``, ``refine``); missing ones take :data:`ADI_DEFAULTS`, the
+        defaults of ``bt``. Factors are shared only between calls with equal options.
 
     Returns
     -------

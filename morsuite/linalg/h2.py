@@ -38,9 +38,12 @@ import scipy.linalg as sla
 from ..errors import InputError
 from .gramians import gramian_factors, h2_tail
 
-__all__ = ["Modal", "modal_form", "norm_squared", "pole_residue_squared", "EPS"]
+__all__ = ["Modal", "modal_form", "norm_squared", "pole_residue_squared", "EPS", "UNREFINED_UNIT"]
 
 EPS = np.finfo(float).eps
+#: relative forward error assumed for solves that were not refined (their error is not measured): the
+#: largest measured, 7.9e-12 (||T||^2 from unrefined LR-ADI solves on tcom(2000)), with margin
+UNREFINED_UNIT = 1e-10
 
 
 @dataclass
@@ -113,6 +116,17 @@ def norm_squared(fom, adi: dict):
     cached in ``fom.cache`` next to the factors. Cost: the factors' LR-ADI run
     on the first call per model and options (``record["gramian_lu_count"]``),
     then products with the factors once, then nothing.
+
+    The floor adds three parts: the tail estimate's own error (the tail times
+    the observability residual, factor 10), the rounding of the factor
+    (:math:`2\varepsilon\sqrt{\mathrm{rank}}`, measured 2e-16 to 7e-16 relative),
+    and the forward error of the shifted solves, :math:`2u` relative with
+    :math:`u` the refined solves' estimated error (``solve_error`` of the
+    controllability factor, whose solves are the refined ones; the observability
+    factor enters only the tail, about ``tol`` of the value;
+    :data:`UNREFINED_UNIT` for factors computed with ``refine=0``,
+    whose solves are off by up to :math:`\kappa\varepsilon`: 7.9e-12 of
+    :math:`\|T\|^2` on tcom(2000), ``docs/design/norms.md``).
     """
     t0 = time.perf_counter()
     gf = gramian_factors(fom, **adi)
@@ -129,11 +143,13 @@ def norm_squared(fom, adi: dict):
     # the tail estimate misses about tail * (observability residual); the factor's rounding, measured
     # against long-double quadratures of |T(jw)|^2 (dsms(60), random MIMO models: 2e-16 .. 7e-16 relative,
     # factor ranks 28 .. 258), is bounded with margin by 2 eps sqrt(rank)
-    floor = 10.0 * tail * max(o.residual, EPS) + 2.0 * EPS * np.sqrt(max(c.rank, 1)) * value
+    unit = c.solve_error if c.refine else UNREFINED_UNIT
+    floor = 10.0 * tail * max(o.residual, EPS) + 2.0 * EPS * np.sqrt(max(c.rank, 1)) * value + 2.0 * unit * value
     if not gf.converged:
         floor = max(floor, tail)
     rec = {"method": "gramian", "uncorrected": float(np.sqrt(raw)), "tail": tail,
-           "factor_rank": c.rank, "adi_converged": gf.converged,
+           "factor_rank": c.rank, "adi_converged": gf.converged, "adi_refine": c.refine,
+           "adi_solve_error": float(unit),
            "adi_residuals": {"controllability": c.residual, "observability": o.residual},
            "gramian_cached": not gf.computed, "gramian_lu_count": gf.lu_count if gf.computed else 0,
            "gramian_time_s": gf.time_s if gf.computed else 0.0, "adi_options": dict(gf.options),
@@ -143,7 +159,8 @@ def norm_squared(fom, adi: dict):
     return value, floor, rec, gf
 
 
-def pole_residue_squared(norm2: float, floor2: float, cross: complex, cross_abs: float, modal: Modal):
+def pole_residue_squared(norm2: float, floor2: float, cross: complex, cross_abs: float, modal: Modal,
+                         cross_err: float = 0.0):
     r""":math:`\|T - T_r\|^2 = \|T\|^2 - 2\,\mathrm{Re}\langle T, T_r\rangle + \|T_r\|^2` and its absolute floor.
 
     Parameters
@@ -157,6 +174,10 @@ def pole_residue_squared(norm2: float, floor2: float, cross: complex, cross_abs:
         The sum of the moduli of its terms (for the rounding estimate).
     modal : Modal
         The reduced model's pole-residue form, whose residues the cross term used.
+    cross_err : float
+        Absolute error bound of the cross term beyond its rounding: the solves'
+        forward errors, :math:`\sum_k w_k|t_k|u_k` with :math:`u_k` the relative
+        error of the solve at :math:`-\lambda_k` (default 0: exact solves).
 
     Returns
     -------
@@ -169,5 +190,6 @@ def pole_residue_squared(norm2: float, floor2: float, cross: complex, cross_abs:
     tr = np.sqrt(max(self2, 0.0))
     # rounding of the three sums (measured errors are 30-160x below this on dsms(60) and random models),
     # and the modal form's perturbation of the reduced model, seen through both of its terms alike
-    floor = floor2 + 2.0 * EPS * (norm2 + 2.0 * cross_abs + self_abs) + 2.0 * EPS * modal.kappa * tr * max(e_est, 1e-300)
+    floor = (floor2 + 2.0 * EPS * (norm2 + 2.0 * cross_abs + self_abs) + 2.0 * cross_err
+             + 2.0 * EPS * modal.kappa * tr * max(e_est, 1e-300))
     return float(e2), float(floor), {"rom_norm": float(tr), "self_inner": float(self2), "cross": float(np.real(cross))}

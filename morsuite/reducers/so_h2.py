@@ -85,7 +85,7 @@ from .so_h2_starts import LEVELS, STARTS, Surrogates, candidate_roms, standard_r
 
 __all__ = ["SOH2"]
 
-ADI_OPTIONS = ("tol", "maxiter", "shifts", "num_shifts", "selection")
+ADI_OPTIONS = ("tol", "maxiter", "shifts", "num_shifts", "selection", "refine")
 #: start chosen when no candidate's exact error is resolved: the paper's level first
 PREFERENCE = ("vv", "pp", "vp", "pv", "fv", "irka")
 
@@ -135,6 +135,8 @@ class SOH2(Reducer):
         "num_shifts": Option(ADI_DEFAULTS["num_shifts"], "int", "LR-ADI shifts per computation (as bt)", low=1),
         "selection": Option(ADI_DEFAULTS["selection"], "choice", "LR-ADI projection shift selection (as bt)",
                             choices=("residual", "gain")),
+        "refine": Option(ADI_DEFAULTS["refine"], "int", "long-double refinement steps of each shifted LR-ADI "
+                         "solve (as bt)", low=0),
     }
 
     def __init__(self, fom, **options):

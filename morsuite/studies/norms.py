@@ -39,14 +39,14 @@ NORM_KINDS = ("h2", "hinf")
 #: measure of a scene -> (norm kind, relative?)
 NORM_MEASURES = {"h2": ("h2", False), "h2_rel": ("h2", True), "hinf": ("hinf", False), "hinf_rel": ("hinf", True)}
 #: the LR-ADI options of the Gramian factors (morsuite.linalg.gramians.ADI_DEFAULTS)
-ADI_KEYS = ("tol", "maxiter", "shifts", "num_shifts", "selection")
+ADI_KEYS = ("tol", "maxiter", "shifts", "num_shifts", "selection", "refine")
 
 
 def _adi(ctx, where, value):
     if value is None:
         return None
     ctx.keys(where, value, ADI_KEYS)
-    checks = {"tol": float_in_01, "maxiter": positive_int, "num_shifts": positive_int}
+    checks = {"tol": float_in_01, "maxiter": positive_int, "num_shifts": positive_int, "refine": nonnegative_int}
     out = {}
     for k, v in value.items():
         out[k] = checks[k](ctx, f"{where}.{k}", v) if k in checks else v
