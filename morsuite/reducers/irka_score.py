@@ -34,17 +34,17 @@ import numpy as np
 
 from ..linalg.gramians import ADI_DEFAULTS, cached_gramian_factors
 from ..linalg.h2 import norm_squared
-from ..linalg.h2_gradient import EPS, FullTarget, h2_value, second_order_realization
+from ..linalg.h2_gradient import EPS, FullTarget, h2_value
+from .so_h2_starts import standard_realization
 
 __all__ = ["ExactH2Score", "rom_realization", "iterate_scorer", "score_cost"]
 
 
 def rom_realization(rom):
     """(A, B, C) with E = I of a reduced model: M (second-order) or E (first-order) applied as its inverse."""
-    solve = np.linalg.solve
     if rom.kind == "second-order":
-        return second_order_realization(solve(rom.M, rom.K), solve(rom.M, rom.D), solve(rom.M, rom.F), rom.L)
-    return solve(rom.E, rom.A), solve(rom.E, rom.B), rom.C
+        return standard_realization(rom)
+    return np.linalg.solve(rom.E, rom.A), np.linalg.solve(rom.E, rom.B), rom.C
 
 
 class ExactH2Score:
