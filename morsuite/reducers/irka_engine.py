@@ -43,8 +43,8 @@ paths are kept bit for bit; engaged when it cycles in its last stage, settles
 at an unstable model or stalls in its last stage, it replaces the update by
 the residue rule with matched hysteresis and a tabu list, relaxed adaptively
 in shifts and directions. Without convergence it also picks the returned
-iterate: the stable one of smallest :attr:`IRKABase.iterate_score` among a
-shortlist (smallest measure without a scorer).
+iterate: the stable one of smallest exact H2 error among a shortlist
+(option ``shortlist_score``, :mod:`.irka_score`; :attr:`IRKABase.iterate_score` overrides).
 
 Options and defaults: :attr:`IRKABase.OPTIONS`. Cost per iteration: one
 factorization per real shift or conjugate pair (``info["lu_count"]``), two
