@@ -182,7 +182,7 @@ def test_shortlist_prefers_stable_then_score_then_earlier():
     assert (it, payload, scores) == (3, ("s3",), {})
     it, payload, scores = s.choose(lambda rom: {"s3": 2.0, "s4": 1.0}[rom])
     assert (it, payload) == (4, ("s4",)) and scores == {3: 2.0, 4: 1.0}
-    it, _, _ = s.choose(lambda rom: 1.0)  # tie: the earlier iterate
+    it, _, _ = s.choose(lambda rom: 1.0)  # tie: the smaller measure
     assert it == 3
     only_unstable = Shortlist(3)
     only_unstable.add(0.5, 1, False, ("a",))

@@ -43,8 +43,8 @@ paths are kept bit for bit; engaged when it cycles in its last stage, settles
 at an unstable model or stalls in its last stage, it replaces the update by
 the residue rule with matched hysteresis and a tabu list, relaxed adaptively
 in shifts and directions. Without convergence it also picks the returned
-iterate: the stable one of smallest :attr:`IRKABase.iterate_score` among a
-shortlist (smallest measure without a scorer).
+iterate: the stable one of smallest exact H2 error among a shortlist
+(option ``shortlist_score``, :mod:`.irka_score`; :attr:`IRKABase.iterate_score` overrides).
 
 Options and defaults: :attr:`IRKABase.OPTIONS`. Cost per iteration: one
 factorization per real shift or conjugate pair (``info["lu_count"]``), two
@@ -67,6 +67,7 @@ from ..rom import SecondOrderROM
 from .base import Option, Reducer
 from .irka_safeguards import GUARD_OPTIONS, CycleGuard, Shortlist, ill_conditioned, instability_culprit, \
     oblique_selection, orthonormal_basis, perturb_shifts, shift_slots, zero_transfer_error
+from .irka_score import iterate_scorer, score_cost
 from .shift_update import COMPLEX_TOL, UpdateSchedule, bt_rule, initial_shifts, relaxed_update, residue_rule, \
     shifts_from_poles
 
@@ -141,10 +142,10 @@ class IRKABase(Reducer):
     }
 
     #: Score of the shortlisted stable iterates when the iteration does not converge (safeguard
-    #: on): a callable ``(fom, rom) -> float``, smaller is better (meant: the exact H2 error), or
-    #: None: their convergence measure. The one place to plug a scorer in: on a reducer,
-    #: ``red.iterate_score = f``; for every IRKA variant, ``IRKABase.iterate_score = staticmethod(f)``.
-    #: Cost: one call per shortlisted iterate (option ``shortlist``), at the end only.
+    #: on): a callable ``(fom, rom) -> float``, smaller is better, or None: option
+    #: ``shortlist_score`` decides (default the exact H2 error, :class:`~.irka_score.ExactH2Score`).
+    #: On a reducer, ``red.iterate_score = f``; for every IRKA variant,
+    #: ``IRKABase.iterate_score = staticmethod(f)``. Cost: one call per shortlisted iterate, at the end only.
     iterate_score = None
 
     # -- hooks -------------------------------------------------------------
@@ -454,8 +455,9 @@ class IRKABase(Reducer):
             recent = (recent + [alpha.copy()])[-o["cycle_window"]:] if o["cycle_window"] else []
             alpha, bdir, cdir = self._next_data(it, (alpha, bdir, cdir), (new_alpha, new_b, new_c), relax,
                                                 blend=guard.engaged)
+        score = None
         if chosen is None:
-            score = getattr(self, "iterate_score", None) if guard.active else None
+            score = iterate_scorer(self) if guard.active else None
             chosen = shortlist.choose(None if score is None else (lambda m: score(self.fom, m)))
         times = {"setup": t_setup, **setup_times, **self._phase_times(), "projection": t_proj,
                  "shift_update": t_upd}
@@ -463,7 +465,8 @@ class IRKABase(Reducer):
                                   switched=schedule.switched_at)
         info["safeguard"] = {**guard.info(), "active": guard.active,
                              "scored_by": "iterate_score" if chosen[2] else "measure",
-                             "scores": {str(i): v for i, v in chosen[2].items()}}
+                             "scores": {str(i): v for i, v in chosen[2].items()}, **score_cost(score)}
+        info["lu_count"] += info["safeguard"]["score_lu_count"] + info["safeguard"]["score_gramian_lu_count"]
         return rom, info
 
     def _outcome(self, r, best, history, it, converged, cycled, *, times, perturbed, switched):

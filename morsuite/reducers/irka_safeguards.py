@@ -143,6 +143,11 @@ GUARD_OPTIONS = {
                                  "relaxation (1: no relaxation)", low=0, high=1, open_low=True),
     "shortlist": Option(5, "int", "stable iterates kept (with their models) for the final choice "
                         "without convergence (safeguard on)", low=1),
+    "shortlist_score": Option("h2", "choice", "how the shortlisted iterates are ranked without convergence: "
+                              "their exact H2 error (irka_score.ExactH2Score: about r sparse LUs per "
+                              "shortlisted iterate, no Gramian factor) or their convergence measure (no cost); "
+                              "a reducer's iterate_score, when set, takes precedence",
+                              choices=("h2", "measure")),
 }
 
 
@@ -341,5 +346,7 @@ class Shortlist:
         if score is None:
             return self.stable[0][1], self.stable[0][2], {}
         scores = {it: float(score(payload[0])) for _, it, payload in self.stable}
-        it = min(scores, key=lambda k: (scores[k] if np.isfinite(scores[k]) else np.inf, k))
+        # iterates without a finite score rank last, among themselves by measure (the list's order)
+        rank = {it: j for j, (_, it, _) in enumerate(self.stable)}
+        it = min(scores, key=lambda k: (scores[k] if np.isfinite(scores[k]) else np.inf, rank[k]))
         return it, next(p for _, i, p in self.stable if i == it), scores

@@ -1,0 +1,89 @@
+"""IRKA without convergence returns the shortlisted stable iterate of smallest exact H2 error.
+
+Reference: :func:`morsuite.analysis.h2_error` and :func:`morsuite.analysis.h2_norm` of
+each shortlisted iterate, computed after the fact (the reducer's scorer never sees
+them). No test depends on which iterate the chaotic iteration visits.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import morsuite as ms
+from morsuite.reducers import irka_score
+
+
+@pytest.fixture(scope="module")
+def mimo():
+    return ms.models.tcom(nc=50, constraints="curvature", io="points")
+
+
+def _scored_run(monkeypatch, fom, r, **opts):
+    """The reduction with the default scorer, and the (rom, score) pairs it scored."""
+    seen = []
+    original = irka_score.ExactH2Score.__call__
+
+    def spy(self, f, rom):
+        value = original(self, f, rom)
+        seen.append((rom, value))
+        return value
+
+    monkeypatch.setattr(irka_score.ExactH2Score, "__call__", spy)
+    with pytest.warns(ms.ConvergenceWarning, match="did not converge"):
+        res = ms.reducers.make("irka", fom, maxit=30, tol=1e-12, **opts).reduce(r)
+    return res, seen
+
+
+def test_returned_iterate_has_the_smallest_exact_h2_error_of_the_shortlist(monkeypatch, mimo):
+    res, seen = _scored_run(monkeypatch, mimo, 10)
+    info, sg = res.info, res.info["safeguard"]
+    assert info["converged"] is False and sg["scored_by"] == "iterate_score"
+    assert 2 <= len(seen) <= info["options"]["shortlist"]  # the premise: a choice was made
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        norm2 = ms.analysis.h2_norm(mimo) ** 2
+        errors = [ms.analysis.h2_error(mimo, rom) for rom, _ in seen]
+    # the score is ||T - Tr||^2 - ||T||^2; its rounding is eps ||T||^2 times the reduced
+    # model's conditioning, far below 1e-8 ||T||^2 here
+    for e, (_, score) in zip(errors, seen):
+        assert score + norm2 == pytest.approx(e ** 2, abs=1e-8 * norm2)
+    returned = ms.analysis.h2_error(mimo, res.rom)
+    assert res.rom.is_stable()
+    assert returned <= min(errors) * (1 + 1e-8)
+    assert returned == pytest.approx(min(errors), rel=1e-8)
+    # the cost: one LU per real pole or conjugate pair of each scored iterate, counted in lu_count
+    assert sg["score_gramian_lu_count"] == 0
+    poles = [rom.poles() for rom, _ in seen]
+    assert sg["score_lu_count"] == sum(int(np.sum(p.imag >= 0)) for p in poles)
+    assert sg["score_lu_count"] <= 2 * 10 * info["options"]["shortlist"]
+
+
+def test_h2_score_reports_the_error_itself_when_the_gramian_factors_are_cached(mimo):
+    rom = ms.reducers.make("bt", mimo).reduce(6).rom  # caches the factors on the model
+    score = irka_score.ExactH2Score()
+    value = score(mimo, rom)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ref = ms.analysis.h2_error(mimo, rom)
+    assert score.records[0]["h2_error"] == pytest.approx(ref, rel=1e-8)
+    assert score.gramian_lu_count == 0
+    assert score.lu_count == score.records[0]["lu_count"] == int(np.sum(rom.poles().imag >= 0))
+    assert value == pytest.approx(ref ** 2 - ms.analysis.h2_norm(mimo) ** 2, abs=1e-10 * ref ** 2 + 1e-14)
+
+
+def test_measure_ranking_costs_nothing_and_unstable_iterates_score_infinity(mimo):
+    with pytest.warns(ms.ConvergenceWarning):
+        res = ms.reducers.make("irka", mimo, maxit=30, tol=1e-12, shortlist_score="measure").reduce(10)
+    sg = res.info["safeguard"]
+    assert sg["scored_by"] == "measure" and sg["score_lu_count"] == 0 and res.rom.is_stable()
+    unstable = ms.rom.SecondOrderROM(np.eye(2), -np.eye(2), np.eye(2), np.ones((2, mimo.m)), np.ones((mimo.p, 2)))
+    score = irka_score.ExactH2Score()
+    assert score(mimo, unstable) == np.inf and score.lu_count == 0
+
+
+def test_bad_shortlist_score_is_refused():
+    with pytest.raises(ms.OptionError, match="shortlist_score"):
+        ms.reducers.make("irka", ms.models.dsms(50), shortlist_score="hinf")
