@@ -148,3 +148,11 @@ def test_the_checker_sees_local_and_relative_imports():
                      ("morsuite", frozenset({"__version__"}))}
     assert layer("morsuite.models.index3") not in ALLOWED["linalg"]
     assert "report" not in ALLOWED["analysis"] and "studies" not in ALLOWED["report"]
+
+
+def test_no_module_is_over_500_lines():
+    """Modules are split by responsibility before they grow past 500 lines (issue 17)."""
+    root = Path(morsuite.__file__).resolve().parent
+    long = {str(p.relative_to(root)): n for p in root.rglob("*.py")
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > 500}
+    assert not long, f"modules over 500 lines: {long}"

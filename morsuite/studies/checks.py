@@ -16,7 +16,8 @@ from numbers import Integral, Real
 from ..errors import SpecError
 
 __all__ = ["Ctx", "suggest", "name_ok", "r_values", "positive_int", "nonnegative_int", "int_at_least",
-           "positive_float", "float_in_01", "finite_list", "choice_of", "subset_of"]
+           "positive_float", "float_in_01", "finite_list", "choice_of", "subset_of",
+           "r_by_method", "check_output_names", "norms_of"]
 
 
 def suggest(word, choices) -> str:
@@ -155,3 +156,39 @@ def subset_of(choices):
         return list(value)
     check.describe = "a list of distinct values from " + ", ".join(map(str, choices))
     return check
+
+
+def r_by_method(ctx, where, table, mlist, spec, kind):
+    """``{alias: orders}`` of a scene's ``r_by_method``: methods of the scene, orders as ``r``."""
+    ctx.keys(where, table, tuple(mlist))
+    out = {}
+    for alias, value in table.items():
+        rs = r_values(ctx, f"{where}.{alias}", value)
+        if spec.one_r and len(rs) != 1:
+            ctx.fail(f"{where}.{alias}", f"a {kind!r} scene shows one reduced order per method; got {list(rs)}")
+        out[alias] = rs
+    return out
+
+
+def check_output_names(ctx, scenes):
+    """Each scene's figures and tables (a time scene makes NAME and NAME_error) have names of their own."""
+    from .plan import SUMMARY
+    from .scenes import output_names
+
+    seen = {SUMMARY: "the summary table"}
+    for i, s in enumerate(scenes):
+        for out in output_names(s):
+            if out in seen:
+                ctx.fail(f"scenes[{i}] ({s.name!r}).name", f"its output {out!r} has the name of {seen[out]}; "
+                                                           "rename the scene")
+            seen[out] = f"scene {s.name!r}"
+
+
+def norms_of(ctx, data):
+    """The top-level ``norms`` (kinds for every reduction) and ``norm_options`` (every kind, filled in)."""
+    from .norms import NORM_KINDS, full_options
+
+    kinds = tuple(subset_of(NORM_KINDS)(ctx, "norms", data.get("norms", [])))
+    given = data.get("norm_options", {})
+    ctx.keys("norm_options", given, NORM_KINDS)
+    return kinds, {k: full_options(ctx, f"norm_options.{k}", k, given.get(k)) for k in NORM_KINDS}

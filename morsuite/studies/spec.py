@@ -54,7 +54,8 @@ import numpy as np
 from ..utils import to_plain
 from ..errors import FileFormatError, InputError, SpecError
 from ..modelfiles import is_model_path, model_files
-from .checks import Ctx as _Ctx, name_ok as _name_ok, r_values as _r_values, subset_of, suggest as _suggest
+from .checks import Ctx as _Ctx, name_ok as _name_ok, r_values as _r_values, suggest as _suggest
+from .checks import check_output_names as _check_output_names, norms_of as _norms, r_by_method as _r_by_method
 
 __all__ = ["Study", "ModelEntry", "GridEntry", "MethodEntry", "SceneEntry", "load_spec",
            "study_from_dict", "plain"]
@@ -383,17 +384,6 @@ def _scene_entry(ctx, i, table, study_models, grids, methods, root):
                       title=title, params=params, paper=paper, r_by_method=by_method)
 
 
-def _r_by_method(ctx, where, table, mlist, spec, kind):
-    """``{alias: orders}`` of a scene's ``r_by_method``: methods of the scene, orders as ``r``."""
-    ctx.keys(where, table, tuple(mlist))
-    out = {}
-    for alias, value in table.items():
-        rs = _r_values(ctx, f"{where}.{alias}", value)
-        if spec.one_r and len(rs) != 1:
-            ctx.fail(f"{where}.{alias}", f"a {kind!r} scene shows one reduced order per method; got {list(rs)}")
-        out[alias] = rs
-    return out
-
 
 # -- entry points ----------------------------------------------------------
 def study_from_dict(data: dict, *, path=None, source: str | None = None, memo=None) -> Study:
@@ -469,30 +459,6 @@ def study_from_dict(data: dict, *, path=None, source: str | None = None, memo=No
     return Study(name=name, title=title, description=description, path=path, root=root, models=models,
                  grids=grids, methods=methods, scenes=scenes, raw=data, norms=norms, norm_options=norm_options,
                  memo=memo)
-
-
-def _check_output_names(ctx, scenes):
-    """Each scene's figures and tables (a time scene makes NAME and NAME_error) have names of their own."""
-    from .plan import SUMMARY
-    from .scenes import output_names
-
-    seen = {SUMMARY: "the summary table"}
-    for i, s in enumerate(scenes):
-        for out in output_names(s):
-            if out in seen:
-                ctx.fail(f"scenes[{i}] ({s.name!r}).name", f"its output {out!r} has the name of {seen[out]}; "
-                                                           "rename the scene")
-            seen[out] = f"scene {s.name!r}"
-
-
-def _norms(ctx, data):
-    """The top-level ``norms`` (kinds for every reduction) and ``norm_options`` (every kind, filled in)."""
-    from .norms import NORM_KINDS, full_options
-
-    kinds = tuple(subset_of(NORM_KINDS)(ctx, "norms", data.get("norms", [])))
-    given = data.get("norm_options", {})
-    ctx.keys("norm_options", given, NORM_KINDS)
-    return kinds, {k: full_options(ctx, f"norm_options.{k}", k, given.get(k)) for k in NORM_KINDS}
 
 
 def load_spec(path, *, memo=None) -> Study:
