@@ -409,5 +409,5 @@ def bench_pareto(quick: bool = False, out_dir=None, *, plan: dict | None = None,
 
 @benchmark("pareto")
 def _registered(quick: bool) -> dict:
-    """Wall time against error for irka/bt/bt-vv/so-h2 (irka-projected on g=1000), r = 2..40; LU floors at r = 20."""
+    """Wall time against error for irka/bt/bt-vv/irka-fo/so-h2 (irka-projected on g=1000), r = 2..40; LU floors at r = 20."""
     return bench_pareto(quick, resolve_out_dir())
