@@ -100,9 +100,11 @@ class SaddleOperator:
             # (a a) m + a d + k + g, with a a = (ar ar - ai ai) + i (ar ai + ai ar)
             dre = (((ar * ar - ai * ai) * m + ar * d) + k) + g
             dim = (ar * ai + ai * ar) * m + ai * d if ai != 0 else None
+            cache.update(a=complex(a), data={True: (dre, dim)})
+        if bool(trans) not in cache["data"]:  # the CSR order of the entries, made when first needed
             perm = cache["perm"]
-            cache.update(a=complex(a), data={True: (dre, dim),
-                                             False: (dre[perm], None if dim is None else dim[perm])})
+            dre, dim = cache["data"][True]
+            cache["data"][False] = (dre[perm], None if dim is None else dim[perm])
         dre, dim = cache["data"][bool(trans)]
         idx, starts, nonempty = cache["structure"][bool(trans)]
 
