@@ -2,7 +2,7 @@
 
 ``python -m morsuite.stress --cases N --out results/stress`` runs N random
 cases and writes ``summary.md`` and ``summary.csv``;
-``python -m morsuite.stress --refused-table`` prints the README table of
+``python -m morsuite.stress --refused-table`` prints the table of
 refused inputs. The property-based tests in ``tests/stress`` use the same
 check functions.
 

@@ -6,8 +6,8 @@ needs_data)``: ``call(tmp, data)`` must raise ``error`` (a subclass of
 ``match``; ``tmp`` is a scratch directory and ``data`` the directory holding
 :data:`DATA_FILE` (the M.E.S.S. DSMS file with g = 600), used only by the rows
 with ``needs_data``. tests/stress/test_refused_inputs.py runs one test per row;
-:func:`markdown_table` runs every row and prints the table of the README
-section "Refused inputs" with the actual messages::
+:func:`markdown_table` runs every row and prints the table (the one in the
+documentation's design note on refused inputs) with the actual messages::
 
     python -m morsuite.stress --refused-table [--data-dir DIR]
 

@@ -119,7 +119,7 @@ def main(argv=None) -> int:
     p.add_argument("--case", type=int, default=None, help="run only this case index and print it")
     p.add_argument("--progress", type=int, default=100, help="print a progress line every N cases (0: never)")
     p.add_argument("--refused-table", action="store_true",
-                   help="print the Markdown table of refused inputs (README section 'Refused inputs') and exit")
+                   help="print the Markdown table of refused inputs (docs/design/refused.md) and exit")
     p.add_argument("--data-dir", default=None, help="with --refused-table: the directory of "
                    "mess_msd_ind3_g600.mat (default: the checkout's tests/data)")
     args = p.parse_args(argv)
