@@ -32,6 +32,7 @@ extensions = [
     "numpydoc",
     "morsuite_api",
     "morsuite_tables",
+    "morsuite_results",
 ]
 # MathJax copied into the built site (the docs extra installs it), so that pages read
 # offline show their formulas; without it sphinx.ext.mathjax loads MathJax from its CDN
