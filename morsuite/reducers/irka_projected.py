@@ -98,7 +98,6 @@ import scipy.sparse.linalg as spla
 from scipy.linalg import lapack
 
 from ..errors import MemoryBudgetError, ModelError, SingularShiftError
-from ..rom import SecondOrderROM
 from . import base as _base
 from .base import Option, register
 from .irka_engine import IRKABase

@@ -145,7 +145,6 @@ def needs(scene):
     """Artifacts the scene reads: ("metrics", model, grid, method, r), ("reduce", model, method, r),
     ("norm", model, method, r, kind) (an exact error norm and the model's norm) or
     ("time", model, method, r) (the scene's simulations)."""
-    kind = KINDS[scene.kind]
     norms = list(scene.params.get("norms") or [])
     if scene.params.get("measure") in NORM_MEASURES:
         norms.append(NORM_MEASURES[scene.params["measure"]][0])
