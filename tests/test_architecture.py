@@ -30,7 +30,7 @@ import morsuite
 
 PKG = Path(morsuite.__file__).resolve().parent
 LEAVES = {"errors", "utils", "rom", "modelfiles"}
-CHAIN = ["linalg", "models", "reducers", "analysis", "studies"]
+CHAIN = ["linalg", "models", "norms", "reducers", "analysis", "studies"]
 ALLOWED = {"leaf": {"leaf"}, "report": {"leaf", "report"}}
 for _i, _layer in enumerate(CHAIN):
     ALLOWED[_layer] = {"leaf", *CHAIN[: _i + 1]} | ({"report"} if _layer == "studies" else set())

@@ -48,9 +48,9 @@ def test_pole_residue_floor_bounds_its_error_on_the_tcom(r):
     # the cross term's solves are refined and their error is part of the floor
     pr = d["pole_residue"]
     assert 0 < pr["cross_error"] and 2 * pr["cross_error"] <= pr["floor_squared"]
-    # auto takes the formula here (its floor is within rtol = 1e-8) and returns the same value
+    # auto returns a value whose floor bounds its error and is no looser than the formula's
     auto, da = ms.analysis.h2_error(fom, rom, details=True)
-    assert da["method"] == "pole-residue" and auto == value
+    assert da["trusted"] and da["rel_floor"] <= d["rel_floor"] and abs(auto / ref - 1) <= da["rel_floor"] + dq["rel_floor"]
 
 
 def test_h2_norm_floor_bounds_its_error_on_the_tcom():
