@@ -18,7 +18,7 @@ For a stable, strictly proper, real :math:`H`,
     on tcom(2000); refined, 8e-15, inside the floor, which includes the
     solves' estimated error (:func:`~morsuite.linalg.h2.norm_squared`).
 :func:`h2_error`
-    :math:`\|T - T_r\|_{\mathcal H_2}` by one of two routes, chosen by ``method``:
+    :math:`\|T - T_r\|_{\mathcal H_2}` by one of three routes, chosen by ``method``:
 
     ``"pole-residue"``
         :math:`\|T-T_r\|^2 = \|T\|^2 - 2\,\mathrm{Re}\langle T, T_r\rangle + \|T_r\|^2`
@@ -55,16 +55,32 @@ For a stable, strictly proper, real :math:`H`,
         :class:`~morsuite.analysis._rom.RomResponse`) and subtracted in long
         double, so the difference is accurate to double precision even where
         it is 1e-12 of :math:`T`. No cancellation; its cost is the node count.
+    ``"error-gramian"``
+        LR-ADI of the error system :math:`T - T_r` with the shifts of the
+        model's cached factor (:mod:`morsuite.norms.error_gramian`):
+        :math:`\|T-T_r\|^2 = \|LZ_p - C_rZ_r\|_F^2 + t_1 - 2t_2 + t_3`, the
+        columns subtracted before they are squared, so that rounding enters
+        with one power of :math:`\|T\|/\|T-T_r\|` instead of two. The tail's
+        cross term :math:`t_2` is bounded by Cauchy-Schwarz (no LU) or computed
+        from solves at the mirrored poles (the pole-residue route's LUs).
     ``"auto"`` (default)
-        The pole-residue value when its estimated relative accuracy is within
-        ``rtol`` (large errors: cheap) and the modal form is well conditioned,
-        else the quadrature.
+        Escalates until ``rtol`` is met: the error-Gramian route with the bound
+        (no LU); the solves at the mirrored poles, which give :math:`t_2` and
+        the pole-residue value, a second and independent route; the quadrature
+        when it fits ``max_nodes``. The value with the smallest floor is
+        returned, and two routes that disagree beyond their floors make it
+        untrusted.
 
-A value whose estimated relative accuracy is worse than both
-``TRUST_FACTOR * rtol`` and ``TRUST_REL`` (four significant digits) is
-flagged: an :class:`~morsuite.errors.AccuracyWarning` and
-``details["trusted"] = False``; ``details["rtol_met"]`` says whether ``rtol``
-itself was reached. An unstable reduced model, or one with a
+Every value carries a floor (``details["floor"]``), a bound of its error, not
+an estimate of it (``docs/design/norms.md`` has the measurements behind each
+term). A value whose floor is worse than both ``TRUST_FACTOR * rtol`` and
+``TRUST_REL`` (four significant digits) relative is flagged: an
+:class:`~morsuite.errors.AccuracyWarning` and ``details["trusted"] = False``;
+``details["rtol_met"]`` says whether ``rtol`` itself was reached. A quadrature
+that stopped at its node budget still covers the whole axis (its breakpoints
+are thinned to fit), says ``converged=False`` and keeps its error estimate as
+its floor; a squared error that comes out negative is reported as 0 with
+``negative=True`` and an infinite relative floor, never silently clipped. An unstable reduced model, or one with a
 nonzero feedthrough, has an infinite error: ``inf`` with a warning
 (:class:`~morsuite.errors.StabilityWarning`) and ``details["reason"]``.
 """
