@@ -29,8 +29,9 @@ import warnings
 import numpy as np
 
 from ..errors import MorsuiteError
+from ..reducers.outcome import standalone_lu_count, standalone_time
 
-__all__ = ["FOM_ARRAYS", "fom_response", "standalone_time", "reduce_sweep", "metrics", "rom_payload", "rom_from_payload", "CAUGHT"]
+__all__ = ["FOM_ARRAYS", "fom_response", "reduce_sweep", "metrics", "rom_payload", "rom_from_payload", "CAUGHT"]
 
 #: Failures of one r that are recorded (and reported) instead of aborting the study.
 #: Anything else is a bug and propagates.
@@ -85,17 +86,6 @@ def fom_response(source: str, lo: float, hi: float, n: int, key: str, cache_root
         Cache(cache_root, read=False).put("fom", key, {k: out[k] for k in FOM_ARRAYS},
                                           {k: v for k, v in out.items() if k not in FOM_ARRAYS + ("cached",)})
     return out
-
-
-def standalone_time(info: dict, wall: float) -> float:
-    """Time of ``reduce(r)`` on a fresh reducer: the call's time plus the r-independent
-    work it reused (``info["setup_cost"]`` when ``info["setup_reused"]``, the reducers'
-    convention for Gramians or a projector formed once per instance)."""
-    t = float(info.get("time_s", wall))
-    if info.get("setup_reused"):
-        cost = info.get("setup_cost") or {}
-        t += sum(float(v) for v in cost.values() if isinstance(v, (int, float)) and not isinstance(v, bool))
-    return t
 
 
 def reduce_sweep(source: str, reducer: str, options: dict, rs, keys: dict, cache_root=None,
