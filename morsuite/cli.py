@@ -81,7 +81,7 @@ def cmd_reduce(args) -> int:
             norms = analysis.error_norms(fom, res.rom)
         out.update({k: norms.get(k) for k in keys})
         warned += norms["norm_warnings"]
-    # the norms in which the reduced model is no better than T_r = 0 (analysis.flags)
+    # the norms in which the reduced model is no better than T_r = 0 (utils.worse_than_zero)
     out["worse_than_zero"] = analysis.worse_than_zero(
         band=(out["max_abs_error"], float(df.sigma_full.max())),
         h2=(out["h2_rel_error"], 1.0), hinf=(out["hinf_rel_error"], 1.0))

@@ -179,10 +179,17 @@ def test_standalone_time_formula():
 
 def test_studies_and_benchmarks_use_the_one_definition():
     from morsuite.bench import pareto
-    from morsuite.studies import results, tasks
+    from morsuite.studies import tasks
 
-    assert tasks.standalone_time is pareto.standalone_time is outcome.standalone_time
-    assert results.standalone_lu_count is pareto.standalone_lu_count is outcome.standalone_lu_count
+    assert pareto.standalone_time is outcome.standalone_time
+    assert pareto.standalone_lu_count is outcome.standalone_lu_count
+    tasks._model.cache_clear()  # a fresh model: the first call pays the Gramians
+    out = tasks.reduce_sweep("dsms:g=40", "bt", {"gramian_cache": "reducer"}, [2, 4], {2: "k2", 4: "k4"})
+    for r in (2, 4):
+        info = out[r]["info"]
+        assert out[r]["time_standalone_s"] == standalone_time(info)
+        assert out[r]["lu_count_standalone"] == standalone_lu_count(info) == info["lu_count_shared"] > 0
+    assert out[4]["info"]["setup_reused"] and out[4]["info"]["lu_count"] == 0
 
 
 def test_standalone_time_of_a_reused_bt_adds_its_gramians():
@@ -217,7 +224,7 @@ def test_zero_and_mirrored_models_are_flagged_in_every_norm():
     Hf = fom.freqresp(omega)
     for rom, expect in ((good, []), (_mirror(good), ["band", "h2", "hinf"])):
         band = ms.analysis.errors(fom, rom, omega, H_full=Hf)
-        # the reference of each norm computed here, independently of analysis.flags
+        # the reference of each norm computed here, independently of worse_than_zero
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             h2 = (ms.analysis.h2_error(fom, rom), ms.analysis.h2_norm(fom))

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.flags import worse_than_zero
+from ..utils import worse_than_zero
 from ..reducers.outcome import standalone_lu_count, standalone_time
 from . import benchmark
 from .floor import adi_lu_shifts, lu_floor, upper_half

@@ -153,9 +153,9 @@ class Reduction:
 
     @property
     def status(self) -> str:
-        """``info["status"]``: how the reduction ended, one of
-        :data:`morsuite.reducers.outcome.STATUS` ("direct" for a record without one)."""
-        return str(self.info.get("status", "direct"))
+        """``info["status"]``: how the reduction ended, one of :data:`morsuite.reducers.outcome.STATUS`
+        (for a record written without one, derived from ``converged`` as the base class does)."""
+        return str(complete_outcome(dict(self.info))["status"])
 
 
 class Reducer:

@@ -32,7 +32,7 @@ this r alone, on a fresh reducer and a fresh model: the one definition the studi
 
 from __future__ import annotations
 
-from numbers import Real
+from numbers import Integral, Real
 
 import numpy as np
 
@@ -83,6 +83,9 @@ def complete_outcome(info: dict) -> dict:
         info["converged"] = bool(info["converged"])
     info.setdefault("lu_count", 0)
     info.setdefault("lu_count_shared", info.get("lu_count_gramians", 0))
+    for key in ("lu_count", "lu_count_shared"):  # NumPy integers as int
+        if isinstance(info[key], Integral) and not isinstance(info[key], (bool, np.bool_)):
+            info[key] = int(info[key])
     if "status" in info and "converged" not in info:
         info["converged"] = info["status"] in CONVERGED_STATUSES
     elif "status" not in info:

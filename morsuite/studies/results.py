@@ -9,7 +9,7 @@ The summary has one row per reduction (and per grid it has errors on): the colum
 :data:`SUMMARY_COLUMNS`, then the exact norms' columns when the study computes any
 (:data:`NORM_COLUMNS` of the kinds it computes) and the time-domain columns when it has a
 ``time`` scene (:data:`TIME_COLUMNS`), then ``worse_than_zero`` (the norms in which the
-reduced model is no better than the zero model, :func:`morsuite.analysis.worse_than_zero`),
+reduced model is no better than the zero model, :func:`morsuite.utils.worse_than_zero`),
 ``cached`` and ``status``.
 """
 
@@ -17,9 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..analysis.flags import worse_than_zero
-from ..reducers.outcome import standalone_lu_count
 from ..report.tables import TableData
+from ..utils import worse_than_zero
 from .timedomain import ERROR_COLUMNS
 
 __all__ = ["Results", "summary", "SUMMARY_COLUMNS", "NORM_COLUMNS", "TIME_COLUMNS", "TIME_NOTE", "BAND_NOTE",
@@ -159,7 +158,7 @@ class Results:
                    iterations=int(info.get("iterations", 0)), stable=bool(info.get("stable")),
                    time_s=float(red["time_s"]), time_standalone_s=float(red["time_standalone_s"]),
                    lu_count=info.get("lu_count"), lu_count_shared=info.get("lu_count_shared"),
-                   lu_count_standalone=standalone_lu_count(info), status="ok")
+                   lu_count_standalone=red.get("lu_count_standalone"), status="ok")
         bound = info.get("error_bound")
         if isinstance(bound, (int, float)) and not isinstance(bound, bool):
             row["error_bound"] = float(bound)  # the reducer's own a-priori bound (BT), when it has one
@@ -171,7 +170,7 @@ class Results:
         return row
 
     def _worse_than_zero(self, row, model, met, grid) -> list:
-        """The norms of this row whose error is at or above the full model's (analysis.flags)."""
+        """The norms of this row whose error is at or above the full model's (utils.worse_than_zero)."""
         fom = self.fom(model, grid) if met is not None and "error" not in met else None
         peak = float(np.max(fom["sigma_full"])) if fom is not None and "sigma_full" in fom else None
         rel = {k: (row.get(f"{k}_rel_error"), 1.0) for k in ("h2", "hinf", "max_output", "l2_output")}

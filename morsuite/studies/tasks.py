@@ -29,7 +29,6 @@ import warnings
 import numpy as np
 
 from ..errors import MorsuiteError
-from ..reducers.outcome import standalone_lu_count, standalone_time
 
 __all__ = ["FOM_ARRAYS", "fom_response", "reduce_sweep", "metrics", "rom_payload", "rom_from_payload", "CAUGHT"]
 
@@ -94,11 +93,13 @@ def reduce_sweep(source: str, reducer: str, options: dict, rs, keys: dict, cache
 
     Returns ``{r: entry}``; an entry holds the ROM payload, the reducer's ``info``,
     ``time_s`` (the reducer's own timing of this call), ``time_standalone_s``
-    (see :func:`standalone_time`), ``wall_s`` (this task's timing of the call), ``call_index`` (0 for the call that did the r-independent
+    and ``lu_count_standalone`` (:func:`~morsuite.reducers.outcome.standalone_time`,
+    :func:`~morsuite.reducers.outcome.standalone_lu_count`), ``wall_s`` (this task's timing of the call), ``call_index`` (0 for the call that did the r-independent
     work) or, for a failed r, ``error``. With ``cache_root`` each entry is stored
     as soon as it exists, so an interrupted sweep resumes where it stopped.
     """
     from .. import reducers
+    from ..reducers.outcome import standalone_lu_count, standalone_time
     from .cache import Cache
 
     cache = Cache(cache_root, read=False) if cache_root is not None else None
@@ -122,7 +123,8 @@ def reduce_sweep(source: str, reducer: str, options: dict, rs, keys: dict, cache
             wall = time.perf_counter() - t1
         info = res.info
         entry = {**base, "rom": rom_payload(res.rom), "info": info, "time_s": float(info.get("time_s", wall)),
-                 "time_standalone_s": standalone_time(info, wall), "wall_s": wall, **_stamp()}
+                 "time_standalone_s": standalone_time(info, wall), "lu_count_standalone": standalone_lu_count(info),
+                 "wall_s": wall, **_stamp()}
         if cache is not None:
             cache.put("reduction", keys[r], entry["rom"]["arrays"],
                       {**{k: v for k, v in entry.items() if k not in ("rom", "cached")},
