@@ -118,6 +118,22 @@ def count_factorizations(monkeypatch):
     return calls
 
 
+SPARSE = [pytest.param(n, marks=pytest.mark.xfail(
+    reason="irka-fo leaves its start's LR-ADI out of lu_count (20 of 24 LUs on dsms(40) at r = 4); "
+           "its owner fixes it in reducers/irka_fo.py", strict=False)) if n == "irka-fo" else n
+          for n in ms.reducers.available() if n != "irka-projected"]  # (dense LUs: counted below)
+
+
+@pytest.mark.parametrize("name", SPARSE)
+def test_lu_count_is_every_saddle_lu_of_a_fresh_run(name, count_factorizations):
+    fom = ms.models.dsms(g=40)  # a fresh model: no cached Gramian factors
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        info = ms.reducers.make(name, fom).reduce(4).info
+    assert info["lu_count"] == len(count_factorizations) > 0 and not info.get("setup_reused")
+    assert standalone_lu_count(info) == info["lu_count"] >= info["lu_count_shared"]
+
+
 def test_bt_counts_its_gramians_lus_once_and_shares_them(count_factorizations):
     fom = ms.models.dsms(g=40)
     red = ms.reducers.make("bt", fom, gramian_cache="reducer")
