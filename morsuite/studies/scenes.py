@@ -439,13 +439,13 @@ def _verdict(rows, study) -> str:
                 row.get("h2_trusted") is False for row in at) else ""
             lines.append(f"{where}, {col}: {study.methods[who].label} ({best:.3g}; {ratio}){flag}")
     if not lines:
-        return zero_note(ok, study)
+        return _zero_note(ok, study).strip()
     head = ("Compared at equal first-order states (a second-order ROM of order r has 2r): " + "; ".join(orders)
             + ". ") if by_states else ""
-    return head + "Smallest error per measure: " + "; ".join(lines) + "." + zero_note(ok, study)
+    return head + "Smallest error per measure: " + "; ".join(lines) + "." + _zero_note(ok, study)
 
 
-def zero_note(rows, study) -> str:
+def _zero_note(rows, study) -> str:
     """The sentence naming the reductions no better than the zero model (column ``worse_than_zero``)."""
     bad = [f"{study.methods[row['method']].label} r = {row['r_requested']} ({row['worse_than_zero']})"
            for row in rows if row.get("worse_than_zero")]
@@ -458,7 +458,7 @@ def _table_scene(scene, study, res):
     rows = [res.summary_row(scene.model, m, r, scene.grid) for m in scene.methods for r in scene.rs_of(m)]
     title = _title(scene, study, f"{study.models[scene.model].name}: reductions")
     ok = [row for row in rows if row["status"] == "ok"]
-    note = _verdict(rows, study) if len(scene.methods) > 1 else zero_note(ok, study).strip()
+    note = _verdict(rows, study) if len(scene.methods) > 1 else _zero_note(ok, study).strip()
     return TableData(scene.name, title, rows, columns=columns, note=note)
 
 
