@@ -51,7 +51,9 @@ def _print(out: dict, as_json: bool):
 
 def cmd_reduce(args) -> int:
     """Reduce one model with one method; print one JSON object (band errors and, unless --no-norms,
-    the exact H2 and Hinf errors)."""
+    the exact H2 and Hinf errors; ``status``, ``lu_count_shared`` and ``worse_than_zero``, the norms
+    in which the reduced model's error is at or above the full model's own norm,
+    :func:`morsuite.analysis.worse_than_zero`)."""
     import numpy as np
 
     from . import analysis
@@ -62,8 +64,9 @@ def cmd_reduce(args) -> int:
     df = analysis.errors(fom, res.rom, omega)
     info = res.info
     out = {"model": args.model, "method": args.method, "r": info["r"], "r_requested": info["r_requested"],
-           "states": info["states"], "converged": info["converged"], "iterations": info["iterations"],
-           "stable": info["stable"], "time_s": info["time_s"], "lu_count": info.get("lu_count"),
+           "states": info["states"], "converged": info["converged"], "status": info.get("status"),
+           "iterations": info["iterations"], "stable": info["stable"], "time_s": info["time_s"],
+           "lu_count": info.get("lu_count"), "lu_count_shared": info.get("lu_count_shared"),
            "max_abs_error": float(df.abs_error.max()), "max_rel_error": float(df.rel_error.max()),
            "omega": [lo, hi, n]}
     keys = ("h2_error", "h2_rel_error", "hinf_error", "hinf_rel_error", "h2_route", "h2_trusted", "hinf_route",
@@ -78,14 +81,20 @@ def cmd_reduce(args) -> int:
             norms = analysis.error_norms(fom, res.rom)
         out.update({k: norms.get(k) for k in keys})
         warned += norms["norm_warnings"]
+    # the norms in which the reduced model is no better than T_r = 0 (utils.worse_than_zero)
+    out["worse_than_zero"] = analysis.worse_than_zero(
+        band=(out["max_abs_error"], float(df.sigma_full.max())),
+        h2=(out["h2_rel_error"], 1.0), hinf=(out["hinf_rel_error"], 1.0))
     out["warnings"] = warned
     _print(out, args.json)
     return 0
 
 
 def cmd_simulate(args) -> int:
-    """Reduce, then simulate the full and the reduced model for one input; print the output errors."""
-    from .analysis import output_errors
+    """Reduce, then simulate the full and the reduced model for one input; print the output errors
+    (``worse_than_zero`` names ``max_output`` / ``l2_output`` when the output error is at or above
+    the output itself)."""
+    from .analysis import output_errors, worse_than_zero
     from .analysis.compare import time_input, time_response
 
     fom, res = _reduced(args)
@@ -99,14 +108,16 @@ def cmd_simulate(args) -> int:
     errs = output_errors(y, y_r, t)
     info = res.info
     out = {"model": args.model, "method": args.method, "r": info["r"], "r_requested": info["r_requested"],
-           "states": info["states"], "converged": info["converged"], "stable": info["stable"],
-           "input": args.input, "horizon": setup["horizon"], "step": setup["step"], "steps": setup["steps"],
+           "states": info["states"], "converged": info["converged"], "status": info.get("status"),
+           "stable": info["stable"], "input": args.input, "horizon": setup["horizon"], "step": setup["step"], "steps": setup["steps"],
            "scheme": args.scheme, "rom_method": args.rom_method, "direction": setup["direction"],
            **{k: errs[k] for k in ("max_output_error", "l2_output_error", "max_output_rel_error",
                                    "l2_output_rel_error", "max_output", "l2_output", "t_max_error")},
            "growth": red["growth"], "unstable_poles": red["unstable_poles"], "growth_factor": red["growth_factor"],
            "lu_count": full["lu_count"], "reduce_lu_count": info.get("lu_count"),
            "times": {"reduce_s": info["time_s"], "simulate_full_s": full["time_s"], "simulate_rom_s": red["time_s"]},
+           "worse_than_zero": worse_than_zero(max_output=(errs["max_output_error"], errs["max_output"]),
+                                              l2_output=(errs["l2_output_error"], errs["l2_output"])),
            "csv": args.csv, "warnings": list(info["warnings"]) + full["warnings"] + red["warnings"]}
     if args.csv:
         _write_curves(args.csv, t, y, y_r)

@@ -1,15 +1,18 @@
-"""Small shared helpers: atomic file writes."""
+"""Small shared helpers: atomic file writes, plain data, BLAS threads, and the
+worse-than-the-zero-model flag of reported errors (:func:`worse_than_zero`)."""
 
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import tempfile
+from numbers import Real
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["atomic_path", "atomic_write_text", "to_plain", "strict_json", "band_pair"]
+__all__ = ["atomic_path", "atomic_write_text", "to_plain", "strict_json", "band_pair", "worse_than_zero"]
 
 
 @contextlib.contextmanager
@@ -108,3 +111,54 @@ def blas_threads(limit: int = 1):
         from threadpoolctl import ThreadpoolController
         _CONTROLLER = ThreadpoolController()
     return _CONTROLLER.limit(limits=limit, user_api="blas")
+
+
+def _judged(pair):
+    """(error, reference) as floats, or None when the pair cannot be judged."""
+    if pair is None:
+        return None
+    err, ref = pair
+    if not all(isinstance(x, Real) and not isinstance(x, bool) for x in (err, ref)):
+        return None
+    err, ref = float(err), float(ref)
+    if math.isnan(err) or math.isnan(ref) or math.isinf(ref):
+        return None
+    return err, ref
+
+
+def worse_than_zero(**pairs) -> list[str]:
+    r"""The norms in which a reduced model's error is at or above the zero model's.
+
+    The zero model :math:`T_r = 0` has error :math:`\|T - 0\| = \|T\|` in every norm, at no
+    cost. A reduced model with :math:`\|T - T_r\| \ge \|T\|` is no approximation in that
+    norm, whatever its other merits (e.g. the paper's IRKA at r = 2 on a 3x3 MIMO chain in
+    the band norm): the study tables, ``morsuite reduce/simulate --json`` and the verdict
+    texts say so through this function (also exported as
+    :func:`morsuite.analysis.worse_than_zero`; a leaf, so that a cached study imports no
+    numerics). The values compared are the ones reported (the H-infinity values are the
+    largest peaks found, lower bounds).
+
+    Parameters
+    ----------
+    **pairs : (float, float) or None
+        ``name=(error, reference)`` per norm: :math:`\|T - T_r\|` and :math:`\|T\|` in that
+        norm. The names morsuite uses: ``band`` (:math:`\max_\omega \sigma_{\max}(T - T_r)`
+        and :math:`\max_\omega \sigma_{\max}(T)` on one grid), ``h2``, ``hinf``, and for a
+        simulation ``max_output`` (:math:`\max_t \|y - y_r\|_2` against
+        :math:`\max_t \|y\|_2`) and ``l2_output`` (the same in :math:`L_2` over the horizon).
+        A relative error may be passed as ``(rel, 1.0)``. A norm given as None, or with a
+        None or NaN value or an infinite reference, is not judged.
+
+    Returns
+    -------
+    list of str
+        The names with ``error >= reference`` (an infinite error, of an unstable reduced
+        model, counts), in the order given; empty when the reduced model beats the zero
+        model in every norm judged. Cost: none.
+    """
+    out = []
+    for name, pair in pairs.items():
+        p = _judged(pair)
+        if p is not None and p[0] >= p[1]:
+            out.append(name)
+    return out

@@ -11,7 +11,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from morsuite import bench
-from morsuite.bench.pareto import _compare, standalone_time
+from morsuite.bench.pareto import _compare
 from morsuite.bench.profiler import REST, StackProfiler
 from morsuite.linalg.dense import orth
 
@@ -37,14 +37,6 @@ def test_stack_profiler_charges_by_call_stack():
     assert cats[REST] > 0
     assert s["total_s"] == sum(cats.values())
     assert s["groups_s"]["floor"] > 0
-
-
-def test_standalone_time_adds_back_reused_setup():
-    fresh = {"time_s": 2.0, "setup_reused": False, "setup_cost": {"adi": 1.5}}
-    assert standalone_time(fresh) == 2.0
-    reused = {"time_s": 0.1, "setup_reused": True, "setup_cost": {"adi": 1.5, "products": 0.2, "svd": 0.05},
-              "time_breakdown": {"adi": 0.0, "products": 0.0, "svd": 0.05}}
-    assert standalone_time(reused) == pytest.approx(0.1 + 1.5 + 0.2, rel=1e-12)
 
 
 def test_compare_counts_wins_at_equal_states():
@@ -80,6 +72,10 @@ def test_pareto_quick_through_bench_run(tmp_path):
     for col in ("time_s", "time_standalone_s", "max_abs_error", "max_rel_error"):
         assert np.all(np.isfinite(ok[col])), col
     assert (ok["time_standalone_s"] >= ok["time_s"] - 1e-12).all()
+    from morsuite.reducers.outcome import CONVERGED_STATUSES, STATUS
+    assert set(ok["reducer_status"]) <= set(STATUS) and "worse_than_zero" in df
+    assert (ok["converged"] == ok["reducer_status"].isin(CONVERGED_STATUSES)).all()
+    assert (ok["lu_count_standalone"] >= ok["lu_count"]).all()
     floor = pd.read_csv(tmp_path / "pareto_floor.csv")
     assert np.all(np.isfinite(floor["ratio"])) and (floor["ratio"] > 0).all()
     for x in data["floor"]:

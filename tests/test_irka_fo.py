@@ -267,12 +267,12 @@ def test_chart_round_trip_and_surrogate_interpolant():
     # a fixed point found by Newton satisfies the interpolation conditions at its mirrored poles
     smap = SurrogateMap(sur, (0.1, 10.0))
     res = newton_fixed_point(smap, alpha, bdir, cdir, tol=1e-11)
-    if res.converged:
-        rom = sur.interpolant(*res.data)
-        lam, bres, cres = modal(rom)
-        for a, bb, cc in zip(-lam, bres, cres.T):
-            assert abs(cc @ (sur_rom.transfer_derivative(a) - rom.transfer_derivative(a)) @ bb) <= \
-                1e-6 * abs(cc @ sur_rom.transfer_derivative(a) @ bb)
+    assert res.converged  # measured: 11 Newton steps from this seeded start (tol 1e-11)
+    rom = sur.interpolant(*res.data)
+    lam, bres, cres = modal(rom)
+    for a, bb, cc in zip(-lam, bres, cres.T):
+        assert abs(cc @ (sur_rom.transfer_derivative(a) - rom.transfer_derivative(a)) @ bb) <= \
+            1e-6 * abs(cc @ sur_rom.transfer_derivative(a) @ bb)
 
 
 # -- options, info, registry ------------------------------------------------------

@@ -18,6 +18,7 @@ import pytest
 
 import morsuite as ms
 from morsuite.errors import SpecError
+from morsuite.reducers.outcome import CONVERGED_STATUSES, STATUS
 from morsuite.report.tables import read_markdown
 from morsuite.studies import load_spec, run
 from morsuite.studies import tasks as study_tasks
@@ -278,6 +279,11 @@ def test_summary_and_manifest_content(base_run):
     assert s[(s.model == "dsms(g=100)") & (s.r_requested == 2)].max_abs_error.isna().all()
     ok = s[s.status == "ok"]
     assert (ok.states == 2 * ok.r).all()          # second-order ROMs: 2r first-order states
+    # how each run ended, consistent with converged; no ROM here is worse than T_r = 0 in the band
+    assert set(ok.reducer_status) <= set(STATUS)
+    assert (ok.converged == ok.reducer_status.isin(CONVERGED_STATUSES)).all()
+    assert (ok.lu_count_standalone >= ok.lu_count).all() and (ok.lu_count_shared == 0).all()
+    assert "worse_than_zero" in s.columns and (ok.worse_than_zero.fillna("") == "").all()
     tcom = ok[ok.model == "tcom(nc=20)"]
     assert tcom.max_abs_error.notna().all() and tcom.max_rel_error.notna().all()
     m = res.manifest
@@ -535,7 +541,8 @@ def fake_bt(monkeypatch):
             finally:
                 self.options = opts
             info.update(hsv=self._gram.tolist(), error_bound=float(2 * self._gram[r:].sum()),
-                        setup_reused=reused, setup_cost={"gramians": 1.0})
+                        setup_reused=reused, setup_cost={"gramians": 1.0}, lu_count_shared=5,
+                        lu_count=info["lu_count"] + (0 if reused else 5))  # "the Gramians' 5 LUs"
             return rom, info
 
     monkeypatch.setitem(base._REGISTRY, "fake-bt", FakeBT)
@@ -580,6 +587,9 @@ r = [2, 4, 6]
     assert bt.error_bound.notna().all()
     assert bt.loc[2, "time_s"] >= 1.0                # the first call did the setup
     assert bt.loc[4, "time_s"] < 1.0 <= bt.loc[4, "time_standalone_s"]
+    # the shared LUs: paid (and counted) by the first call only, added back to the others' standalone count
+    assert (bt.lu_count_shared == 5).all() and bt.loc[2, "lu_count_standalone"] == bt.loc[2, "lu_count"]
+    assert bt.loc[4, "lu_count_standalone"] == bt.loc[4, "lu_count"] + 5
     t = pd.read_csv(res.outdir / "time.csv")         # standalone by default
     assert (t.value >= 1.0).all()
     assert (res.outdir / "cmp__bt.csv").is_file() and (res.outdir / "cmp__irka.csv").is_file()

@@ -7,6 +7,8 @@ from .simulate import output_errors, simulate
 from . import signals
 from .compare import error_norms
 from . import compare
+from ..utils import worse_than_zero
 
 __all__ = ["sigma_max", "errors", "freq_grid", "h2_norm", "h2_error", "h2_rel_error", "hinf_norm", "hinf_error",
-           "hinf_rel_error", "simulate", "output_errors", "signals", "error_norms", "compare"]
+           "hinf_rel_error", "simulate", "output_errors", "signals", "error_norms", "compare",
+           "worse_than_zero"]

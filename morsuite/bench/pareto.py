@@ -9,7 +9,9 @@ structure-preserving H2 descent, 2r states) on dsms(6000) and tcom(2000), and al
 ``irka-projected`` (2r states, :math:`O(n_1^3)`) on dsms(1000). Error:
 :math:`\max_\omega \sigma_{\max}(T(j\omega) - T_r(j\omega))` on 200 log-spaced
 frequencies of the band, the full response computed once per model. Time:
-``time_standalone_s``, the cost of the ROM from scratch (:func:`standalone_time`).
+``time_standalone_s``, the cost of the ROM from scratch
+(:func:`~morsuite.reducers.outcome.standalone_time`; LUs:
+:func:`~morsuite.reducers.outcome.standalone_lu_count`).
 The paper's claim (IRKA more accurate and faster than BT) is judged pairwise at
 equal numbers of first-order states, and at equal r (:data:`COMPARISONS`). ``so-h2``
 is set against second-order BT (``bt-vv``) at equal r in error, time and LUs
@@ -36,14 +38,15 @@ from pathlib import Path
 
 import numpy as np
 
+from ..utils import worse_than_zero
+from ..reducers.outcome import standalone_lu_count, standalone_time
 from . import benchmark
 from .floor import adi_lu_shifts, lu_floor, upper_half
 from .output import code_state, resolve_out_dir, rewrite_derived
 from .pareto_report import write_outputs
 from .profiler import profile_categories
 
-__all__ = ["bench_pareto", "derive_verdicts", "rewrite", "standalone_time", "standalone_lus",
-           "soh2_against_bt", "METHODS"]
+__all__ = ["bench_pareto", "derive_verdicts", "rewrite", "soh2_against_bt", "METHODS"]
 
 #: method label -> (registry name, options, what r means)
 METHODS = {
@@ -77,26 +80,6 @@ def _plan(quick: bool) -> dict:
 # sweep
 # ---------------------------------------------------------------------------
 
-def standalone_time(info: dict) -> float:
-    """``time_s`` plus the once-per-reducer work a reused reducer did not pay in this call."""
-    t = float(info["time_s"])
-    if not info.get("setup_reused"):
-        return t
-    tb = info.get("time_breakdown") or {}
-    for key, cost in (info.get("setup_cost") or {}).items():
-        t += max(0.0, float(cost) - float(tb.get(key, 0.0) or 0.0))
-    return t
-
-
-def standalone_lus(info: dict) -> int:
-    """LUs of the ROM from scratch: ``lu_count`` plus the Gramians' LUs where they were reused
-    (bt: ``lu_count_gramians``; so-h2: its own LUs plus the Gramians')."""
-    lus = int(info.get("lu_count") or 0)
-    if "lu_breakdown" in info:  # so-h2: gramians + IRKA start + exact evaluations
-        return lus - int(info["lu_breakdown"].get("gramians", 0)) + int(info.get("lu_count_gramians", 0))
-    return int(info.get("lu_count_gramians", lus))
-
-
 def _sweep(spec, fom, methods, rs, omega, H, echo):
     from .. import reducers
     from ..analysis import errors
@@ -125,13 +108,16 @@ def _sweep(spec, fom, methods, rs, omega, H, echo):
             row.update({
                 "status": "ok", "r": info["r"], "states": info["states"], "states_nominal": nominal,
                 "kind": info["kind"], "converged": bool(info.get("converged", True)),
+                "reducer_status": info.get("status"),
                 "stable": bool(info.get("stable", True)), "iterations": info.get("iterations"),
                 "lu_count": info.get("lu_count"),
-                "lu_count_standalone": standalone_lus(info), "lu_count_gramians": info.get("lu_count_gramians"),
+                "lu_count_standalone": standalone_lu_count(info), "lu_count_shared": info.get("lu_count_shared"),
                 "h2_error": info.get("h2_error"), "start": info.get("start"),
                 "time_s": info["time_s"], "time_standalone_s": standalone_time(info),
                 "max_abs_error": float(err["abs_error"].max()),
                 "max_rel_error": float(err["rel_error"].max()),
+                "worse_than_zero": ",".join(worse_than_zero(band=(float(err["abs_error"].max()),
+                                                                  float(err["sigma_full"].max())))),
                 "error_bound": info.get("error_bound"),
                 "h2_error_tracked": info.get("h2_error"),
                 "warnings": len(caught)})
@@ -185,7 +171,9 @@ def _compare(rows, spec, other, noise, tie=1.05, match="states", label=None) -> 
                       "irka_time_s": ta, "other_time_s": tb, "time_ratio": ta / tb if tb > 0 else float("inf"),
                       "more_accurate": acc, "faster": fast,
                       "claim_holds": bool(acc == "irka" and fast == "irka"),
-                      "irka_converged": a["converged"], "irka_stable": a["stable"], "other_stable": b["stable"]})
+                      "irka_converged": a["converged"], "irka_stable": a["stable"], "other_stable": b["stable"],
+                      "irka_worse_than_zero": a.get("worse_than_zero") or "",
+                      "other_worse_than_zero": b.get("worse_than_zero") or ""})
     n = len(pairs)
     summ = {"model": spec, "against": label, "matched_on": match, "pairs": n,
             "irka_more_accurate": sum(p["more_accurate"] == "irka" for p in pairs),
@@ -207,6 +195,14 @@ def _compare(rows, spec, other, noise, tie=1.05, match="states", label=None) -> 
                            f"{summ['median_time_ratio']:.3g}, median error ratio {summ['median_error_ratio']:.3g}")
     else:
         summ["verdict"] = "no comparable pairs"
+    where = "states" if match == "states" else "r"
+    zero = [f"{who} at {where} = {p[key if match == 'r' else 'states']}" for p in pairs
+            for who, col, key in (("irka", "irka_worse_than_zero", "irka_r"),
+                                  (other, "other_worse_than_zero", "other_r")) if p[col]]
+    summ["worse_than_zero"] = zero
+    if zero:
+        summ["verdict"] += (f"; worse than the zero model in the band norm (max error >= max sigma(T)): "
+                            f"{', '.join(zero)}")
     return pairs, summ
 
 

@@ -94,9 +94,9 @@ def write_outputs(result: dict, out_dir) -> list[Path]:
     out = Path(out_dir)
     files = []
     rows = pd.DataFrame(result["rows"])
-    cols = ["model", "method", "r_requested", "r", "states", "states_nominal", "status", "converged", "stable",
-            "iterations", "lu_count", "lu_count_standalone", "time_s", "time_standalone_s", "max_abs_error",
-            "max_rel_error", "error_bound", "warnings"]
+    cols = ["model", "method", "r_requested", "r", "states", "states_nominal", "status", "converged",
+            "reducer_status", "stable", "iterations", "lu_count", "lu_count_shared", "lu_count_standalone", "time_s",
+            "time_standalone_s", "max_abs_error", "max_rel_error", "worse_than_zero", "error_bound", "warnings"]
     files += write_table(rows[[c for c in cols if c in rows]], out / "pareto",
                          title="pareto: wall time against max abs error",
                          note=result["note"], md_columns=cols)

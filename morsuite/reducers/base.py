@@ -24,6 +24,7 @@ import numpy as np
 
 from ..errors import InputError, OptionError
 from ..utils import blas_threads, to_plain
+from .outcome import check_outcome, complete_outcome
 
 __all__ = ["Option", "Reducer", "Reduction", "make", "available", "register", "get_class", "as_complex"]
 
@@ -141,13 +142,20 @@ class Reduction:
 
     @property
     def converged(self) -> bool:
-        """``info["converged"]``: False if the method stopped at its iteration cap or on a cycle.
+        """``info["converged"]``: True only when the method's own optimality or fixed-point
+        test passed on the full model (``status`` "converged", or "direct" for a method
+        that does not iterate on its result; :mod:`morsuite.reducers.outcome`).
 
         A reduction that did not converge still returns its best iterate (with a
-        :class:`~morsuite.errors.ConvergenceWarning`); a method that does not
-        iterate, or does not say, counts as converged.
+        :class:`~morsuite.errors.ConvergenceWarning`); ``status`` says how it ended.
         """
         return bool(self.info.get("converged", True))
+
+    @property
+    def status(self) -> str:
+        """``info["status"]``: how the reduction ended, one of :data:`morsuite.reducers.outcome.STATUS`
+        (for a record written without one, derived from ``converged`` as the base class does)."""
+        return str(complete_outcome(dict(self.info))["status"])
 
 
 class Reducer:
@@ -203,7 +211,12 @@ class Reducer:
         warnings.warn(message, category, stacklevel=stacklevel)
 
     def reduce(self, r) -> Reduction:
-        """Reduce to order ``r``; see the subclass for what r means (always also in info)."""
+        """Reduce to order ``r``; see the subclass for what r means (always also in info).
+
+        Every ``info`` carries ``status`` and ``converged`` (consistent: checked), ``lu_count``,
+        ``lu_count_shared`` (:mod:`morsuite.reducers.outcome`), ``time_s``, ``r``, ``states``,
+        ``stable``, ``warnings`` and ``options``.
+        """
         r = self._validate_r(r)
         self._warnings = []
         # the dense work of a reducer is on tall-skinny n1 x r blocks and r x r
@@ -217,7 +230,8 @@ class Reducer:
                 "r": int(rom.order), "kind": rom.kind, "states": int(rom.states),
                 "time_s": elapsed}
         base.update(info)
-        base.setdefault("converged", True)
+        complete_outcome(base)  # status <-> converged, lu_count, lu_count_shared (reducers.outcome)
+        check_outcome(base, self.name)
         base.setdefault("iterations", 0)
         if "stable" not in base:
             base["stable"] = bool(rom.is_stable())

@@ -80,10 +80,12 @@ same model object and ADI options, and :func:`morsuite.analysis.h2_norm` /
 
 ``info`` holds ``adi`` (per equation: iterations, converged, residual history,
 shifts, rank), ``adi_iterations``, ``residual_history``, ``factor_ranks``,
-``lu_count``, ``time_breakdown`` (adi, of which lu, solves, shifts; svd;
+``lu_count`` (the LR-ADI's LUs when this call ran it, else 0), ``lu_count_shared`` (the
+LR-ADI's LUs, whoever paid them), ``time_breakdown`` (adi, of which lu, solves, shifts; svd;
 projection), ``hsv`` (first-order Hankel singular values), ``error_bound``
 (first-order form; None otherwise), ``level_singular_values`` (second-order
-forms), ``converged`` (both ADIs converged), ``iterations`` (ADI steps of the
+forms), ``converged`` (both ADIs converged) with ``status`` "direct" (else "cap":
+an LR-ADI stopped at its maxiter), ``iterations`` (ADI steps of the
 lock-step run), ``setup_reused`` and ``setup_cost`` (the Gramian and SVD work
 paid once per reducer).
 """
@@ -276,13 +278,14 @@ class BT(Reducer):
         svd_keys = {"fo"} | ({_LEVELS[form][0], _LEVELS[form][2]} - {None} if form != "first-order" else set())
         info = {
             "form": form, "converged": bool(c.converged and ob.converged),
+            "status": "direct" if c.converged and ob.converged else "cap",  # LR-ADI's maxiter
             "iterations": max(c.iterations, ob.iterations),
             "adi_iterations": {"controllability": c.iterations, "observability": ob.iterations},
             "residual_history": {"controllability": c.residuals, "observability": ob.residuals},
             "adi": {"controllability": c.summary(history=False), "observability": ob.summary(history=False)},
             "factor_ranks": {"controllability": c.rank, "observability": ob.rank},
             "lu_count": c.lu_count if adi_fresh else 0,
-            "lu_count_gramians": c.lu_count,
+            "lu_count_shared": c.lu_count,  # the Gramian factors' LR-ADI, whoever paid it
             "hsv": hsv, "stable": stable, **extra,
             "time_breakdown": {"adi": times["adi"] if adi_fresh else 0.0,
                                "lu": st_c["factor"] if adi_fresh else 0.0,

@@ -34,8 +34,8 @@ Cycles: a new shift set within ``cycle_tol`` of one of the last
 ``cycle_window`` sets while more than 100 ``cycle_tol`` from the current one
 (criterion ``"shifts"``) is a cycle: ``update="auto"`` moves to its next stage,
 otherwise the safeguard engages or (safeguard off) the iteration stops. Without
-convergence the best iterate (stable first) is returned with ``converged=False``
-and a :class:`~morsuite.errors.ConvergenceWarning`.
+convergence the best iterate (stable first) is returned with ``converged=False``, ``status`` "cap"
+or "cycle" (:mod:`.outcome`) and a :class:`~morsuite.errors.ConvergenceWarning`.
 
 Safeguard (option ``safeguard``, :class:`~.irka_safeguards.CycleGuard`): idle
 while the plain iteration may still converge, so that its fixed points and
@@ -59,10 +59,9 @@ import time
 
 import numpy as np
 
-from ..linalg.dense import sigma_max
 from ..errors import (ConvergenceWarning, InputError, MorsuiteWarning, RankWarning, SingularShiftError,
                       StabilityWarning)
-from ..linalg.dense import shift_distance
+from ..linalg.dense import shift_distance, sigma_max
 from ..rom import SecondOrderROM
 from .base import Option, Reducer
 from .irka_safeguards import GUARD_OPTIONS, CycleGuard, Shortlist, ill_conditioned, instability_culprit, \
@@ -467,6 +466,9 @@ class IRKABase(Reducer):
                              "scored_by": "iterate_score" if chosen[2] else "measure",
                              "scores": {str(i): v for i, v in chosen[2].items()}, **score_cost(score)}
         info["lu_count"] += info["safeguard"]["score_lu_count"] + info["safeguard"]["score_gramian_lu_count"]
+        info.setdefault("lu_count_shared", info["safeguard"]["score_gramian_lu_count"])  # r-independent factors
+        info.setdefault("status", "converged" if info["converged"] else "cycle" if cycled  # a variant may overrule
+                        else "uncertified" if converged else "cap")
         return rom, info
 
     def _outcome(self, r, best, history, it, converged, cycled, *, times, perturbed, switched):

@@ -263,7 +263,8 @@ class IRKAProjected(IRKABase):
     :math:`\|G\Psi_r\|`), and ``time_breakdown`` holds ``form_pi``, ``split``,
     ``project_model`` (zero when reused), ``dense_lu``, ``dense_solves`` and
     ``dense_lu_per_iteration`` (one entry per basis computation). ``lu_count``
-    counts dense LUs.
+    counts the dense LUs of the iteration plus, in the call that formed :math:`\Pi`, its two
+    (a sparse LU of :math:`M`, a dense one of :math:`G M^{-1} G^T`: ``lu_count_shared``).
     """
 
     name = "irka-projected"
@@ -395,6 +396,10 @@ class IRKAProjected(IRKABase):
         info["memory"] = dict(self.memory)
         info["setup_reused"] = not fresh_before
         info["setup_cost"] = dict(pm.times)
+        # the setup's LUs (sparse of M, dense of G M^-1 G^T), shared by every r (reducers.outcome)
+        info["lu_count_shared"] = 2 if self.fom.n2 else 0
+        if fresh_before:
+            info["lu_count"] += info["lu_count_shared"]
         info["projected_order"] = pm.order
         info["split"] = dict(pm.split)
         return rom, info

@@ -40,8 +40,9 @@ def _artifacts(plan, res) -> list:
                          "states": info.get("states"), "key": g.keys[r], "cached": bool(e.get("cached")),
                          "time_s": e.get("time_s"), "time_standalone_s": e.get("time_standalone_s"),
                          "wall_s": e.get("wall_s"), "call_index": e.get("call_index"),
-                         "converged": info.get("converged"), "iterations": info.get("iterations"),
-                         "lu_count": info.get("lu_count"), "time_breakdown": info.get("time_breakdown"),
+                         "converged": info.get("converged"), "status": info.get("status"),
+                         "iterations": info.get("iterations"), "lu_count": info.get("lu_count"),
+                         "lu_count_shared": info.get("lu_count_shared"), "time_breakdown": info.get("time_breakdown"),
                          "warnings": info.get("warnings"), "error": e.get("error"), "scheduler": e.get("scheduler"),
                          "host": e.get("host"),
                          "created": e.get("created")})

@@ -8,27 +8,39 @@ that simulated it.
 The summary has one row per reduction (and per grid it has errors on): the columns of
 :data:`SUMMARY_COLUMNS`, then the exact norms' columns when the study computes any
 (:data:`NORM_COLUMNS` of the kinds it computes) and the time-domain columns when it has a
-``time`` scene (:data:`TIME_COLUMNS`), then ``cached`` and ``status``.
+``time`` scene (:data:`TIME_COLUMNS`), then ``worse_than_zero`` (the norms in which the
+reduced model is no better than the zero model, :func:`morsuite.utils.worse_than_zero`),
+``cached`` and ``status``.
 """
 
 from __future__ import annotations
 
+import numpy as np
+
 from ..report.tables import TableData
+from ..utils import worse_than_zero
 from .timedomain import ERROR_COLUMNS
 
 __all__ = ["Results", "summary", "SUMMARY_COLUMNS", "NORM_COLUMNS", "TIME_COLUMNS", "TIME_NOTE", "BAND_NOTE",
-           "NORM_NOTE", "TIME_DOMAIN_NOTE"]
+           "NORM_NOTE", "TIME_DOMAIN_NOTE", "STATUS_NOTE"]
 
-SUMMARY_COLUMNS = ["model", "method", "reducer", "r_requested", "r", "states", "converged", "iterations",
-                   "stable", "time_s", "time_standalone_s", "lu_count", "max_abs_error", "max_rel_error",
-                   "error_bound", "grid"]
+SUMMARY_COLUMNS = ["model", "method", "reducer", "r_requested", "r", "states", "converged", "reducer_status",
+                   "iterations", "stable", "time_s", "time_standalone_s", "lu_count", "lu_count_shared",
+                   "lu_count_standalone", "max_abs_error", "max_rel_error", "error_bound", "grid"]
 NORM_COLUMNS = {"h2": ["h2_error", "h2_rel_error", "h2_trusted"], "hinf": ["hinf_error", "hinf_rel_error"]}
 TIME_COLUMNS = list(ERROR_COLUMNS) + ["time_scene"]
-TAIL = ["cached", "status"]
+TAIL = ["worse_than_zero", "cached", "status"]
 
 TIME_NOTE = ("time_s is the reducer's own timing of reduce(r) (info['time_s']); when one reducer instance "
              "serves several r, work that does not depend on r (Gramians, a projector) is done in its first "
-             "call only. time_standalone_s adds that shared work back: what reducing to this r alone costs.")
+             "call only. time_standalone_s adds that shared work back: what reducing to this r alone costs. "
+             "lu_count is the LUs this call paid, lu_count_shared those of the shared work (whoever paid "
+             "them), lu_count_standalone the LUs of reducing to this r alone.")
+STATUS_NOTE = ("converged is True only when the method's own optimality or fixed-point test passed on the full "
+               "model; reducer_status says how the run ended (converged, direct, cap, cycle, stalled, "
+               "uncertified, skipped, stopped: morsuite.reducers.outcome.STATUS). worse_than_zero names the "
+               "norms (band, h2, hinf, max_output, l2_output) in which the error is at or above the full "
+               "model's own norm, the error of the zero model T_r = 0.")
 BAND_NOTE = ("max_abs_error and max_rel_error are band quantities: the maximum of sigma_max(T - T_r) (over "
              "sigma_max(T)) on the frequencies of the grid named in the grid column.")
 NORM_NOTE = ("h2_error is the exact H2 norm of T - T_r over the whole "
@@ -142,9 +154,11 @@ class Results:
             return row
         info = red["info"]
         row.update(r=int(info["r"]), states=int(info["states"]), converged=bool(info.get("converged")),
+                   reducer_status=info.get("status"),
                    iterations=int(info.get("iterations", 0)), stable=bool(info.get("stable")),
                    time_s=float(red["time_s"]), time_standalone_s=float(red["time_standalone_s"]),
-                   lu_count=info.get("lu_count"), status="ok")
+                   lu_count=info.get("lu_count"), lu_count_shared=info.get("lu_count_shared"),
+                   lu_count_standalone=red.get("lu_count_standalone"), status="ok")
         bound = info.get("error_bound")
         if isinstance(bound, (int, float)) and not isinstance(bound, bool):
             row["error_bound"] = float(bound)  # the reducer's own a-priori bound (BT), when it has one
@@ -152,7 +166,15 @@ class Results:
             row.update(max_abs_error=met["max_abs_error"], max_rel_error=met["max_rel_error"])
         row.update({k: v for k, v in self.norm_columns(model, method, r).items() if k in row})
         row.update({k: v for k, v in self.time_columns(model, method, r).items() if k in row})
+        row["worse_than_zero"] = ",".join(self._worse_than_zero(row, model, met, grid))
         return row
+
+    def _worse_than_zero(self, row, model, met, grid) -> list:
+        """The norms of this row whose error is at or above the full model's (utils.worse_than_zero)."""
+        fom = self.fom(model, grid) if met is not None and "error" not in met else None
+        peak = float(np.max(fom["sigma_full"])) if fom is not None and "sigma_full" in fom else None
+        rel = {k: (row.get(f"{k}_rel_error"), 1.0) for k in ("h2", "hinf", "max_output", "l2_output")}
+        return worse_than_zero(band=(row.get("max_abs_error"), peak), **rel)
 
 
 def summary(study, plan, res, name) -> TableData:
@@ -166,7 +188,8 @@ def summary(study, plan, res, name) -> TableData:
             grids = [g for g in sorted(grids_of.get((model, method), [])) if res.metrics(model, g, method, r)]
             for grid in grids or [None]:
                 rows.append(res.summary_row(model, method, r, grid))
-    note = "\n\n".join([BAND_NOTE] + ([NORM_NOTE] if plan.norm_groups else []) + [TIME_NOTE] +
+    note = "\n\n".join([BAND_NOTE] + ([NORM_NOTE] if plan.norm_groups else []) + [TIME_NOTE, STATUS_NOTE] +
                        ([TIME_DOMAIN_NOTE] if plan.sim_groups else []))
     return TableData(name, f"{study.title}: every reduction of this run", rows, columns=res.summary_columns(),
-                     int_columns=("r", "states", "iterations", "lu_count"), note=note)
+                     int_columns=("r", "states", "iterations", "lu_count", "lu_count_shared",
+                                  "lu_count_standalone"), note=note)

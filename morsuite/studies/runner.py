@@ -201,8 +201,8 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
             if "error" in e:
                 notes.append(f"{who} at r = {r} failed: {e['error']}")
             elif not e["info"].get("converged", True):
-                notes.append(f"{who} at r = {r} did not converge ({e['info'].get('iterations')} iterations; "
-                             f"best iterate returned)")
+                notes.append(f"{who} at r = {r} did not converge (status {e['info'].get('status', 'stopped')!r}, "
+                             f"{e['info'].get('iterations')} iterations; best iterate returned)")
     notes += _norm_notes(plan, norms, norm_errors)
     t_report = time.perf_counter() - t1
 

@@ -375,7 +375,8 @@ def _convergence_scene(scene, study, res):
                 _missing(notes, scene, m, r, "no convergence history (info['history']['measure'])")
                 continue
             df = {"iteration": np.arange(1, len(hist) + 1), "value": np.asarray(hist, float)}
-            conv = "converged" if pair[0]["info"].get("converged") else "not converged"
+            info = pair[0]["info"]
+            conv = info.get("status") or ("converged" if info.get("converged") else "not converged")
             curves.append(Curve(f"{m}_r{r}", f"{study.methods[m].label}, $r = {r}$ ({conv})", df, x="iteration"))
     return FigureData(scene.name, _title(scene, study, f"{model.name}: IRKA convergence"), "iteration",
                       "convergence measure (relative change of shifts or response)", curves, xscale="linear",
@@ -438,17 +439,26 @@ def _verdict(rows, study) -> str:
                 row.get("h2_trusted") is False for row in at) else ""
             lines.append(f"{where}, {col}: {study.methods[who].label} ({best:.3g}; {ratio}){flag}")
     if not lines:
-        return ""
+        return _zero_note(ok, study).strip()
     head = ("Compared at equal first-order states (a second-order ROM of order r has 2r): " + "; ".join(orders)
             + ". ") if by_states else ""
-    return head + "Smallest error per measure: " + "; ".join(lines) + "."
+    return head + "Smallest error per measure: " + "; ".join(lines) + "." + _zero_note(ok, study)
+
+
+def _zero_note(rows, study) -> str:
+    """The sentence naming the reductions no better than the zero model (column ``worse_than_zero``)."""
+    bad = [f"{study.methods[row['method']].label} r = {row['r_requested']} ({row['worse_than_zero']})"
+           for row in rows if row.get("worse_than_zero")]
+    return (" Worse than the zero model T_r = 0 (error at or above the full model's norm) in the norms "
+            "named: " + "; ".join(bad) + ".") if bad else ""
 
 
 def _table_scene(scene, study, res):
     columns = res.summary_columns()
     rows = [res.summary_row(scene.model, m, r, scene.grid) for m in scene.methods for r in scene.rs_of(m)]
     title = _title(scene, study, f"{study.models[scene.model].name}: reductions")
-    note = _verdict(rows, study) if len(scene.methods) > 1 else ""
+    ok = [row for row in rows if row["status"] == "ok"]
+    note = _verdict(rows, study) if len(scene.methods) > 1 else _zero_note(ok, study).strip()
     return TableData(scene.name, title, rows, columns=columns, note=note)
 
 

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..errors import MorsuiteError
 
-__all__ = ["FOM_ARRAYS", "fom_response", "standalone_time", "reduce_sweep", "metrics", "rom_payload", "rom_from_payload", "CAUGHT"]
+__all__ = ["FOM_ARRAYS", "fom_response", "reduce_sweep", "metrics", "rom_payload", "rom_from_payload", "CAUGHT"]
 
 #: Failures of one r that are recorded (and reported) instead of aborting the study.
 #: Anything else is a bug and propagates.
@@ -87,28 +87,19 @@ def fom_response(source: str, lo: float, hi: float, n: int, key: str, cache_root
     return out
 
 
-def standalone_time(info: dict, wall: float) -> float:
-    """Time of ``reduce(r)`` on a fresh reducer: the call's time plus the r-independent
-    work it reused (``info["setup_cost"]`` when ``info["setup_reused"]``, the reducers'
-    convention for Gramians or a projector formed once per instance)."""
-    t = float(info.get("time_s", wall))
-    if info.get("setup_reused"):
-        cost = info.get("setup_cost") or {}
-        t += sum(float(v) for v in cost.values() if isinstance(v, (int, float)) and not isinstance(v, bool))
-    return t
-
-
 def reduce_sweep(source: str, reducer: str, options: dict, rs, keys: dict, cache_root=None,
                  run_by: str = "") -> dict:
     """``reduce(r)`` for each r in increasing order on ONE reducer instance.
 
     Returns ``{r: entry}``; an entry holds the ROM payload, the reducer's ``info``,
     ``time_s`` (the reducer's own timing of this call), ``time_standalone_s``
-    (see :func:`standalone_time`), ``wall_s`` (this task's timing of the call), ``call_index`` (0 for the call that did the r-independent
+    and ``lu_count_standalone`` (:func:`~morsuite.reducers.outcome.standalone_time`,
+    :func:`~morsuite.reducers.outcome.standalone_lu_count`), ``wall_s`` (this task's timing of the call), ``call_index`` (0 for the call that did the r-independent
     work) or, for a failed r, ``error``. With ``cache_root`` each entry is stored
     as soon as it exists, so an interrupted sweep resumes where it stopped.
     """
     from .. import reducers
+    from ..reducers.outcome import standalone_lu_count, standalone_time
     from .cache import Cache
 
     cache = Cache(cache_root, read=False) if cache_root is not None else None
@@ -132,7 +123,8 @@ def reduce_sweep(source: str, reducer: str, options: dict, rs, keys: dict, cache
             wall = time.perf_counter() - t1
         info = res.info
         entry = {**base, "rom": rom_payload(res.rom), "info": info, "time_s": float(info.get("time_s", wall)),
-                 "time_standalone_s": standalone_time(info, wall), "wall_s": wall, **_stamp()}
+                 "time_standalone_s": standalone_time(info, wall), "lu_count_standalone": standalone_lu_count(info),
+                 "wall_s": wall, **_stamp()}
         if cache is not None:
             cache.put("reduction", keys[r], entry["rom"]["arrays"],
                       {**{k: v for k, v in entry.items() if k not in ("rom", "cached")},
