@@ -133,6 +133,9 @@ def study_page(study, outputs, summary, manifest: dict) -> dict:
             verdicts.append({"title": item.title, "text": item.note})
     models = [{"name": m["name"], "n1": m["n1"], "n2": m["n2"], "m": m["m"], "p": m["p"], "band": m["band"]}
               for m in manifest["models"].values()]
+    used = {sc.get("grid") for sc in manifest.get("scenes") or []}
+    grids = [{"name": g, "band": v.get("band"), "n": v.get("n")} for g, v in (manifest.get("grids") or {}).items()
+             if g in used]
     methods = [{"alias": a, **{k: m[k] for k in ("label", "reducer", "options_given", "options")}}
                for a, m in manifest["methods"].items()]
     threads = manifest.get("threads") or {}
@@ -146,7 +149,7 @@ def study_page(study, outputs, summary, manifest: dict) -> dict:
     return plain({
         "study": study.name, "title": study.title, "description": study.description,
         "spec": study.path.name if study.path is not None else None,
-        "models": models, "methods": methods, "verdicts": verdicts, "flags": _flags(summary.rows),
+        "models": models, "grids": grids, "methods": methods, "verdicts": verdicts, "flags": _flags(summary.rows),
         "figures": figures, "formats": sorted({f.rsplit(".", 1)[-1] for x in figures for f in x["files"]}),
         "tables": tables, "timings": _timings(summary.rows),
         "timing_note": "time_s is the call's own time (work shared across r done once), time_standalone_s "
