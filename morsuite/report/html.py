@@ -22,6 +22,7 @@ only when the page's data, these templates or Jinja2's version changed
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 from numbers import Integral, Real
@@ -96,6 +97,7 @@ def table_view(columns, rows) -> dict:
     return {"columns": columns, "rows": [[cell(c, row.get(c), row) for c in columns] for row in rows]}
 
 
+@functools.lru_cache(maxsize=1)
 def _environment():
     import jinja2
 
