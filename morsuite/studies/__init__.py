@@ -17,8 +17,10 @@ Modules, in the order data flows through them (each imports only modules before 
   :mod:`.timedomain`; :mod:`.execute` (schedulers, progress);
 - outputs: :mod:`.time_figures` and :mod:`.scenes` (figures and tables from results),
   :mod:`.results` (lookups, the summary), :mod:`.outputs` (figures and tables keyed by
-  content, reused when unchanged), :mod:`.manifest`, :mod:`.environment`;
-- :mod:`.runner` (the whole run).
+  content, reused when unchanged), :mod:`.manifest`, :mod:`.environment`, :mod:`.pages`
+  (the study's ``index.html`` and the results folder's);
+- :mod:`.runner` (the whole run); :mod:`.compare` (``morsuite compare``: a comparison
+  study of one model, built in memory, written and run).
 
 A re-run does nothing twice: results come from the cache, and figures and tables
 whose data, style and software did not change are left as they are (``run(...,
