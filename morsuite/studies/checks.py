@@ -3,7 +3,7 @@
 Every failure raises :class:`~morsuite.errors.SpecError` as
 ``study spec SOURCE: WHERE: what was wrong`` (with a close match suggested for a
 misspelt name). Validators are plain functions ``check(ctx, where, value) -> value``
-that the scene kinds (:mod:`.kinds`) and the option tables (:mod:`morsuite.studies.norm_options`,
+that the scene kinds (:mod:`morsuite.studies.kinds`) and the option tables (:mod:`morsuite.studies.norm_options`,
 :mod:`morsuite.studies.time_options`) name. This module is the bottom of the study package:
 it imports no other module of it (nor the numerical code); the checks that need the
 scene kinds or the option tables live beside those (``kinds.check_output_names``,

@@ -4,7 +4,7 @@ The table :data:`KINDS` (one :class:`Kind` per scene kind), :func:`needs` (the a
 scene reads) and :func:`output_names` are what the spec validates against and the plan
 builds from; how a scene is drawn from results is :mod:`morsuite.studies.scenes`, which
 re-exports these names. This module imports only the validators and option tables
-(:mod:`.checks`, :mod:`.norm_options`, :mod:`.time_options`), so that spec -> plan ->
+(:mod:`morsuite.studies.checks`, :mod:`morsuite.studies.norm_options`, :mod:`morsuite.studies.time_options`), so that spec -> plan ->
 tasks -> outputs import one way.
 """
 

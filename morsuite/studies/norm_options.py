@@ -3,7 +3,7 @@
 The option tables repeat the keyword options of :func:`morsuite.analysis.h2_error` and
 :func:`morsuite.analysis.hinf_error` with the same defaults (``tests/test_studies_norms_time.py``
 checks that they agree); the tasks that compute the norms are :mod:`morsuite.studies.norms`.
-This module imports only :mod:`.checks`: the spec and the scene kinds validate with it.
+This module imports only :mod:`morsuite.studies.checks`: the spec and the scene kinds validate with it.
 """
 
 from __future__ import annotations

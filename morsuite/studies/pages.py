@@ -113,7 +113,7 @@ def study_page(study, outputs, summary, manifest: dict) -> dict:
     """The plain data of a study's page.
 
     ``outputs``: ``(item, record)`` pairs of the run's figures and tables in scene order
-    (``item`` a FigureData or TableData, ``record`` its :func:`~.outputs.realize` record);
+    (``item`` a FigureData or TableData, ``record`` its :func:`~morsuite.studies.outputs.realize` record);
     ``summary``: the summary TableData; ``manifest``: the run's manifest (its facts).
     """
     figures, tables, verdicts = [], [], []

@@ -1,6 +1,6 @@
 """What every task of a study's graph shares: the model it builds, its stamp, the ROM payload.
 
-The tasks (:mod:`.tasks`, :mod:`.norms`, :mod:`.timedomain`) are pure functions of plain
+The tasks (:mod:`morsuite.studies.tasks`, :mod:`morsuite.studies.norms`, :mod:`morsuite.studies.timedomain`) are pure functions of plain
 data; this module holds the few pieces they have in common, so that none of them
 imports another:
 

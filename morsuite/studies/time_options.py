@@ -3,7 +3,7 @@ r"""The ``time`` scene's settings: their keys, defaults and validators, and thei
 What a time scene may say (input, horizon, step, scheme, rom_method, direction, channel) and
 how it is checked before anything runs (:func:`resolve`, kept in the spec memo) are here; the
 tasks that simulate are :mod:`morsuite.studies.timedomain`, which re-exports these names.
-This module imports only :mod:`.checks` (and, to check an input, :mod:`morsuite.analysis`):
+This module imports only :mod:`morsuite.studies.checks` (and, to check an input, :mod:`morsuite.analysis`):
 the spec and the scene kinds validate with it.
 """
 
