@@ -1,4 +1,4 @@
-"""Command line: ``morsuite run | reduce | simulate | list | info | bench``."""
+"""Command line: ``morsuite run | compare | reduce | simulate | list | info | bench``."""
 
 from __future__ import annotations
 
@@ -245,6 +245,38 @@ def _add_run_parser(sub):
     return p
 
 
+def _add_compare_parser(sub):
+    """``morsuite compare MODEL --states N [N ...] [--methods ...] [--band LO HI] [--input ...] [--out DIR]``
+    (see :mod:`morsuite.studies.compare`)."""
+
+    def cmd_compare(args) -> int:
+        from .studies.compare import compare, verdict_lines
+
+        result, path = compare(args.model, args.states, args.methods, args.band, args.input, out=args.out,
+                               name=args.name, quiet=args.quiet)
+        print("\n".join(verdict_lines(result)))
+        print(f"report: {result.outdir / 'index.html'}\nstudy:  {path} (morsuite run {path} --out {args.out})")
+        return 0
+
+    from .studies.compare import DEFAULT_METHODS, INPUTS, METHODS
+    p = sub.add_parser("compare", help="compare reducers on one model at equal first-order states: a study, "
+                                       "its HTML report and the verdict")
+    p.add_argument("model", help=MODEL_HELP)
+    p.add_argument("--states", required=True, nargs="+", type=int, metavar="N",
+                   help="first-order states of the reduced models (even: a second-order ROM of order r has 2r)")
+    p.add_argument("--methods", nargs="+", metavar="NAME",
+                   help=f"default: {' '.join(DEFAULT_METHODS)}; valid: {', '.join(METHODS)}")
+    p.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
+                   help="frequency band in rad/s (default: the model's; a model file: from its eigenfrequencies)")
+    p.add_argument("--input", metavar="|".join(INPUTS) + "|FILE.csv",
+                   help="add a time-domain comparison for this input")
+    p.add_argument("--out", default="results", metavar="DIR", help="results root (default: results)")
+    p.add_argument("--name", help="study name (default: compare_MODEL)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars or log lines")
+    p.set_defaults(func=cmd_compare)
+    return p
+
+
 MODEL_HELP = "catalog spec (dsms:g=6000) or a path: .mat, .npz, a Matrix Market set (directory or stem)"
 
 
@@ -254,7 +286,8 @@ def build_parser():
     Subcommands: ``info MODEL`` (a model's summary as JSON), ``list`` (models and
     reducers), ``reduce`` (one reduction, its band errors and exact norms),
     ``simulate`` (time-domain output errors), ``bench`` (the benchmarks of
-    :mod:`morsuite.bench`) and ``run`` (study specs, :mod:`morsuite.studies`). Each
+    :mod:`morsuite.bench`), ``run`` (study specs, :mod:`morsuite.studies`) and ``compare``
+    (a comparison study of one model, :mod:`morsuite.studies.compare`). Each
     subparser stores its command function as ``func``.
 
     Returns
@@ -285,6 +318,7 @@ def build_parser():
     _add_simulate_parser(sub)
     _add_bench_parser(sub)
     _add_run_parser(sub)
+    _add_compare_parser(sub)
     return parser, sub
 
 

@@ -156,3 +156,81 @@ def test_no_module_is_over_500_lines():
     long = {str(p.relative_to(root)): n for p in root.rglob("*.py")
             if (n := len(p.read_text(encoding="utf-8").splitlines())) > 500}
     assert not long, f"modules over 500 lines: {long}"
+
+
+def import_cycles(edge_list) -> list:
+    """The import circles of a graph given as ``(importer, imported)`` pairs: each strongly
+    connected component with more than one module, or a module importing itself (Tarjan,
+    iterative). Importing a package counts as importing its ``__init__``; the implicit
+    import of a parent package that every ``import a.b.c`` does is not an edge."""
+    graph = {}
+    for a, b in edge_list:
+        graph.setdefault(a, set()).add(b)
+        graph.setdefault(b, set())
+    index, low, on, stack, out, counter = {}, {}, set(), [], [], [0]
+    for root in sorted(graph):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = counter[0]
+        counter[0] += 1
+        stack.append(root)
+        on.add(root)
+        while work:
+            v, it = work[-1]
+            w = next(it, None)
+            if w is not None:
+                if w not in index:
+                    index[w] = low[w] = counter[0]
+                    counter[0] += 1
+                    stack.append(w)
+                    on.add(w)
+                    work.append((w, iter(sorted(graph[w]))))
+                elif w in on:
+                    low[v] = min(low[v], index[w])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                comp = []
+                while True:
+                    w = stack.pop()
+                    on.discard(w)
+                    comp.append(w)
+                    if w == v:
+                        break
+                if len(comp) > 1 or v in graph[v]:
+                    out.append(sorted(comp))
+    return out
+
+
+def test_no_import_circle_anywhere_in_the_package():
+    """No module of morsuite reaches itself through imports, at module level or inside a
+    function (issue 28: the studies package flows spec -> plan -> tasks -> execute ->
+    outputs; bench/pareto and its report no longer import each other)."""
+    cycles = import_cycles((i, t) for i, t, _ in edges())
+    assert not cycles, "import circles (each a set of modules that import each other):\n" + "\n".join(
+        "  " + " <-> ".join(c) for c in cycles)
+
+
+def test_the_cycle_finder_finds_planted_circles():
+    """A planted three-module circle, a self-import and a diamond (no circle) are told apart."""
+    found = import_cycles([("a", "b"), ("b", "c"), ("c", "a"), ("c", "d"), ("e", "e"),
+                           ("p", "q"), ("p", "r"), ("q", "s"), ("r", "s")])
+    assert sorted(found) == [["a", "b", "c"], ["e"]]
+    assert import_cycles([("x", "y"), ("y", "z")]) == []
+    # the real graph's edges include function-local imports: the old studies circle went through them
+    src = "def f():\n    from .plan import SUMMARY\n"
+    assert ("morsuite.studies.plan", frozenset({"SUMMARY"})) in set(imports_in(src, "morsuite.studies.checks", False))
+
+
+def test_the_study_modules_flow_one_way():
+    """spec -> plan -> tasks -> execute -> outputs -> runner: no study module imports one
+    downstream of it (validators sit below what they validate)."""
+    order = ["checks", "norm_options", "time_options", "kinds", "spec", "cache", "memo", "plan", "task_common",
+             "tasks", "norms", "timedomain", "execute", "time_figures", "scenes", "results", "outputs",
+             "manifest", "pages", "runner", "compare"]
+    rank = {f"morsuite.studies.{m}": i for i, m in enumerate(order)}
+    back = [(i, t) for i, t, _ in edges() if i in rank and t in rank and rank[t] > rank[i]]
+    assert not back, f"study modules importing downstream: {back}"

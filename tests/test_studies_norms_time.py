@@ -270,8 +270,8 @@ def test_cached_rerun_computes_nothing_and_imports_no_numerics(study, tmp_path):
     src, _ = study
     shutil.copytree(src, tmp_path / "s")
     spec, out = tmp_path / "s" / "nt.toml", tmp_path / "s" / "results"
-    second = run(spec, out=out, quiet=True)   # figures and tables with a "cached" column settle here
-    assert [a["id"] for a in second.manifest["artifacts"] if a["kind"] not in ("figure", "table")
+    second = run(spec, out=out, quiet=True)   # figures, tables and the page with a "cached" column settle here
+    assert [a["id"] for a in second.manifest["artifacts"] if a["kind"] not in ("figure", "table", "page")
             and not a["cached"]] == []
     pd.testing.assert_frame_equal(second.summary.drop(columns="cached"), study[1].summary.drop(columns="cached"))
     heavy = ("matplotlib", "pandas", "control", "dask", "scipy.sparse", "morsuite.models", "morsuite.reducers",

@@ -142,7 +142,9 @@ def test_manifest_records_each_output_with_key_files_and_inputs(study):
     assert outs["figure/sig"]["formats"] == ["png", "pdf"]
     # every file of the run belongs to one output (or is the manifest)
     owned = {n for o in outs.values() for n in o["files"]}
-    assert owned | {"manifest.json"} == set(m["files"]) | {"manifest.json"}
+    page = next(a for a in m["artifacts"] if a["kind"] == "page")
+    assert set(page["files"]) == {"index.html"} and len(page["key"]) == 64
+    assert owned | {"manifest.json", "index.html"} == set(m["files"]) | {"manifest.json"}
 
 
 def test_changed_title_redraws_that_figure_only(study, draws):
@@ -156,7 +158,8 @@ def test_changed_title_redraws_that_figure_only(study, draws):
     # the curve did not change: its CSV is left as it was; the image and the .tex are new
     assert sorted(outs["figure/err"]["changed"]) == ["err.pdf", "err.png", "err.tex"]
     after = _snapshot(results / "reuse")
-    assert {n for n in after if after[n] != before[n]} == {"err.pdf", "err.png", "err.tex"}
+    # the study's page shows the figure's title: it changes with it
+    assert {n for n in after if after[n] != before[n]} == {"err.pdf", "err.png", "err.tex", "index.html"}
 
 
 def test_changed_r_redraws_that_scene_and_the_summary(study, draws):

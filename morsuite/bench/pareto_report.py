@@ -23,11 +23,10 @@ _COLORS = {"irka": "C0", "bt": "C3", "bt-vv": "C1", "irka-projected": "C2", "irk
 _MARKERS = {"irka": "o", "bt": "s", "bt-vv": "v", "irka-projected": "D", "irka-fo": "^", "so-h2": "P"}
 
 
-def _pareto_figure(spec, rows, summaries, path):
-    from .pareto import METHODS
-
+def _pareto_figure(spec, rows, summaries, methods, path):
+    """``methods``: the result's ``{label: {"order": what r means, ...}}``, in drawing order."""
     fig, (ax,) = new_figure()
-    for label in METHODS:
+    for label in methods:
         pts = sorted(((x["time_standalone_s"], x["max_abs_error"], x["r_requested"], x["states_nominal"])
                       for x in rows if x["model"] == spec and x["method"] == label and x.get("status") == "ok"),
                      key=lambda p: p[3])
@@ -36,7 +35,7 @@ def _pareto_figure(spec, rows, summaries, path):
         t = np.array([p[0] for p in pts])
         e = np.maximum(np.array([p[1] for p in pts]), 1e-300)
         ax.plot(t, e, "-", lw=0.7, marker=_MARKERS[label], ms=4, color=_COLORS[label],
-                label=f"{label}: {METHODS[label][2]}")
+                label=f"{label}: {methods[label].get('order', '')}")
         for p in pts[:: max(1, len(pts) // 5)]:
             ax.annotate(f"{p[3]}", (p[0], max(p[1], 1e-300)), fontsize=6, color=_COLORS[label],
                         xytext=(3, 2), textcoords="offset points")
@@ -136,5 +135,8 @@ def write_outputs(result: dict, out_dir) -> list[Path]:
                              md_columns=md)
         files.append(_floor_figure(result["floor"], out / "pareto_floor.png"))
     for spec in dict.fromkeys(x["model"] for x in result["rows"]):
-        files.append(_pareto_figure(spec, result["rows"], result["verdicts"], out / f"pareto_{_slug(spec)}.png"))
+        # the methods travel in the result (pareto.json): this module does not import the benchmark
+        methods = result.get("methods") or {m: {} for m in dict.fromkeys(x["method"] for x in result["rows"])}
+        files.append(_pareto_figure(spec, result["rows"], result["verdicts"], methods,
+                                    out / f"pareto_{_slug(spec)}.png"))
     return files

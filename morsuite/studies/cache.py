@@ -23,8 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..utils import atomic_path, atomic_write_text
-from .spec import plain
+from ..utils import atomic_path, atomic_write_text, to_plain as plain
 
 __all__ = ["Cache", "cache_key", "code_digest", "source_digest"]
 

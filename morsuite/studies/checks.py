@@ -3,8 +3,11 @@
 Every failure raises :class:`~morsuite.errors.SpecError` as
 ``study spec SOURCE: WHERE: what was wrong`` (with a close match suggested for a
 misspelt name). Validators are plain functions ``check(ctx, where, value) -> value``
-that the scene kinds (:mod:`.scenes`) and the option tables (:mod:`morsuite.studies.norms`,
-:mod:`morsuite.studies.timedomain`) name; none imports the numerical code.
+that the scene kinds (:mod:`morsuite.studies.kinds`) and the option tables (:mod:`morsuite.studies.norm_options`,
+:mod:`morsuite.studies.time_options`) name. This module is the bottom of the study package:
+it imports no other module of it (nor the numerical code); the checks that need the
+scene kinds or the option tables live beside those (``kinds.check_output_names``,
+``norm_options.norms_of``).
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ from ..errors import SpecError
 
 __all__ = ["Ctx", "suggest", "name_ok", "r_values", "positive_int", "nonnegative_int", "int_at_least",
            "positive_float", "float_in_01", "finite_list", "choice_of", "subset_of",
-           "r_by_method", "check_output_names", "norms_of"]
+           "r_by_method"]
 
 
 def suggest(word, choices) -> str:
@@ -168,27 +171,3 @@ def r_by_method(ctx, where, table, mlist, spec, kind):
             ctx.fail(f"{where}.{alias}", f"a {kind!r} scene shows one reduced order per method; got {list(rs)}")
         out[alias] = rs
     return out
-
-
-def check_output_names(ctx, scenes):
-    """Each scene's figures and tables (a time scene makes NAME and NAME_error) have names of their own."""
-    from .plan import SUMMARY
-    from .scenes import output_names
-
-    seen = {SUMMARY: "the summary table"}
-    for i, s in enumerate(scenes):
-        for out in output_names(s):
-            if out in seen:
-                ctx.fail(f"scenes[{i}] ({s.name!r}).name", f"its output {out!r} has the name of {seen[out]}; "
-                                                           "rename the scene")
-            seen[out] = f"scene {s.name!r}"
-
-
-def norms_of(ctx, data):
-    """The top-level ``norms`` (kinds for every reduction) and ``norm_options`` (every kind, filled in)."""
-    from .norms import NORM_KINDS, full_options
-
-    kinds = tuple(subset_of(NORM_KINDS)(ctx, "norms", data.get("norms", [])))
-    given = data.get("norm_options", {})
-    ctx.keys("norm_options", given, NORM_KINDS)
-    return kinds, {k: full_options(ctx, f"norm_options.{k}", k, given.get(k)) for k in NORM_KINDS}

@@ -12,7 +12,8 @@ reductions something asks them for:
 
 Options: ``[norm_options]`` with ``h2 = { rtol = 1e-8, ... }`` and ``hinf = { max_lus = 190, ... }``,
 checked against :data:`NORM_OPTIONS` (the keyword options of ``h2_error`` and
-``hinf_error``, the same defaults; ``tests/test_studies_norms.py`` checks that they agree).
+``hinf_error``, the same defaults; they live in :mod:`morsuite.studies.norm_options`, which
+the spec validates with, and are re-exported here).
 
 Artifacts (cached; keys include the options, the code digest and this file's digest):
 
@@ -30,46 +31,10 @@ from __future__ import annotations
 import time
 import warnings
 
-from .checks import choice_of, float_in_01, int_at_least, nonnegative_int, positive_int
-from .tasks import CAUGHT, _model, _stamp, rom_from_payload
+from .norm_options import ADI_KEYS, NORM_KINDS, NORM_MEASURES, NORM_OPTIONS, full_options
+from .task_common import CAUGHT, model_of as _model, rom_from_payload, stamp as _stamp
 
 __all__ = ["NORM_KINDS", "NORM_OPTIONS", "NORM_MEASURES", "ADI_KEYS", "full_options", "model_norm", "error_norms"]
-
-NORM_KINDS = ("h2", "hinf")
-#: measure of a scene -> (norm kind, relative?)
-NORM_MEASURES = {"h2": ("h2", False), "h2_rel": ("h2", True), "hinf": ("hinf", False), "hinf_rel": ("hinf", True)}
-#: the LR-ADI options of the Gramian factors (morsuite.linalg.gramians.ADI_DEFAULTS)
-ADI_KEYS = ("tol", "maxiter", "shifts", "num_shifts", "selection", "refine")
-
-
-def _adi(ctx, where, value):
-    if value is None:
-        return None
-    ctx.keys(where, value, ADI_KEYS)
-    checks = {"tol": float_in_01, "maxiter": positive_int, "num_shifts": positive_int, "refine": nonnegative_int}
-    out = {}
-    for k, v in value.items():
-        out[k] = checks[k](ctx, f"{where}.{k}", v) if k in checks else v
-    return out
-
-
-#: kind -> option -> (default, validator); the keyword options of h2_error / hinf_error
-NORM_OPTIONS = {
-    "h2": {"method": ("auto", choice_of(("auto", "pole-residue", "quadrature"))), "rtol": (1e-8, float_in_01),
-           "max_nodes": (1500, int_at_least(15)), "refine": (1, nonnegative_int), "adi": (None, _adi)},
-    "hinf": {"max_lus": (190, int_at_least(4)), "grid_lus": (120, positive_int), "rtol": (1e-10, float_in_01),
-             "per_decade": (8, positive_int), "refine": (1, nonnegative_int), "n_peaks": (8, positive_int),
-             "adi": (None, _adi)},
-}
-
-
-def full_options(ctx, where, kind, given) -> dict:
-    """Every option of ``kind`` with the defaults filled in, each value checked."""
-    table = NORM_OPTIONS[kind]
-    given = {} if given is None else given
-    ctx.keys(where, given, tuple(table))
-    return {k: (check(ctx, f"{where}.{k}", given[k]) if k in given else default)
-            for k, (default, check) in table.items()}
 
 
 def model_norm(source: str, kind: str, options: dict, key: str, run_by: str = "", after=None) -> dict:

@@ -20,7 +20,7 @@ one thing share one artifact:
   nodes of the graph, keyed by their content once their inputs exist (see
   :mod:`morsuite.studies.outputs`).
 
-Nothing outside what :func:`morsuite.studies.scenes.needs` returns for the
+Nothing outside what :func:`morsuite.studies.kinds.needs` returns for the
 study's scenes is planned.
 """
 
@@ -29,15 +29,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from .cache import cache_key, source_digest
-from .scenes import needs, output_names
-from .timedomain import settings as time_settings
+from .kinds import SUMMARY, needs, output_names
+from .time_options import settings as time_settings
 
 __all__ = ["Plan", "FomArtifact", "ReduceGroup", "MetricsGroup", "NormArtifact", "NormGroup", "SimArtifact",
            "SimGroup", "OutputArtifact", "build_plan", "SUMMARY"]
-
-#: Name of the summary table (``summary.csv``, ``summary.md``): every reduction of the run.
-SUMMARY = "summary"
-
 
 @dataclass
 class FomArtifact:
@@ -169,27 +165,29 @@ def _reduction_key(model, method, r):
 
 
 def _metrics_key(fom_key, reduction_key):
-    # tasks.py computes the metrics: a change there must not serve stale numbers
-    return cache_key("metrics", fom=fom_key, reduction=reduction_key, tasks=source_digest("studies/tasks.py"))
+    # tasks.py (with task_common.py) computes the metrics: a change there must not serve stale numbers
+    return cache_key("metrics", fom=fom_key, reduction=reduction_key,
+                     tasks=source_digest("studies/tasks.py", "studies/task_common.py"))
 
 
 def _norm_key(model, kind, options):
     return cache_key("model_norm", model=model.model_id, norm=kind, options=options,
-                     tasks=source_digest("studies/norms.py"))
+                     tasks=source_digest("studies/norms.py", "studies/task_common.py"))
 
 
 def _norm_error_key(reduction_key, kind, options):
     return cache_key("norm_error", reduction=reduction_key, norm=kind, options=options,
-                     tasks=source_digest("studies/norms.py"))
+                     tasks=source_digest("studies/norms.py", "studies/task_common.py"))
 
 
 def _sim_key(model, setup):
-    return cache_key("simulation", model=model.model_id, settings=setup, tasks=source_digest("studies/timedomain.py"))
+    return cache_key("simulation", model=model.model_id, settings=setup,
+                     tasks=source_digest("studies/timedomain.py", "studies/task_common.py"))
 
 
 def _sim_error_key(sim_key, reduction_key, rom_method):
     return cache_key("sim_error", simulation=sim_key, reduction=reduction_key, rom_method=rom_method,
-                     tasks=source_digest("studies/timedomain.py"))
+                     tasks=source_digest("studies/timedomain.py", "studies/task_common.py"))
 
 
 def build_plan(study) -> Plan:

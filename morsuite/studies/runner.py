@@ -4,7 +4,8 @@
 is wrong), plans the artifacts its scenes need, takes what the cache holds,
 computes the rest as a Dask graph (synchronous by default), and writes
 ``OUT/NAME/``: a CSV per curve, PNG, PDF and pgfplots per figure, tables,
-``summary.csv``/``summary.md`` (every reduction computed) and ``manifest.json``.
+``summary.csv``/``summary.md`` (every reduction computed), ``manifest.json`` and the
+study's page ``index.html`` (:mod:`.pages`); ``OUT/index.html`` links every study's page.
 
 Nothing is done twice: computed artifacts come from the cache when their key is
 there (a fully cached study builds no Dask graph and no model: see
@@ -32,6 +33,7 @@ from .cache import Cache
 from .execute import choose, compute, progress_enabled
 from .memo import SpecMemo
 from .outputs import previous_records, realize
+from .pages import PAGE, realize_page, study_page, write_index
 from .plan import SUMMARY, build_plan
 from .results import SUMMARY_COLUMNS, Results, summary as make_summary
 from .scenes import build
@@ -183,7 +185,7 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
     outdir.mkdir(parents=True, exist_ok=True)
     old = _old_manifest(outdir)
     previous = previous_records(old)
-    files, notes, records = [], [], []
+    files, notes, records, shown = [], [], [], []
     for scene in study.scenes:
         for item in build(scene, study, res):
             notes += item.notes
@@ -191,6 +193,7 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
                 notes.append(f"scene {scene.name!r}: nothing to draw; no figure {item.name!r} written")
             output = plan.outputs[f"{'table' if isinstance(item, TableData) else 'figure'}/{item.name}"]
             records.append(realize(output, item, outdir, formats, previous, rerender))
+            shown.append((item, records[-1]))
     summary = make_summary(study, plan, res, SUMMARY)
     records.append(realize(plan.outputs[f"table/{SUMMARY}"], summary, outdir, formats, previous, rerender))
     files += [outdir / name for rec in records for name in rec["files"]]
@@ -210,10 +213,12 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
 
     manifest = make_manifest(study, plan, choice, cache, res, records, files, outdir, notes, started, {"validate_s": t_validated - t_start, "compute_s": t_compute,
                                        "report_s": t_report, "total_s": time.perf_counter() - t_start}, rerender)
+    _page(study, shown, summary, manifest, outdir, old, files, rerender)
     keep = {str(p.relative_to(outdir)) for p in files} | {"manifest.json"}
     _remove_stale(outdir, old, keep)
     atomic_write_text(outdir / "manifest.json", json.dumps(strict_json(plain(manifest)), indent=1, allow_nan=False))
     files.append(outdir / "manifest.json")
+    write_index(out)
     for n in notes:
         _log(quiet, "note: " + n)
     drawn = sum(1 for rec in records if rec["rendered"])
@@ -221,6 +226,16 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
                 f"and tables made, the others unchanged; {manifest['timing']['total_s']:.1f} s, computing "
                 f"{t_compute:.1f} s)")
     return RunResult(study, outdir, manifest, summary, files, notes)
+
+
+def _page(study, shown, summary, manifest, outdir, old, files, rerender):
+    """Write (or reuse) the study's ``index.html`` and record it in the manifest (kind ``page``)."""
+    prev = next((a for a in old.get("artifacts") or [] if isinstance(a, dict) and a.get("kind") == "page"), None)
+    rec = realize_page(study_page(study, shown, summary, manifest), outdir, prev, rerender)
+    manifest["artifacts"].append(rec)
+    manifest["reused" if rec["reused"] else "computed"].append(rec["id"])
+    manifest["files"] = sorted(manifest["files"] + [PAGE])
+    files.append(outdir / PAGE)
 
 
 def _lookup(cache, kind, groups, entry, json_only=False):

@@ -1,5 +1,9 @@
 r"""Scene kinds: what each figure or table needs, and how it is built from results.
 
+The kinds' table, :func:`needs` and :func:`output_names` live in :mod:`morsuite.studies.kinds`
+(the spec and the plan read them there) and are re-exported here; this module builds
+each scene's figures and tables from the results.
+
 A scene names one model, one or more methods (aliases of the study's
 ``[methods]``), the reduced orders ``r`` and, for frequency-domain scenes, a grid.
 
@@ -53,74 +57,19 @@ each figure by its data and skip the ones that did not change.
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass
 
 import numpy as np
 
 from ..report.figures import Curve, CsvSource, FigureData
 from ..report.tables import TableData
-from .checks import subset_of
-from .norms import NORM_KINDS, NORM_MEASURES
-from .timedomain import TIME_KEYS
+from .kinds import AXES, COMMON_KEYS, KINDS, MAX_POINTS, MEASURES, TIMES, Kind, needs, orders_text, output_names
+from .norm_options import NORM_MEASURES
+from .time_figures import time_figures
 
 __all__ = ["KINDS", "COMMON_KEYS", "Kind", "TableData", "needs", "build", "output_names", "MEASURES", "AXES",
            "TIMES", "MAX_POINTS"]
 
-COMMON_KEYS = ("name", "kind", "title", "model", "methods", "r_by_method")
-MEASURES = ("max_abs", "max_rel") + tuple(NORM_MEASURES)
-#: a time-domain curve is thinned to at most this many samples for its figure and CSV
-MAX_POINTS = 4000
-AXES = ("r", "states")
-TIMES = ("standalone", "call")
-
-_R = (None, None)          # placeholders: validated by the spec module itself
-_GRID = (None, None)
-_PAPER = (None, None)
-
-
-@dataclass(frozen=True)
-class Kind:
-    doc: str
-    keys: dict                 # kind-specific key -> (default, choices or None for a positive int)
-    uses_grid: bool
-    one_r: bool
-    min_methods: int = 1
-    with_full: bool = False
-
-    def curve_names(self, methods) -> list:
-        """The scene's curves: ``"full"`` first if the kind draws the full model, then one per method alias."""
-        return (["full"] if self.with_full else []) + list(methods)
-
-    def grid_needed(self, params) -> bool:
-        """A grid unless the scene's measure is an exact norm (over the whole axis)."""
-        return self.uses_grid and params.get("measure") not in NORM_MEASURES
-
-
-KINDS = {
-    "sigma": Kind("sigma_max of the full and the reduced models over frequency",
-                  {"r": _R, "grid": _GRID, "paper_csv": _PAPER}, True, True, with_full=True),
-    "error": Kind("absolute or relative error over frequency",
-                  {"r": _R, "grid": _GRID, "paper_csv": _PAPER, "error": ("abs", ("abs", "rel"))}, True, True),
-    "compare": Kind("method against method at one r: error over frequency",
-                    {"r": _R, "grid": _GRID, "paper_csv": _PAPER, "error": ("abs", ("abs", "rel"))}, True, True,
-                    min_methods=2),
-    "error_vs_r": Kind("an error measure (band maximum on a grid, or an exact norm) against r",
-                       {"r": _R, "grid": _GRID, "paper_csv": _PAPER, "measure": ("max_abs", MEASURES),
-                        "axis": ("r", AXES)}, True, False),
-    "time_vs_r": Kind("reduction time against r",
-                      {"r": _R, "paper_csv": _PAPER, "axis": ("r", AXES), "time": ("standalone", TIMES)},
-                      False, False),
-    "pareto": Kind("time against error, one point per method and r",
-                   {"r": _R, "grid": _GRID, "measure": ("max_abs", MEASURES), "time": ("standalone", TIMES),
-                    "axis": ("r", AXES)},
-                   True, False),
-    "convergence": Kind("IRKA convergence history (shift change per iteration)", {"r": _R}, False, False),
-    "hsv": Kind("Hankel singular value decay", {"r": _R, "count": (None, None)}, False, True),
-    "table": Kind("summary table of the scene's reductions",
-                  {"r": _R, "grid": _GRID, "norms": ([], subset_of(NORM_KINDS))}, True, False),
-    "time": Kind("output of the full and reduced models over time, and the output error",
-                 {"r": _R, **TIME_KEYS}, False, True),
-}
+_orders_text = orders_text  # its old name here
 
 OMEGA = r"$\omega$ (rad/s)"
 YLABEL = {
@@ -139,27 +88,6 @@ MEASURE_COLUMN = {"max_abs": "max_abs_error", "max_rel": "max_rel_error", "h2": 
 XLABEL = {"r": r"reduced order $r$", "states": r"first-order states of the ROM ($2r$ for second order)"}
 TIME_LABEL = {"standalone": "time (s), reduction at this r alone",
               "call": "time (s) of reduce(r), shared work reused"}
-
-
-def needs(scene):
-    """Artifacts the scene reads: ("metrics", model, grid, method, r), ("reduce", model, method, r),
-    ("norm", model, method, r, kind) (an exact error norm and the model's norm) or
-    ("time", model, method, r) (the scene's simulations)."""
-    norms = list(scene.params.get("norms") or [])
-    if scene.params.get("measure") in NORM_MEASURES:
-        norms.append(NORM_MEASURES[scene.params["measure"]][0])
-    for m in scene.methods:
-        for r in scene.rs_of(m):
-            yield ("metrics", scene.model, scene.grid, m, r) if scene.grid else ("reduce", scene.model, m, r)
-            for n in norms:
-                yield ("norm", scene.model, m, r, n)
-            if scene.kind == "time":
-                yield ("time", scene.model, m, r)
-
-
-def output_names(scene) -> list:
-    """The names of the scene's outputs (figures or a table)."""
-    return [scene.name, f"{scene.name}_error"] if scene.kind == "time" else [scene.name]
 
 
 # -- building --------------------------------------------------------------
@@ -210,12 +138,6 @@ def _title(scene, study, default):
 
 def _missing(notes, scene, method, r, what):
     notes.append(f"scene {scene.name!r}: {method} at r = {r}: {what}; not shown")
-
-
-def _orders_text(scene) -> str:
-    """'r = 30' for a one-r scene, with the methods of other orders: 'r = 30 (fo: 60)'."""
-    own = {m: scene.rs_of(m)[0] for m in scene.methods if scene.rs_of(m)[0] != scene.rs[0]}
-    return f"r = {scene.rs[0]}" + (" (" + ", ".join(f"{m}: {r}" for m, r in own.items()) + ")" if own else "")
 
 
 def _freq_scene(scene, study, res):
@@ -463,7 +385,6 @@ def _table_scene(scene, study, res):
 
 
 def _time_scene(scene, study, res):
-    from .time_figures import time_figures
     return time_figures(scene, study, res, MAX_POINTS)
 
 

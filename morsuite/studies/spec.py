@@ -54,8 +54,11 @@ import numpy as np
 from ..utils import to_plain
 from ..errors import FileFormatError, InputError, SpecError
 from ..modelfiles import is_model_path, model_files
-from .checks import Ctx as _Ctx, name_ok as _name_ok, r_values as _r_values, suggest as _suggest
-from .checks import check_output_names as _check_output_names, norms_of as _norms, r_by_method as _r_by_method
+from .checks import Ctx as _Ctx, name_ok as _name_ok, r_by_method as _r_by_method, r_values as _r_values
+from .checks import suggest as _suggest
+from .kinds import COMMON_KEYS, KINDS, check_output_names as _check_output_names
+from .norm_options import norms_of as _norms
+from .time_options import resolve as _resolve_time
 
 __all__ = ["Study", "ModelEntry", "GridEntry", "MethodEntry", "SceneEntry", "load_spec",
            "study_from_dict", "plain"]
@@ -304,8 +307,6 @@ def _grid_entry(ctx, name, table):
 
 # -- scenes ----------------------------------------------------------------
 def _scene_entry(ctx, i, table, study_models, grids, methods, root):
-    from .scenes import COMMON_KEYS, KINDS
-
     where = f"scenes[{i}]"
     if not isinstance(table, dict):
         ctx.fail(where, "expected a table ([[scenes]])")
@@ -454,8 +455,7 @@ def study_from_dict(data: dict, *, path=None, source: str | None = None, memo=No
                          f"r = {rs[-1]} exceeds 2 (n1 - n2) = {2 * order} first-order states of model "
                          f"{s.model!r} ({models[s.model].name})")
         if s.kind == "time":
-            from .timedomain import resolve
-            resolve(ctx, f"scenes[{i}] ({s.name!r})", s.params, models[s.model], root, memo)
+            _resolve_time(ctx, f"scenes[{i}] ({s.name!r})", s.params, models[s.model], root, memo)
     return Study(name=name, title=title, description=description, path=path, root=root, models=models,
                  grids=grids, methods=methods, scenes=scenes, raw=data, norms=norms, norm_options=norm_options,
                  memo=memo)

@@ -14,50 +14,23 @@ plain data: arrays, numbers, strings, dicts. A reduced model travels as
   (model, method, options).
 
 Exact norms and time-domain simulations are the tasks of :mod:`morsuite.studies.norms` and
-:mod:`morsuite.studies.timedomain`.
+:mod:`morsuite.studies.timedomain`; what the three share (the model built once per
+process, the ROM payload, the failures recorded) is :mod:`morsuite.studies.task_common`.
 """
 
 from __future__ import annotations
 
-import datetime
-import functools
-import os
-import platform
 import time
 import warnings
 
 import numpy as np
 
-from ..errors import MorsuiteError
+from .task_common import CAUGHT, model_of as _model, rom_from_payload, rom_payload, stamp as _stamp
 
 __all__ = ["FOM_ARRAYS", "fom_response", "reduce_sweep", "metrics", "rom_payload", "rom_from_payload", "CAUGHT"]
 
-#: Failures of one r that are recorded (and reported) instead of aborting the study.
-#: Anything else is a bug and propagates.
-CAUGHT = (MorsuiteError, ArithmeticError, ValueError, RuntimeError, MemoryError, np.linalg.LinAlgError)
-
-
-@functools.lru_cache(maxsize=4)
-def _model(source: str):
-    from ..models import catalog
-    return catalog.parse(source)
-
-
-def _stamp() -> dict:
-    return {"host": platform.node(), "pid": os.getpid(),
-            "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
-
-
-def rom_payload(rom) -> dict:
-    """A reduced model as plain data: its kind and its matrices."""
-    return {"kind": rom.kind, "arrays": {f: np.asarray(getattr(rom, f)) for f in type(rom)._fields}}
-
-
-def rom_from_payload(payload: dict):
-    """The reduced model of a :func:`rom_payload` (a :class:`~morsuite.rom.SecondOrderROM` or :class:`~morsuite.rom.FirstOrderROM`)."""
-    from ..rom import FirstOrderROM, SecondOrderROM
-    cls = {"second-order": SecondOrderROM, "first-order": FirstOrderROM}[payload["kind"]]
-    return cls(*(payload["arrays"][f] for f in cls._fields))
+# ``_model`` and ``_stamp`` are kept under their old names here (tests clear ``tasks._model``'s
+# cache); they live in :mod:`.task_common`, which the norm and time-domain tasks import too.
 
 
 #: The arrays of a full-order response entry (stored as npz; the rest as JSON).

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..report.figures import Curve, FigureData
+from .kinds import orders_text
 
 __all__ = ["time_figures", "thin"]
 
@@ -59,9 +60,7 @@ def time_figures(scene, study, res, max_points: int) -> list:
     """``[FigureData of y and y_r, FigureData of the error]`` of the time scene ``scene``."""
     notes = []
     model = study.models[scene.model]
-    from .scenes import _orders_text
-
-    at = _orders_text(scene)
+    at = orders_text(scene)
     ch = scene.params["channel"] - 1
     what = _input_text(scene.params["input"])
     sim = res.simulation(scene.name)

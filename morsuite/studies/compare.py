@@ -1,0 +1,295 @@
+"""``morsuite compare``: a method-comparison study of one model, built in memory and run.
+
+:func:`compare_spec` writes the study a user would otherwise write by hand: the methods
+compared at equal first-order states (a second-order reduced model of order r has 2r
+states; a first-order one at N states runs at r = N), the frequency band of the model or,
+for a model file, a decade beyond its undamped eigenfrequencies, the exact H2 and
+H-infinity errors of every reduction, a verdict table per number of states, an error
+figure per number of states, error and time against states when several are asked for,
+and a time-domain scene when an input is given. :func:`compare` validates it (nothing
+is written when an argument is wrong: the error names it), writes it as TOML into the
+study's output folder (``OUT/NAME/NAME.toml``: edit it and ``morsuite run`` it again),
+runs it with the cache, and returns the run and the verdict lines that the command prints.
+
+The default methods are the five of the ``*_five_*`` scenes of ``studies/sweep.toml``:
+the paper's IRKA (``irka``, second-order), ``irka-fo`` (first-order tangential IRKA),
+``so-h2`` (second-order H2 descent), second-order BT at the velocity-velocity level
+(``bt-vv``) and first-order BT (``bt``). ``irka-projected`` (dense, n1 x n1) and the other
+BT levels (``bt-pp``, ``bt-pv``, ``bt-vp``, ``bt-fv``) can be asked for.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+from ..errors import InputError
+from ..modelfiles import is_model_path
+from ..utils import atomic_write_text
+from .checks import suggest
+
+__all__ = ["METHODS", "DEFAULT_METHODS", "INPUTS", "compare_spec", "compare", "to_toml", "verdict_lines"]
+
+#: method name -> (reducer, options, first-order states per order, label)
+METHODS = {
+    "irka": ("irka", {}, 2, "IRKA (paper, second-order)"),
+    "irka-fo": ("irka-fo", {}, 1, "irka-fo (first-order IRKA)"),
+    "so-h2": ("so-h2", {}, 2, "so-h2 (second-order H2 descent)"),
+    "bt": ("bt", {}, 1, "BT, first-order"),
+    "irka-projected": ("irka-projected", {}, 2, "IRKA, Pi-projected (dense)"),
+    **{f"bt-{lvl}": ("bt", {"form": lvl}, 2, f"BT ({lvl}, second-order)") for lvl in ("pp", "pv", "vp", "vv", "fv")},
+}
+DEFAULT_METHODS = ("irka", "irka-fo", "so-h2", "bt-vv", "bt")
+#: the inputs of ``--input`` besides a CSV file (columns t, u1..um)
+INPUTS = ("step", "impulse", "chirp")
+
+
+def _alias(name: str) -> str:
+    return name.replace("-", "_")
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_.") or "model"
+
+
+def _file_band(fom) -> tuple:
+    from ..models.random import default_band, eigenfrequency_range
+
+    lo, hi = eigenfrequency_range(fom.M, fom.K)
+    return default_band(lo, hi, 0.0)
+
+
+def compare_spec(model: str, states, methods=None, band=None, input=None, name=None) -> dict:
+    """The study (a dict, as its TOML reads) comparing ``methods`` on ``model`` at ``states``.
+
+    Parameters
+    ----------
+    model : str
+        A catalog spec (``dsms:g=600``) or a model file (.mat, .npz, a Matrix Market set).
+    states : sequence of int
+        First-order states of the reduced models (each even when a second-order method is
+        compared: its order is r = N / 2); at most 2 (n1 - n2), and N / 2 <= n1 - n2 for
+        second-order methods.
+    methods : sequence of str, optional
+        Names from :data:`METHODS`; default :data:`DEFAULT_METHODS`.
+    band : (float, float), optional
+        Frequency band (rad/s) of the error figures and band errors; default the catalog
+        model's band, or for a model file a decade beyond its undamped eigenfrequency range
+        (:func:`morsuite.models.random.eigenfrequency_range`: one sparse LU of K).
+    input : str, optional
+        ``step``, ``impulse``, ``chirp`` or a CSV file (t, u1..um): adds a time scene per N.
+    name : str, optional
+        The study's name (its output folder); default ``compare_`` and the model's name.
+
+    Raises
+    ------
+    InputError
+        Naming the argument at fault: ``MODEL`` unreadable, ``--states`` out of range or odd,
+        ``--methods`` unknown, ``--band`` not 0 < lo < hi, ``--input`` unknown or missing.
+
+    Cost: building the model once (and, for a file without ``band``, one sparse LU of K).
+    """
+    from .. import models
+
+    methods = list(DEFAULT_METHODS if not methods else methods)
+    for m in methods:
+        if m not in METHODS:
+            raise InputError(f"--methods: unknown method {m!r}{suggest(m, METHODS)}; valid: {', '.join(METHODS)}")
+    if len(set(methods)) != len(methods):
+        raise InputError(f"--methods: a method is named twice in {methods}")
+    try:
+        fom = models.parse(str(model))
+    except (InputError, OSError, ValueError) as exc:
+        raise InputError(f"MODEL {str(model)!r} cannot be read: {exc}") from exc
+    states = sorted(set(int(n) for n in states))
+    second = [m for m in methods if METHODS[m][2] == 2]
+    for n in states:
+        if n < (2 if second else 1):
+            raise InputError(f"--states: {n} is too small (at least {2 if second else 1})")
+        if second and n % 2:
+            raise InputError(f"--states: {n} is odd; a second-order reduced model of order r has 2r states, so "
+                             f"{', '.join(second)} need an even number")
+        if n > 2 * fom.order or (second and n // 2 > fom.order):
+            cap = 2 * fom.order
+            raise InputError(f"--states: {n} exceeds what model {fom.name} allows: {cap} first-order states "
+                             f"(n1 - n2 = {fom.order}; a second-order model of order r <= {fom.order})")
+    if band is not None:
+        lo, hi = (float(b) for b in band)
+        if not (0 < lo < hi < float("inf")):
+            raise InputError(f"--band: expected 0 < LO < HI (rad/s); got {lo:g} {hi:g}")
+        band = [lo, hi]
+    elif is_model_path(str(model)):
+        band = [float(b) for b in _file_band(fom)]
+    else:
+        band = [float(b) for b in fom.band]
+    source = str(model)
+    if is_model_path(source):  # absolute here; relative to the TOML file when written (to_toml)
+        source = str(Path(source).expanduser().resolve())
+    name = name or _slug("compare_" + fom.name.replace("(", "_").replace(")", "").replace("=", ""))
+
+    spec = {"name": name, "title": f"{fom.name}: " + ", ".join(methods) + " at " +
+            ", ".join(str(n) for n in states) + " states",
+            "description": f"Written by morsuite compare: {len(methods)} methods on {fom.name} (n1 = {fom.n1}, "
+                           f"n2 = {fom.n2}) at equal first-order states {states}; band [{band[0]:.3g}, "
+                           f"{band[1]:.3g}] rad/s; exact H2 and Hinf errors of every reduction.",
+            "norms": ["h2", "hinf"], "models": {"model": source},
+            "grids": {"band": {"band": band, "n": 200}},
+            "methods": {_alias(m): {"reducer": METHODS[m][0], **({"options": METHODS[m][1]} if METHODS[m][1] else {}),
+                                    "label": METHODS[m][3]} for m in methods},
+            "scenes": []}
+
+    def orders(ns):
+        """``r`` of the scene and ``r_by_method`` for the methods whose order counts otherwise."""
+        base = 2 if second else 1
+        rs = [n // base for n in ns]
+        other = {_alias(m): ([n // METHODS[m][2] for n in ns] if len(ns) > 1 else ns[0] // METHODS[m][2])
+                 for m in methods if METHODS[m][2] != base}
+        return (rs if len(rs) > 1 else rs[0]), other
+
+    aliases = [_alias(m) for m in methods]
+    for n in states:
+        r, other = orders([n])
+        extra = {"r_by_method": other} if other else {}
+        spec["scenes"].append({"name": f"table_{n}", "kind": "table", "model": "model", "grid": "band",
+                               "methods": aliases, "r": r, **extra, "norms": ["h2", "hinf"],
+                               "title": f"{fom.name}: {n} states"})
+        spec["scenes"].append({"name": f"error_{n}", "kind": "error", "model": "model", "grid": "band",
+                               "methods": aliases, "r": r, **extra,
+                               "title": f"{fom.name}: absolute error at {n} states"})
+        if input is not None:
+            spec["scenes"].append({"name": f"time_{n}", "kind": "time", "model": "model", "methods": aliases, "r": r,
+                                   **extra, "input": _input(input),
+                                   "title": f"{fom.name}: {input if input in INPUTS else 'measured input'}, "
+                                            f"{n} states"})
+    if len(states) > 1:
+        r, other = orders(states)
+        extra = {"r_by_method": other} if other else {}
+        for measure in ("h2", "hinf", "max_abs"):
+            spec["scenes"].append({"name": f"{measure}_vs_states", "kind": "error_vs_r", "model": "model",
+                                   "methods": aliases, "r": r, **extra, "measure": measure, "axis": "states",
+                                   **({"grid": "band"} if measure == "max_abs" else {})})
+        spec["scenes"].append({"name": "pareto_h2", "kind": "pareto", "model": "model", "methods": aliases, "r": r,
+                               **extra, "measure": "h2", "axis": "states"})
+    return spec
+
+
+def _input(value: str):
+    if value in INPUTS:
+        return value
+    p = Path(value).expanduser()
+    if p.suffix.lower() != ".csv":
+        raise InputError(f"--input: expected one of {', '.join(INPUTS)} or a CSV file (t, u1..um); got {value!r}")
+    if not p.is_file():
+        raise InputError(f"--input: CSV file {value!r} does not exist")
+    return "csv:" + str(p.resolve())
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{k} = {_toml_value(x)}" for k, x in v.items()) + " }"
+    raise InputError(f"cannot write {v!r} to TOML")
+
+
+def to_toml(spec: dict, relative_to=None) -> str:
+    """The study ``spec`` (as :func:`compare_spec` builds it) as TOML text; with ``relative_to`` (the
+    folder of the file) the model file and a CSV input are written relative to it."""
+    if relative_to is not None:
+        base = Path(relative_to).resolve()
+
+        def rel(p):
+            return os.path.relpath(p, base) if os.path.isabs(p) else p
+        spec = {**spec, "models": {k: rel(v) if is_model_path(v) else v for k, v in spec["models"].items()},
+                "scenes": [{**sc, "input": "csv:" + rel(sc["input"][4:])}
+                           if str(sc.get("input", "")).startswith("csv:") else sc for sc in spec["scenes"]]}
+    lines = ["# Written by `morsuite compare`; edit it and run it again with `morsuite run THIS_FILE --out DIR`."]
+    for k in ("name", "title", "description", "norms"):
+        lines.append(f"{k} = {_toml_value(spec[k])}")
+    for table in ("models", "grids"):
+        lines += ["", f"[{table}]"] + [f"{k} = {_toml_value(v)}" for k, v in spec[table].items()]
+    for alias, m in spec["methods"].items():
+        lines += ["", f"[methods.{alias}]"] + [f"{k} = {_toml_value(v)}" for k, v in m.items()]
+    for s in spec["scenes"]:
+        lines += ["", "[[scenes]]"] + [f"{k} = {_toml_value(v)}" for k, v in s.items()]
+    return "\n".join(lines) + "\n"
+
+
+def verdict_lines(result) -> list:
+    """What ``morsuite compare`` prints: per table, a row per method (states, flags, errors, time)
+    and the table's verdict."""
+    out = []
+    for scene in result.study.scenes:
+        if scene.kind != "table":
+            continue
+        rows = {}
+        for r in result.summary_table.rows:  # one row per reduction (a row per grid otherwise)
+            if r["method"] in scene.methods and r["r_requested"] == scene.rs_of(r["method"])[0]:
+                if (r["method"] not in rows) or (rows[r["method"]].get("max_abs_error") is None):
+                    rows[r["method"]] = r
+        rows = [rows[m] for m in scene.methods if m in rows]
+        out.append(f"== {scene.title or scene.name}")
+        out.append(f"{'method':<16}{'states':>7} {'conv':>5} {'H2 error':>12} {'Hinf error':>12} "
+                   f"{'band max':>11} {'time (s)':>9}")
+        for r in rows:
+            h2 = "" if r.get("h2_error") is None else \
+                ("~" if r.get("h2_trusted") is False else "") + f"{r['h2_error']:.4g}"
+            hinf = "" if r.get("hinf_error") is None else \
+                ("" if r.get("hinf_certified") is True else ">=") + f"{r['hinf_error']:.4g}"
+            band = "" if r.get("max_abs_error") is None else f"{r['max_abs_error']:.4g}"
+            conv = "yes" if r.get("converged") else ("FAIL" if r.get("status") != "ok" else "no")
+            t = r.get("time_standalone_s")
+            out.append(f"{r['method']:<16}{r.get('states') or '':>7} {conv:>5} {h2:>12} {hinf:>12} {band:>11} "
+                       f"{'' if t is None else format(t, '.3g'):>9}")
+        note = _table_note(result, scene.name)
+        if note:
+            out.append(note)
+        out.append("")
+    out.append("(~: H2 value not accurate to four digits; >=: the Hinf peak found, a lower bound; "
+               "time: the reduction at this order alone)")
+    return out
+
+
+def _table_note(result, name) -> str:
+    md = result.outdir / f"{name}.md"
+    try:
+        lines = md.read_text().splitlines()
+    except OSError:
+        return ""
+    return next((ln for ln in lines if "Smallest error" in ln), "")
+
+
+def compare(model, states, methods=None, band=None, input=None, out="results", name=None, quiet=False):
+    """Build, write and run the comparison study (see :func:`compare_spec`); returns ``(RunResult, toml_path)``.
+
+    The spec is validated in full before anything is written, so a refused argument leaves
+    nothing behind. The TOML goes to ``out/NAME/NAME.toml`` (atomically; file paths in it
+    relative to it); if the run itself fails, a TOML this call created is removed again.
+    """
+    from .cache import Cache
+    from .memo import SpecMemo
+    from .runner import run
+    from .spec import load_spec, study_from_dict
+
+    spec = compare_spec(model, states, methods, band, input, name)
+    study_from_dict(spec, source="morsuite compare")      # every check before anything is written
+    out = Path(out)
+    folder = out / spec["name"]
+    path = folder / f"{spec['name']}.toml"
+    existed = path.exists()
+    folder.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, to_toml(spec, relative_to=folder))
+    try:
+        result = run(load_spec(path, memo=SpecMemo(Cache(out / ".cache"))), out=out, quiet=quiet)
+    except BaseException:
+        if not existed:
+            path.unlink(missing_ok=True)
+        raise
+    return result, path

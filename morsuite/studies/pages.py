@@ -1,0 +1,225 @@
+"""The study's HTML page (``OUT/NAME/index.html``) and the results folder's (``OUT/index.html``).
+
+:func:`study_page` gathers, as plain data, what a reader of a study needs on one page: its
+description, the verdicts of its tables ("which method wins, by how much, in which norm"),
+the figures it drew, every table with the trusted/certified marks and convergence flags,
+the timings beside the LU counts that are their floor, and the run's facts from the
+manifest (versions, machine, scheduler, every method's options, what came from the cache).
+:mod:`morsuite.report.html` renders it with Jinja2.
+
+A page is an output like a figure: its key is the SHA-256 of that data, the templates and
+Jinja2's version and this module's and the renderer's source. :func:`realize_page` reuses
+the file when the key equals the previous run's record and the file still holds the
+recorded bytes (nothing rendered, Jinja2 not imported); otherwise it renders and writes
+the file atomically, and only when its bytes changed. The results folder's page
+(:func:`write_index`) links every study folder holding a ``manifest.json`` of a study and
+carries its key in its first line, so an unchanged index is neither rendered nor touched.
+
+The page holds nothing that changes from run to run by itself (no start time, no run
+time): an unchanged re-run leaves it as it was. What the cache served is counted, so the
+first re-run after a computing run rewrites it once (as it marks the summary's rows
+``cached``).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import importlib.metadata
+import json
+import time
+from pathlib import Path
+
+from ..report.files import sha256_file, write_text
+from ..utils import to_plain as plain
+from .cache import source_digest
+
+__all__ = ["PAGE", "study_page", "page_key", "realize_page", "write_index", "index_entries"]
+
+#: the page's file name in a study folder and in the results folder
+PAGE = "index.html"
+_TIMING_COLUMNS = ("model", "method", "r_requested", "states", "converged", "time_s", "time_standalone_s",
+                   "lu_count", "s_per_lu", "cached")
+_KEY_PREFIX = "<!-- morsuite page key "
+
+
+@functools.lru_cache(maxsize=1)
+def _software() -> dict:
+    try:
+        jinja = importlib.metadata.version("jinja2")
+    except importlib.metadata.PackageNotFoundError:
+        jinja = None
+    from ..report.html import template_digest  # no jinja2 import: only the templates' bytes
+
+    return {"jinja2": jinja, "templates": template_digest(),
+            "code": source_digest("report/html.py", "studies/pages.py")}
+
+
+def page_key(data: dict) -> str:
+    """SHA-256 of a page's plain ``data``, the templates, Jinja2's version and the page code."""
+    blob = json.dumps(plain({"page": data, **_software()}), sort_keys=True, allow_nan=True)
+    return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def _flags(rows) -> list:
+    """What a reader must not miss, counted from the summary's rows."""
+    out = []
+    ok = [r for r in rows if r.get("status") == "ok"]
+    for col, what in (("converged", "did not converge (best iterate shown)"), ("stable", "is unstable")):
+        bad = [r for r in ok if r.get(col) is False]
+        if bad:
+            out.append(f"{len(bad)} reduction(s) {what}: " + ", ".join(
+                f"{r['method']} r = {r['r_requested']}" for r in bad[:8]) + (" ..." if len(bad) > 8 else ""))
+    failed = [r for r in rows if r.get("status") != "ok"]
+    if failed:
+        out.append(f"{len(failed)} reduction(s) failed: " + ", ".join(
+            f"{r['method']} r = {r['r_requested']}" for r in failed[:8]))
+    for col in sorted({c for r in rows for c in r if c.endswith("_trusted")}):
+        bad = [r for r in ok if r.get(col) is False]
+        if bad:
+            out.append(f"{len(bad)} {col.replace('_trusted', '')} value(s) not accurate to four digits")
+    grew = [r for r in ok if r.get("growth") is True]
+    if grew:
+        out.append(f"{len(grew)} reduced model(s) whose simulated output grows")
+    return out
+
+
+def _timings(rows) -> dict:
+    from ..report.html import table_view
+
+    out = []
+    for r in rows:
+        lus, t = r.get("lu_count"), r.get("time_s")
+        per = t / lus if isinstance(lus, int) and not isinstance(lus, bool) and lus > 0 and \
+            isinstance(t, float) else None
+        out.append({**{c: r.get(c) for c in _TIMING_COLUMNS if c != "s_per_lu"}, "s_per_lu": per})
+    return table_view(_TIMING_COLUMNS, out)
+
+
+def _cache_counts(artifacts) -> dict:
+    kinds = {}
+    for a in artifacts:
+        if a.get("kind") in ("figure", "table", "page"):
+            continue
+        k = kinds.setdefault(a["kind"], {"reused": 0, "total": 0})
+        k["total"] += 1
+        k["reused"] += bool(a.get("reused") or a.get("cached"))
+    reused = sum(k["reused"] for k in kinds.values())
+    total = sum(k["total"] for k in kinds.values())
+    return {"reused": reused, "computed": total - reused, "total": total, "kinds": kinds}
+
+
+def study_page(study, outputs, summary, manifest: dict) -> dict:
+    """The plain data of a study's page.
+
+    ``outputs``: ``(item, record)`` pairs of the run's figures and tables in scene order
+    (``item`` a FigureData or TableData, ``record`` its :func:`~morsuite.studies.outputs.realize` record);
+    ``summary``: the summary TableData; ``manifest``: the run's manifest (its facts).
+    """
+    figures, tables, verdicts = [], [], []
+    for item, rec in outputs + [(summary, None)]:
+        files = sorted((rec or {}).get("files") or [])
+        if rec is None:
+            files = [f"{summary.name}.csv", f"{summary.name}.md"]
+        if hasattr(item, "curves"):
+            img = next((f"{item.name}.{ext}" for ext in ("png", "svg") if f"{item.name}.{ext}" in files), None)
+            if img is not None:
+                figures.append({"name": item.name, "title": item.title, "src": img, "files": files})
+            continue
+        tables.append({"name": item.name, "title": item.title, "note": item.note, "files": files,
+                       "columns": list(item.columns or (list(item.rows[0]) if item.rows else [])),
+                       "rows": item.rows})
+        if item.note and rec is not None:  # a table scene's note is its verdict (scenes._verdict)
+            verdicts.append({"title": item.title, "text": item.note})
+    models = [{"name": m["name"], "n1": m["n1"], "n2": m["n2"], "m": m["m"], "p": m["p"], "band": m["band"]}
+              for m in manifest["models"].values()]
+    used = {sc.get("grid") for sc in manifest.get("scenes") or []}
+    grids = [{"name": g, "band": v.get("band"), "n": v.get("n")} for g, v in (manifest.get("grids") or {}).items()
+             if g in used]
+    methods = [{"alias": a, **{k: m[k] for k in ("label", "reducer", "options_given", "options")}}
+               for a, m in manifest["methods"].items()]
+    threads = manifest.get("threads") or {}
+    facts = {"versions": manifest["versions"], "blas": manifest.get("blas") or {},
+             "host": {k: (manifest.get("host") or {}).get(k) for k in ("platform", "machine")},
+             "cpus": threads.get("affinity") or threads.get("cpu_count"),
+             "scheduler": (manifest.get("scheduler") or {}).get("name"), "spec_sha256": manifest.get("spec_sha256"),
+             "cache": _cache_counts(manifest["artifacts"]), "norms": manifest["norms"]["summary"],
+             "norm_options": {k: v for k, v in manifest["norms"]["options"].items()
+                              if k in manifest["norms"]["summary"]}}
+    return plain({
+        "study": study.name, "title": study.title, "description": study.description,
+        "spec": study.path.name if study.path is not None else None,
+        "models": models, "grids": grids, "methods": methods, "verdicts": verdicts, "flags": _flags(summary.rows),
+        "figures": figures, "formats": sorted({f.rsplit(".", 1)[-1] for x in figures for f in x["files"]}),
+        "tables": tables, "timings": _timings(summary.rows),
+        "timing_note": "time_s is the call's own time (work shared across r done once), time_standalone_s "
+                       "what this r alone costs; a study does not time one LU bare (morsuite bench does).",
+        "facts": facts, "notes": list(manifest.get("notes") or []),
+    })
+
+
+def realize_page(data: dict, outdir: Path, previous: dict | None, rerender: bool = False) -> dict:
+    """Write (or reuse) ``outdir/index.html`` from ``data``; the manifest record of kind ``page``.
+
+    ``previous``: the previous run's record of the page (or None). The record holds
+    the key, the file's SHA-256, ``reused``, and the table verdicts and flags that the
+    results folder's page shows.
+    """
+    t0 = time.perf_counter()
+    key = page_key(data)
+    path = Path(outdir) / PAGE
+    before = sha256_file(path)
+    prev = previous or {}
+    reused = not rerender and prev.get("key") == key and before is not None and \
+        before == (prev.get("files") or {}).get(PAGE)
+    if not reused:
+        from ..report.html import render_study
+        write_text(path, render_study(data))
+    after = sha256_file(path) if not reused else before
+    return {"id": "page/index", "kind": "page", "scene": None, "model": None, "reducer": None, "key": key, "reused": reused, "cached": reused,
+            "files": {PAGE: after}, "rendered": [] if reused else [PAGE],
+            "changed": [PAGE] if after != before else [], "flags": data["flags"],
+            "verdicts": [v["text"] for v in data["verdicts"]], "time_s": time.perf_counter() - t0}
+
+
+def index_entries(root: Path) -> list:
+    """One entry per study folder of ``root`` that holds a study's ``manifest.json`` and page."""
+    out = []
+    for d in sorted(p for p in Path(root).iterdir() if p.is_dir() and not p.name.startswith(".")):
+        try:
+            man = json.loads((d / "manifest.json").read_text())
+        except (OSError, ValueError):
+            continue
+        if not isinstance(man, dict) or "study" not in man or "artifacts" not in man or not (d / PAGE).is_file():
+            continue
+        arts = [a for a in man["artifacts"] if isinstance(a, dict)]
+        page = next((a for a in arts if a.get("kind") == "page"), {})
+        out.append({"name": d.name, "href": f"{d.name}/{PAGE}", "title": man.get("title") or d.name,
+                    "description": man.get("description") or "",
+                    "models": [m.get("name", a) for a, m in (man.get("models") or {}).items()],
+                    "methods": [m.get("label", a) for a, m in (man.get("methods") or {}).items()],
+                    "reductions": sum(1 for a in arts if a.get("kind") == "reduction"),
+                    "figures": sum(1 for a in arts if a.get("kind") == "figure" and a.get("files")),
+                    "tables": sum(1 for a in arts if a.get("kind") == "table"),
+                    "flags": "; ".join(page.get("flags") or []),
+                    "verdicts": " ".join(page.get("verdicts") or [])[:600]})
+    return out
+
+
+def write_index(root, title: str = "morsuite results") -> bool:
+    """Write ``root/index.html`` linking every study page under ``root``; True if written.
+
+    Rendered only when its data, the templates or Jinja2 changed (its key is its first line).
+    """
+    root = Path(root)
+    data = {"title": title, "studies": index_entries(root)}
+    key = page_key(data)
+    path = root / PAGE
+    try:
+        with open(path, encoding="utf-8") as fh:
+            if fh.readline().strip() == f"{_KEY_PREFIX}{key} -->":
+                return False
+    except OSError:
+        pass
+    from ..report.html import render_index
+    return write_text(path, f"{_KEY_PREFIX}{key} -->\n" + render_index(data))

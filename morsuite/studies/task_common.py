@@ -1,0 +1,56 @@
+"""What every task of a study's graph shares: the model it builds, its stamp, the ROM payload.
+
+The tasks (:mod:`morsuite.studies.tasks`, :mod:`morsuite.studies.norms`, :mod:`morsuite.studies.timedomain`) are pure functions of plain
+data; this module holds the few pieces they have in common, so that none of them
+imports another:
+
+- :data:`CAUGHT`: the failures of one r that are recorded instead of aborting a study;
+- :func:`model_of`: the full model of a catalog string or file path, built once per
+  process (a few are kept: the Gramian factors that norms and ``bt`` share live on it);
+- :func:`stamp`: host, process and time of a result;
+- :func:`rom_payload` / :func:`rom_from_payload`: a reduced model as plain data and back.
+"""
+
+from __future__ import annotations
+
+import datetime
+import functools
+import os
+import platform
+
+import numpy as np
+
+from ..errors import MorsuiteError
+
+__all__ = ["CAUGHT", "model_of", "stamp", "rom_payload", "rom_from_payload"]
+
+#: Failures of one r that are recorded (and reported) instead of aborting the study.
+#: Anything else is a bug and propagates.
+CAUGHT = (MorsuiteError, ArithmeticError, ValueError, RuntimeError, MemoryError, np.linalg.LinAlgError)
+
+
+@functools.lru_cache(maxsize=4)
+def model_of(source: str):
+    """The full model of ``source`` (catalog string or file path), via
+    :func:`morsuite.models.catalog.parse`; the last 4 are kept (``model_of.cache_clear()``
+    forgets them)."""
+    from ..models import catalog
+    return catalog.parse(source)
+
+
+def stamp() -> dict:
+    """``{"host", "pid", "created"}`` of a task's result (UTC, ISO 8601, seconds)."""
+    return {"host": platform.node(), "pid": os.getpid(),
+            "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
+
+
+def rom_payload(rom) -> dict:
+    """A reduced model as plain data: its kind and its matrices."""
+    return {"kind": rom.kind, "arrays": {f: np.asarray(getattr(rom, f)) for f in type(rom)._fields}}
+
+
+def rom_from_payload(payload: dict):
+    """The reduced model of a :func:`rom_payload` (a :class:`~morsuite.rom.SecondOrderROM` or :class:`~morsuite.rom.FirstOrderROM`)."""
+    from ..rom import FirstOrderROM, SecondOrderROM
+    cls = {"second-order": SecondOrderROM, "first-order": FirstOrderROM}[payload["kind"]]
+    return cls(*(payload["arrays"][f] for f in cls._fields))

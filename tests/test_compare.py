@@ -1,0 +1,123 @@
+"""``morsuite compare`` (issue 28): from a model to a re-runnable study, its report and the verdict.
+
+The numbers it prints are checked against reductions made here directly (the same
+reducer at the order the states ask for, its exact H2 error), bad arguments against
+their messages, exit code 2 and an output folder that stays empty."""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import scipy.linalg as sla
+
+import morsuite as ms
+from morsuite.cli import main
+from morsuite.studies import compare as C
+
+DATA = Path(__file__).resolve().parent / "data"
+
+
+@pytest.fixture(scope="module")
+def compared(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cmp") / "out"
+    rc = main(["compare", "dsms:g=60", "--states", "4", "8", "--methods", "irka", "bt", "--out", str(out),
+               "--quiet"])
+    assert rc == 0
+    return out, out / "compare_dsms_g60"
+
+
+def test_states_become_orders_and_the_numbers_are_the_reducers(compared, capsys):
+    out, folder = compared
+    s = pd.read_csv(folder / "summary.csv").drop_duplicates(["method", "r_requested"])
+    got = {(r.method, int(r.states)): int(r.r_requested) for r in s.itertuples()}
+    assert got == {("irka", 4): 2, ("irka", 8): 4, ("bt", 4): 4, ("bt", 8): 8}   # second-order r = N / 2
+    fom = ms.models.dsms(g=60)
+    for method, r in (("bt", 8), ("irka", 4)):
+        ref = ms.analysis.h2_error(fom, ms.reducers.make(method, fom).reduce(r).rom)
+        row = s[(s.method == method) & (s.r_requested == r)].iloc[0]
+        assert row.h2_error == pytest.approx(ref, rel=1e-6)
+
+
+def test_printed_verdict_table_matches_the_summary(tmp_path, capsys):
+    rc = main(["compare", "dsms:g=60", "--states", "6", "--methods", "bt", "bt-vv", "--out", str(tmp_path),
+               "--quiet"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    s = pd.read_csv(tmp_path / "compare_dsms_g60" / "summary.csv").drop_duplicates(["method"])
+    for r in s.itertuples():
+        line = next(ln for ln in text.splitlines() if ln.startswith(r.method + " "))
+        assert f"{r.h2_error:.4g}" in line and f">={r.hinf_error:.4g}" in line
+    assert "Smallest error per measure: 6 states" in text and "index.html" in text
+
+
+def test_written_study_reruns_from_the_cache(compared):
+    out, folder = compared
+    toml = folder / "compare_dsms_g60.toml"
+    spec = tomllib.loads(toml.read_text())
+    assert spec["norms"] == ["h2", "hinf"] and spec["grids"]["band"]["band"] == [0.01, 1.0]   # the catalog band
+    before = (folder / "summary.csv").read_bytes()
+    assert main(["run", str(toml), "--out", str(out), "--quiet"]) == 0
+    m = json.loads((folder / "manifest.json").read_text())
+    assert [a for a in m["computed"] if not a.startswith(("figure/", "table/", "page/"))] == []
+    assert (folder / "summary.csv").read_bytes().replace(b"False", b"True").count(b"\n") == before.count(b"\n")
+    assert (folder / "index.html").is_file() and (out / "index.html").is_file()
+
+
+def test_model_file_band_from_its_eigenfrequencies_and_a_time_scene(tmp_path):
+    mat = DATA / "mess_msd_ind3_g600.mat"
+    rc = main(["compare", str(mat), "--states", "4", "--methods", "bt", "--input", "step", "--out",
+               str(tmp_path / "o"), "--quiet"])
+    assert rc == 0
+    folder = tmp_path / "o" / "compare_mess_msd_ind3_g600"
+    spec = tomllib.loads((folder / "compare_mess_msd_ind3_g600.toml").read_text())
+    rel = Path(spec["models"]["model"])
+    assert not rel.is_absolute() and (folder / rel).resolve() == mat.resolve()   # the folder can move with it
+    fom = ms.models.load_mat(mat)
+    lam = sla.eigh(fom.K.toarray(), fom.M.toarray(), eigvals_only=True)   # dense reference
+    lo, hi = spec["grids"]["band"]["band"]
+    assert lo == pytest.approx(np.sqrt(lam[0]) / 10, rel=1e-2)             # a decade below the lowest
+    assert hi >= 10 * np.sqrt(lam[-1]) * (1 - 1e-12)                        # above a bound of the highest
+    assert (folder / "time_4.png").is_file() and (folder / "time_4_error.png").is_file()
+
+
+@pytest.mark.parametrize("args,match", [
+    (["nonexistent.mat", "--states", "4"], "MODEL 'nonexistent.mat' cannot be read"),
+    (["BAD", "--states", "4"], "MODEL 'BAD' cannot be read"),
+    (["dsms:g=60", "--states", "200"], "--states: 200 exceeds what model dsms"),
+    (["dsms:g=60", "--states", "5"], "--states: 5 is odd"),
+    (["dsms:g=60", "--states", "4", "--methods", "irka", "irkaa"], "--methods: unknown method 'irkaa' "
+                                                                   "(did you mean 'irka'?)"),
+    (["dsms:g=60", "--states", "4", "--band", "1", "0.1"], "--band: expected 0 < LO < HI"),
+    (["dsms:g=60", "--states", "4", "--input", "nowhere.csv"], "--input: CSV file 'nowhere.csv' does not exist"),
+    (["dsms:g=60", "--states", "4", "--input", "ramp"], "--input: expected one of step, impulse, chirp"),
+])
+def test_bad_input_exits_2_naming_the_argument_and_writes_nothing(tmp_path, capsys, monkeypatch, args, match):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "BAD").write_bytes(b"not a model")
+    out = tmp_path / "out"
+    assert main(["compare", *args, "--out", str(out), "--quiet"]) == 2
+    assert match in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_garbage_model_file_is_refused(tmp_path, capsys):
+    bad = tmp_path / "broken.mat"
+    bad.write_bytes(b"this is not a MATLAB file")
+    assert main(["compare", str(bad), "--states", "4", "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    assert "MODEL" in capsys.readouterr().err and not (tmp_path / "out").exists()
+
+
+def test_failed_run_leaves_no_study_file(tmp_path, monkeypatch):
+    from morsuite.studies import runner
+
+    def boom(*a, **k):
+        raise RuntimeError("interrupted")
+    monkeypatch.setattr(runner, "run", boom)
+    with pytest.raises(RuntimeError, match="interrupted"):
+        C.compare("dsms:g=60", [4], ["bt"], out=tmp_path / "o", quiet=True)
+    assert not list((tmp_path / "o").rglob("*.toml"))
