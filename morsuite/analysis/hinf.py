@@ -52,15 +52,24 @@ from ..linalg.gramians import cached_gramian_factors
 from ..utils import blas_threads
 from ._common import adi_options, check_fom, infinite, validate_rom
 from ._fom import FomResponse
+from ._hinf_dense import error_realization, hidden_realization
 from ._rom import RomResponse
 from .h2 import breakpoints
 
 __all__ = ["hinf_norm", "hinf_error", "hinf_rel_error"]
 
 EPS = np.finfo(float).eps
+#: largest hidden-manifold dimension n1 - n2 given the dense level-set test by default (docs/design/norms.md)
+CERTIFY_DIM = 300
 
 
-def _check(max_lus, rtol, per_decade):
+def _check(max_lus, rtol, per_decade, certify_dim=0, certify_tol=0.5, certify_lus=4):
+    if isinstance(certify_dim, bool) or not isinstance(certify_dim, (int, np.integer)) or certify_dim < 0:
+        raise OptionError(f"certify_dim must be a non-negative integer; got {certify_dim!r}")
+    if not (isinstance(certify_tol, (float, int)) and 0 < certify_tol < 1):
+        raise OptionError(f"certify_tol must be a float in (0, 1); got {certify_tol!r}")
+    if isinstance(certify_lus, bool) or not isinstance(certify_lus, (int, np.integer)) or certify_lus < 4:
+        raise OptionError(f"certify_lus must be an integer >= 4; got {certify_lus!r}")
     if isinstance(max_lus, bool) or not isinstance(max_lus, (int, np.integer)) or max_lus < 4:
         raise OptionError(f"max_lus must be an integer >= 4; got {max_lus!r}")
     if not (isinstance(rtol, (float, int)) and 0 < rtol < 1):
@@ -77,6 +86,8 @@ class _Sigma:
         self.rr = rr
         self.rtol = rtol
         self.samples = {}
+        #: the largest ||T(jw)||_F sampled: the scale of the cancellation in T - T_r
+        self.scale = 0.0
 
     def __call__(self, w):
         w = float(w)
@@ -90,9 +101,12 @@ class _Sigma:
             # refine only where the unrefined difference would lose more than rtol / 100 (16 eps |T| / |E|)
             need = lambda T0: bool(16.0 * EPS * np.linalg.norm(T0) > 0.01 * self.rtol * np.linalg.norm(T0 - Tr))  # noqa: E731
             T, dT = self.ev.transfer_and_derivative(s, need=need)
+            self.scale = max(self.scale, float(np.linalg.norm(np.asarray(T, dtype=complex))))
             T = T - Tr
             dT = dT - self.rr.derivative(s)
         E = np.asarray(T, dtype=complex)
+        if self.rr is None:
+            self.scale = max(self.scale, float(np.linalg.norm(E)))
         U, sv, Vh = np.linalg.svd(E)
         u, v = U[:, 0], Vh[0].conj()
         ds = float(np.real(u.conj() @ (1j * dT) @ v)) if w > 0 else 0.0
@@ -209,12 +223,134 @@ def _search(fom, rr, rom_poles, feed, *, max_lus, grid_lus, rtol, per_decade, re
     rec = {"peak_frequency": w_peak, "lu_count": sig.ev.lu_count, "lu_shifts": list(sig.ev.shifts),
            "samples": len(sig.samples),
            "grid": how, "grid_size": int(pts.size), "model_resonances_from": "cached LR-ADI shifts" if gf else None,
-           "refinements": refinements, "lower_bound": True}
-    return float(value), rec
+           "refinements": refinements}
+    return float(value), rec, sig
+
+
+#: the dense level-set test's resolution: the certified gap is at least RESOLUTION * eps * ||T|| / peak
+RESOLUTION = 1e3
+
+
+def _climb(sig, w, h, rtol, budget):
+    """The local maximum of sigma on the hump that holds ``w``: march uphill in steps h, 2h, 4h, ..., then refine.
+
+    Returns ``(value, frequency, lus, complete)``; ``complete`` is False when the budget ran out
+    before the maximum was bracketed and refined.
+    """
+    lu0 = sig.ev.lu_count
+    fa, da = sig(w)
+    a, step = w, h
+    direction = 1.0 if (da >= 0 or w == 0) else -1.0
+    b, fb, complete = a, fa, False
+    while sig.ev.lu_count - lu0 < budget - 2:
+        b = max(a + direction * step, 0.0)
+        fb, db = sig(b)
+        if direction * db <= 0 or fb < fa or b == 0.0:
+            complete = True
+            break
+        a, fa = b, fb
+        step *= 2.0
+    best = max((fa, a), (fb, b))
+    lo, hi = min(a, b), max(a, b)
+    left = budget - (sig.ev.lu_count - lu0)
+    if complete and hi > lo:
+        (fv, wv), used, _ = _refine(sig, lo, 0.5 * (lo + hi), hi, rtol, left - 1)
+        complete = used < left - 1
+        best = max(best, (fv, wv))
+    return best[0], best[1], sig.ev.lu_count - lu0, complete
+
+
+def _certify(sig, realization, value, w_peak, *, tol, rounds, lus, rtol):
+    r"""Upper bound by the level-set test at :math:`\gamma = (1 + tol)\,\text{peak}`; missed peaks refined.
+
+    Returns ``(value, w_peak, upper_bound or None, certified, record)``.
+    """
+    from ..linalg.levelset import level_set
+
+    t0, lu0 = time.perf_counter(), sig.ev.lu_count
+    A, B, C, D = realization()
+    t_real = time.perf_counter() - t0
+    scale = max(sig.scale, value)
+    tol = max(tol, RESOLUTION * EPS * scale / value) if value > 0 else tol
+    rec = {"method": "level set (Hamiltonian of the dense error system on the hidden manifold)",
+           "order": 2 * A.shape[0], "tol": tol, "realization_s": t_real, "rounds": [], "reason": None}
+    upper, certified = None, False
+    for rnd in range(rounds + 1):
+        gamma = (1.0 + tol) * value
+        if not gamma > 0:
+            rec["reason"] = "the error is zero to rounding: no level to test"
+            break
+        ls = level_set(A, B, C, D, gamma)
+        entry = {"gamma": gamma, "candidates": ls.frequencies.tolist(), "closest": ls.closest, "climbs": []}
+        rec["rounds"].append(entry)
+        if not ls.crossed:
+            upper, certified = gamma, True
+            break
+        if rnd == rounds:
+            rec["reason"] = f"imaginary eigenvalues remained after {rounds} rounds"
+            break
+        # Boyd-Balakrishnan: sigma exceeds gamma between crossings; probe them and their midpoints
+        ws = ls.frequencies
+        probe = np.unique(np.concatenate([ws, 0.5 * (ws[1:] + ws[:-1])]))
+        if probe.size + 4 > lus - (sig.ev.lu_count - lu0):
+            rec["reason"] = f"LU budget certify_lus = {lus} too small for {ws.size} candidates"
+            break
+        vals = np.array([sig(w)[0] for w in probe])
+        i = int(np.argmax(vals))
+        if vals[i] >= gamma:
+            h = 0.25 * float(np.min(np.abs(np.delete(probe, i) - probe[i]))) if probe.size > 1 else 1e-4 * probe[i]
+            fv, wv, used, _ = _climb(sig, float(probe[i]), max(h, 1e-12 * probe[i]), rtol,
+                                     max(lus - (sig.ev.lu_count - lu0), 4))
+            entry["climbs"].append({"candidate": float(probe[i]), "peak": wv, "value": fv, "lus": used,
+                                    "complete": True})
+            value, w_peak = max((value, w_peak), (fv, wv))
+            continue  # a peak the search missed: test again above it
+        improved, dismissed = False, 0
+        for w, re in zip(ls.frequencies, ls.real_parts):
+            left = lus - (sig.ev.lu_count - lu0)
+            if left < 4:
+                break
+            h = max(4.0 * re, 1e-4 * w, 1e-8 * ls.threshold)
+            fv, wv, used, complete = _climb(sig, float(w), h, rtol, left)
+            entry["climbs"].append({"candidate": float(w), "peak": wv, "value": fv, "lus": used,
+                                    "complete": complete})
+            if fv > value:
+                value, w_peak = fv, wv
+            if fv >= gamma:
+                improved = True  # a peak the search missed: test again above it
+            elif complete:
+                dismissed += 1  # its hump peaks below gamma: an eigenvalue near the axis, not on it
+        if improved:
+            continue
+        if dismissed == ls.frequencies.size:
+            upper, certified = gamma, True
+        else:
+            rec["reason"] = f"LU budget certify_lus = {lus} spent on {dismissed} of {ls.frequencies.size} candidates"
+        break
+    rec.update(lu_count=sig.ev.lu_count - lu0, time_s=time.perf_counter() - t0)
+    return value, w_peak, upper, certified, rec
+
+
+def _certificate(fom, sig, realization, value, rec, *, certify_dim, certify_tol, certify_lus, rtol):
+    """Add ``lower_bound``, ``upper_bound``, ``certified``, ``certificate`` to ``rec`` (and a better peak)."""
+    k = fom.n1 - fom.n2
+    if k > certify_dim or not np.isfinite(value):
+        why = (f"n1 - n2 = {k} exceeds certify_dim = {certify_dim}: no dense level-set test" if k > certify_dim
+               else "infinite value")
+        rec.update(search_value=value, lower_bound=value, upper_bound=None, certified=False,
+                   certificate={"reason": why})
+        return value
+    rec["search_value"] = value
+    value, w, upper, ok, cert = _certify(sig, realization, value, rec["peak_frequency"], tol=certify_tol, rounds=3,
+                                         lus=certify_lus, rtol=rtol)
+    rec.update(peak_frequency=w, lu_count=sig.ev.lu_count, lu_shifts=list(sig.ev.shifts), samples=len(sig.samples),
+               lower_bound=value, upper_bound=upper, certified=ok, certificate=cert)
+    return value
 
 
 def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-10, per_decade: int = 8,
-              refine: int = 1, n_peaks: int = 8, adi=None, details: bool = False):
+              refine: int = 1, n_peaks: int = 8, adi=None, certify_dim: int = CERTIFY_DIM, certify_tol: float = 1e-6,
+              certify_lus: int = 100, details: bool = False):
     r""":math:`\|T\|_{\mathcal H_\infty} = \sup_\omega \sigma_{\max}(T(j\omega))`, a lower bound exact at the peak found.
 
     See the module docstring for the search. The value is cached in
@@ -245,9 +381,12 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
     float, or (float, dict)
     """
     check_fom(fom)
-    _check(max_lus, rtol, per_decade)
+    _check(max_lus, rtol, per_decade, certify_dim, certify_tol, certify_lus)
     adi = adi_options(adi)
-    key = ("hinf_norm", max_lus, grid_lus, rtol, per_decade, refine, n_peaks, tuple(sorted(adi.items())))
+    # the start grid depends on whether the model's resonances (cached Gramian factors) are there
+    resonances = cached_gramian_factors(fom, **adi) is not None
+    key = ("hinf_norm", max_lus, grid_lus, rtol, per_decade, refine, n_peaks, tuple(sorted(adi.items())),
+           certify_dim, certify_tol, certify_lus, resonances)
     cache = getattr(fom, "cache", None)
     if cache is not None and key in cache:
         value, rec = cache[key]
@@ -255,8 +394,10 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
     else:
         t0 = time.perf_counter()
         with blas_threads(1):
-            value, rec = _search(fom, None, np.zeros(0), None, max_lus=max_lus, grid_lus=grid_lus, rtol=rtol,
-                                 per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi)
+            value, rec, sig = _search(fom, None, np.zeros(0), None, max_lus=max_lus, grid_lus=grid_lus, rtol=rtol,
+                                      per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi)
+            value = _certificate(fom, sig, lambda: hidden_realization(fom), value, rec, certify_dim=certify_dim,
+                                 certify_tol=certify_tol, certify_lus=certify_lus, rtol=rtol)
         rec["time_s"] = time.perf_counter() - t0
         rec["cached"] = False
         if cache is not None:
@@ -265,7 +406,8 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
 
 
 def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-10, per_decade: int = 8,
-               refine: int = 1, n_peaks: int = 8, adi=None, details: bool = False):
+               refine: int = 1, n_peaks: int = 8, adi=None, certify_dim: int = CERTIFY_DIM, certify_tol: float = 1e-6,
+               certify_lus: int = 100, details: bool = False):
     r""":math:`\|T - T_r\|_{\mathcal H_\infty}`: a lower bound, exact (to ``rtol``) at the peak it found.
 
     The peak of :math:`\sigma_{\max}(T(j\omega) - T_r(j\omega))` over the whole
@@ -294,17 +436,22 @@ def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float
     InputError
         ``rom`` has non-finite matrices or a singular E.
     """
-    _check(max_lus, rtol, per_decade)
+    _check(max_lus, rtol, per_decade, certify_dim, certify_tol, certify_lus)
     adi = adi_options(adi)
     arrays, why = validate_rom(fom, rom, "rom")
     if why is not None:
-        return infinite(*why, details)
+        out = infinite(*why, details)
+        if details:
+            out[1].update(lower_bound=np.inf, upper_bound=np.inf, certified=True)
+        return out
     t0 = time.perf_counter()
     rr = RomResponse(*arrays, refine=refine)
     feed = float(np.linalg.norm(arrays[4], 2)) if np.any(arrays[4] != 0) else None
     with blas_threads(1):
-        value, rec = _search(fom, rr, rom.poles(), feed, max_lus=max_lus, grid_lus=grid_lus, rtol=rtol,
-                             per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi)
+        value, rec, sig = _search(fom, rr, rom.poles(), feed, max_lus=max_lus, grid_lus=grid_lus, rtol=rtol,
+                                  per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi)
+        value = _certificate(fom, sig, lambda: error_realization(fom, arrays), value, rec, certify_dim=certify_dim,
+                             certify_tol=certify_tol, certify_lus=certify_lus, rtol=rtol)
     rec["time_s"] = time.perf_counter() - t0
     rec["value"] = value
     return (value, rec) if details else value
