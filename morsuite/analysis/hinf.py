@@ -337,10 +337,10 @@ def _certificate(fom, sig, realization, value, rec, *, certify_dim, certify_tol,
     if k > certify_dim or not np.isfinite(value):
         why = (f"n1 - n2 = {k} exceeds certify_dim = {certify_dim}: no dense level-set test" if k > certify_dim
                else "infinite value")
-        rec.update(search_value=value, lower_bound=value, upper_bound=None, certified=False,
-                   certificate={"reason": why})
+        rec.update(search_value=value, search_lu_count=rec["lu_count"], lower_bound=value, upper_bound=None,
+                   certified=False, certificate={"reason": why})
         return value
-    rec["search_value"] = value
+    rec["search_value"], rec["search_lu_count"] = value, rec["lu_count"]
     value, w, upper, ok, cert = _certify(sig, realization, value, rec["peak_frequency"], tol=certify_tol, rounds=3,
                                          lus=certify_lus, rtol=rtol)
     rec.update(peak_frequency=w, lu_count=sig.ev.lu_count, lu_shifts=list(sig.ev.shifts), samples=len(sig.samples),
