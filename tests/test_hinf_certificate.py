@@ -111,12 +111,13 @@ def reduce(fom, method, r, **opts):
 SHARP = dict(n1=30, n2=2, m=3, p=3, seed=3, zeta=0.002, damping="dashpots")
 MIMO = dict(n1=30, n2=3, m=3, p=3, seed=1, zeta=0.01)
 CASES = [
-    ("dsms60", lambda: ms.models.dsms(g=60), [("bt", 4), ("bt", 10), ("bt", 20), ("irka", 10)]),
-    ("tcom20", lambda: ms.models.tcom(nc=20), [("bt", 6), ("irka", 4)]),
+    ("dsms60", lambda: ms.models.dsms(g=60), [("bt", 4), ("bt", 20), ("irka", 10)]),
+    ("tcom20", lambda: ms.models.tcom(nc=20), [("bt", 6)]),
     ("mimo", lambda: ms.models.random_constrained(**MIMO), [("bt", 10)]),
     ("sharp", lambda: ms.models.random_constrained(**SHARP), [("irka", 6)]),
     ("dsms120", lambda: ms.models.dsms(g=120), [("bt", 12)]),
-    ("tcom40", lambda: ms.models.tcom(nc=40), [("bt", 24)]),
+    # the peak search alone stops 16% below the peak here (measured 2026-11-25)
+    ("tcom60", lambda: ms.models.tcom(nc=60), [("bt", 30)]),
 ]
 
 
@@ -147,7 +148,7 @@ def test_hamiltonian_has_j_omega_where_gamma_is_a_singular_value():
 def test_bounds_enclose_the_dense_peak(name, make, roms):
     fom = make()
     ms.analysis.h2_norm(fom)  # the model's resonances for the start grid, as the studies have them
-    for method, r in [(None, 0)] + roms:
+    for method, r in ([(None, 0)] if fom.n1 < 100 else []) + roms:
         rom = None if method is None else reduce(fom, method, r)
         if rom is not None and not rom.is_stable():
             continue
@@ -165,6 +166,8 @@ def test_bounds_enclose_the_dense_peak(name, make, roms):
             assert ab <= d["upper_bound"] * (1 + 1e-9), what
         assert value >= peak * (1 - 1e-7), what            # the missed peaks were found
         assert d["upper_bound"] <= value * (1 + max(1e-6, d["certificate"]["tol"])) * (1 + 1e-15)
+        if name == "tcom60":
+            assert d["search_value"] < 0.9 * peak  # the search alone missed it; the certificate found it
 
 
 def test_missed_peaks_are_found_by_the_level_set_test():

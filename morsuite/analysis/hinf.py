@@ -1,4 +1,4 @@
-r"""H-infinity norms of the full model and of the error of a reduced model, by refined peak search.
+r"""H-infinity norms of the full model and of a reduced model's error: refined peak search, certified bounds.
 
 :math:`\|H\|_{\mathcal H_\infty} = \sup_{\omega \ge 0}\sigma_{\max}(H(j\omega))` (real
 data: :math:`H(-j\omega) = \overline{H(j\omega)}`), for :math:`H = T` and
@@ -30,10 +30,40 @@ Search
        LU budget ``max_lus`` is spent. Also :math:`\|D\|` at
        :math:`\omega = \infty`.
 
-The result is a lower bound of the H-infinity norm, exact (to ``rtol``) at
-the peak it found; a peak between grid points that no pole announces can be
-missed. ``details`` gives the peak frequency, the LUs, the samples and the
-refinement record of each candidate.
+The search's result is a lower bound of the H-infinity norm, exact (to ``rtol``)
+at the peak it found; a peak between grid points that no pole announces can be
+missed.
+
+Certificate (where the hidden manifold is small, :math:`n_1 - n_2 \le`
+``certify_dim``, default 300)
+    4. A dense standard realization of the error system on the hidden manifold
+       (:mod:`morsuite.analysis._hinf_dense`: an orthonormal basis of
+       :math:`\ker G`, the reduced model stacked) and the level-set test
+       (:func:`morsuite.linalg.levelset.level_set`) at
+       :math:`\gamma = (1 + \tau)\,\text{peak}`,
+       :math:`\tau = \max(` ``certify_tol`` :math:`,\ 10^3\varepsilon\|T\|/\text{peak})`
+       (the second term: the double-precision realization of :math:`T - T_r`
+       cancels :math:`\|T\|` to the peak's size). No eigenvalue of the
+       Hamiltonian on (or within :math:`\sqrt\varepsilon\|H\|` of) the
+       imaginary axis: :math:`\gamma` is a certified upper bound.
+    5. Otherwise the frequencies of those eigenvalues and their midpoints are
+       sampled (Boyd-Balakrishnan-Bruinsma-Steinbuch); a sample above
+       :math:`\gamma` is a missed peak: it is refined (steps 2-3), and the test
+       repeated above it (at most 3 rounds). An eigenvalue near the axis whose
+       hump of :math:`\sigma_{\max}` (climbed and refined from its frequency)
+       peaks below :math:`\gamma` is not a crossing (rounding near a local
+       maximum just below :math:`\gamma`, or near a lightly damped pole): when
+       every one is explained so, :math:`\gamma` is certified. At most
+       ``certify_lus`` further LUs.
+
+``details``: ``lower_bound`` (the value returned), ``upper_bound`` (None where
+not computed), ``certified``, ``certificate`` (the record of the test: order,
+:math:`\tau`, the rounds with their candidate frequencies and climbs, LUs,
+time, or why there is none), ``search_value`` and ``search_lu_count`` (the
+search alone), the peak frequency, the LUs, the samples and the refinement
+record of each candidate. Cost and measured gaps: ``docs/design/norms.md``
+(the level-set test is one dense eigenvalue problem of order
+:math:`2(2(n_1 - n_2) + r)`: about 0.1 s at :math:`n_1 - n_2 = 100`, 4 s at 300).
 
 Responses are refined in extended precision and subtracted in long double
 (:class:`~morsuite.analysis._fom.FomResponse`), so that an error of 1e-12 of
@@ -52,6 +82,7 @@ from ..linalg.gramians import cached_gramian_factors
 from ..utils import blas_threads
 from ._common import adi_options, check_fom, infinite, validate_rom
 from ._fom import FomResponse
+from ._hinf_certify import certificate as _certificate, refine_peak as _refine
 from ._hinf_dense import error_realization, hidden_realization
 from ._rom import RomResponse
 from .h2 import breakpoints
@@ -140,53 +171,6 @@ def _grid(fom, rom_poles, ritz, per_decade, budget):
     return pts, {"rom_resonances": int(own.size), "model_resonances": int(model.size), "log_grid": int(logs.size)}
 
 
-def _refine(sig, lo, c, hi, rtol, budget):
-    r"""Maximise sig on [lo, hi] around the sample c (secant on the derivative, bisection safeguard).
-
-    Stops when the gain still predicted by the local quadratic model,
-    :math:`\sigma'(x)^2 / (2|\sigma''|)` with :math:`\sigma''` from the last two
-    derivatives, is below ``rtol`` times the best value, when the bracket has
-    shrunk to rounding, or when ``budget`` LUs are spent.
-    """
-    fl, dl = sig(lo)
-    fc, dc = sig(c)
-    fh, dh = sig(hi)
-    best = (fc, c)
-    used = 0
-    if dc > 0:  # the maximum next to c is on the side its derivative points to
-        a, fa, da, b, fb, db = c, fc, dc, hi, fh, dh
-    else:
-        a, fa, da, b, fb, db = lo, fl, dl, c, fc, dc
-    prev = (c, dc)
-    history = []
-    while used < budget and b - a > 1e-13 * abs(b):
-        if da > 0 > db:
-            x = a + (b - a) * da / (da - db)  # secant root of the derivative
-            if not (a + 0.01 * (b - a) < x < b - 0.01 * (b - a)):
-                x = 0.5 * (a + b)
-        else:
-            x = 0.5 * (a + b)
-        fx, dx = sig(x)
-        used += 1
-        history.append((x, fx, dx))
-        if fx > best[0]:
-            best = (fx, x)
-        curv = (dx - prev[1]) / (x - prev[0]) if x != prev[0] else 0.0
-        prev = (x, dx)
-        if da > 0 > db:
-            if dx > 0:
-                a, fa, da = x, fx, dx
-            else:
-                b, fb, db = x, fx, dx
-        elif fa >= fb:  # no sign change: keep the half that holds the larger end value
-            b, fb, db = x, fx, dx
-        else:
-            a, fa, da = x, fx, dx
-        if curv < 0 and fx >= best[0] and dx * dx / (2.0 * -curv) <= rtol * fx:
-            break
-    return best, used, history
-
-
 def _search(fom, rr, rom_poles, feed, *, max_lus, grid_lus, rtol, per_decade, refine, n_peaks, adi):
     gf = cached_gramian_factors(fom, **adi)
     ritz = np.asarray(gf.controllability.shifts) if gf is not None else None
@@ -227,134 +211,16 @@ def _search(fom, rr, rom_poles, feed, *, max_lus, grid_lus, rtol, per_decade, re
     return float(value), rec, sig
 
 
-#: the dense level-set test's resolution: the certified gap is at least RESOLUTION * eps * ||T|| / peak
-RESOLUTION = 1e3
-
-
-def _climb(sig, w, h, rtol, budget):
-    """The local maximum of sigma on the hump that holds ``w``: march uphill in steps h, 2h, 4h, ..., then refine.
-
-    Returns ``(value, frequency, lus, complete)``; ``complete`` is False when the budget ran out
-    before the maximum was bracketed and refined.
-    """
-    lu0 = sig.ev.lu_count
-    fa, da = sig(w)
-    a, step = w, h
-    direction = 1.0 if (da >= 0 or w == 0) else -1.0
-    b, fb, complete = a, fa, False
-    while sig.ev.lu_count - lu0 < budget - 2:
-        b = max(a + direction * step, 0.0)
-        fb, db = sig(b)
-        if direction * db <= 0 or fb < fa or b == 0.0:
-            complete = True
-            break
-        a, fa = b, fb
-        step *= 2.0
-    best = max((fa, a), (fb, b))
-    lo, hi = min(a, b), max(a, b)
-    left = budget - (sig.ev.lu_count - lu0)
-    if complete and hi > lo:
-        (fv, wv), used, _ = _refine(sig, lo, 0.5 * (lo + hi), hi, rtol, left - 1)
-        complete = used < left - 1
-        best = max(best, (fv, wv))
-    return best[0], best[1], sig.ev.lu_count - lu0, complete
-
-
-def _certify(sig, realization, value, w_peak, *, tol, rounds, lus, rtol):
-    r"""Upper bound by the level-set test at :math:`\gamma = (1 + tol)\,\text{peak}`; missed peaks refined.
-
-    Returns ``(value, w_peak, upper_bound or None, certified, record)``.
-    """
-    from ..linalg.levelset import level_set
-
-    t0, lu0 = time.perf_counter(), sig.ev.lu_count
-    A, B, C, D = realization()
-    t_real = time.perf_counter() - t0
-    scale = max(sig.scale, value)
-    tol = max(tol, RESOLUTION * EPS * scale / value) if value > 0 else tol
-    rec = {"method": "level set (Hamiltonian of the dense error system on the hidden manifold)",
-           "order": 2 * A.shape[0], "tol": tol, "realization_s": t_real, "rounds": [], "reason": None}
-    upper, certified = None, False
-    for rnd in range(rounds + 1):
-        gamma = (1.0 + tol) * value
-        if not gamma > 0:
-            rec["reason"] = "the error is zero to rounding: no level to test"
-            break
-        ls = level_set(A, B, C, D, gamma)
-        entry = {"gamma": gamma, "candidates": ls.frequencies.tolist(), "closest": ls.closest, "climbs": []}
-        rec["rounds"].append(entry)
-        if not ls.crossed:
-            upper, certified = gamma, True
-            break
-        if rnd == rounds:
-            rec["reason"] = f"imaginary eigenvalues remained after {rounds} rounds"
-            break
-        # Boyd-Balakrishnan: sigma exceeds gamma between crossings; probe them and their midpoints
-        ws = ls.frequencies
-        probe = np.unique(np.concatenate([ws, 0.5 * (ws[1:] + ws[:-1])]))
-        if probe.size + 4 > lus - (sig.ev.lu_count - lu0):
-            rec["reason"] = f"LU budget certify_lus = {lus} too small for {ws.size} candidates"
-            break
-        vals = np.array([sig(w)[0] for w in probe])
-        i = int(np.argmax(vals))
-        if vals[i] >= gamma:
-            h = 0.25 * float(np.min(np.abs(np.delete(probe, i) - probe[i]))) if probe.size > 1 else 1e-4 * probe[i]
-            fv, wv, used, _ = _climb(sig, float(probe[i]), max(h, 1e-12 * probe[i]), rtol,
-                                     max(lus - (sig.ev.lu_count - lu0), 4))
-            entry["climbs"].append({"candidate": float(probe[i]), "peak": wv, "value": fv, "lus": used,
-                                    "complete": True})
-            value, w_peak = max((value, w_peak), (fv, wv))
-            continue  # a peak the search missed: test again above it
-        improved, dismissed = False, 0
-        for w, re in zip(ls.frequencies, ls.real_parts):
-            left = lus - (sig.ev.lu_count - lu0)
-            if left < 4:
-                break
-            h = max(4.0 * re, 1e-4 * w, 1e-8 * ls.threshold)
-            fv, wv, used, complete = _climb(sig, float(w), h, rtol, left)
-            entry["climbs"].append({"candidate": float(w), "peak": wv, "value": fv, "lus": used,
-                                    "complete": complete})
-            if fv > value:
-                value, w_peak = fv, wv
-            if fv >= gamma:
-                improved = True  # a peak the search missed: test again above it
-            elif complete:
-                dismissed += 1  # its hump peaks below gamma: an eigenvalue near the axis, not on it
-        if improved:
-            continue
-        if dismissed == ls.frequencies.size:
-            upper, certified = gamma, True
-        else:
-            rec["reason"] = f"LU budget certify_lus = {lus} spent on {dismissed} of {ls.frequencies.size} candidates"
-        break
-    rec.update(lu_count=sig.ev.lu_count - lu0, time_s=time.perf_counter() - t0)
-    return value, w_peak, upper, certified, rec
-
-
-def _certificate(fom, sig, realization, value, rec, *, certify_dim, certify_tol, certify_lus, rtol):
-    """Add ``lower_bound``, ``upper_bound``, ``certified``, ``certificate`` to ``rec`` (and a better peak)."""
-    k = fom.n1 - fom.n2
-    if k > certify_dim or not np.isfinite(value):
-        why = (f"n1 - n2 = {k} exceeds certify_dim = {certify_dim}: no dense level-set test" if k > certify_dim
-               else "infinite value")
-        rec.update(search_value=value, search_lu_count=rec["lu_count"], lower_bound=value, upper_bound=None,
-                   certified=False, certificate={"reason": why})
-        return value
-    rec["search_value"], rec["search_lu_count"] = value, rec["lu_count"]
-    value, w, upper, ok, cert = _certify(sig, realization, value, rec["peak_frequency"], tol=certify_tol, rounds=3,
-                                         lus=certify_lus, rtol=rtol)
-    rec.update(peak_frequency=w, lu_count=sig.ev.lu_count, lu_shifts=list(sig.ev.shifts), samples=len(sig.samples),
-               lower_bound=value, upper_bound=upper, certified=ok, certificate=cert)
-    return value
-
-
 def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-10, per_decade: int = 8,
               refine: int = 1, n_peaks: int = 8, adi=None, certify_dim: int = CERTIFY_DIM, certify_tol: float = 1e-6,
               certify_lus: int = 100, details: bool = False):
-    r""":math:`\|T\|_{\mathcal H_\infty} = \sup_\omega \sigma_{\max}(T(j\omega))`, a lower bound exact at the peak found.
+    r""":math:`\|T\|_{\mathcal H_\infty} = \sup_\omega \sigma_{\max}(T(j\omega))`: the peak found (a lower
+    bound), with a certified upper bound where :math:`n_1 - n_2 \le` ``certify_dim``.
 
-    See the module docstring for the search. The value is cached in
-    ``fom.cache`` per options: relative errors of many reduced models pay for it once.
+    See the module docstring for the search and the certificate. The value is
+    cached in ``fom.cache`` per options and per whether the model's resonances
+    (cached Gramian factors) were available: relative errors of many reduced
+    models pay for it once.
 
     Parameters
     ----------
@@ -373,12 +239,21 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
         Local maxima of the grid refined, best first (default 8).
     adi : dict, optional
         ADI options under which cached Gramian factors supply the model's resonances.
+    certify_dim : int
+        Largest :math:`n_1 - n_2` given the dense level-set test (default 300; 0: never).
+    certify_tol : float
+        Relative gap :math:`\tau` of the upper bound above the peak (default 1e-6; raised
+        to the realization's resolution, module docstring).
+    certify_lus : int
+        LUs for the certificate's samples (default 100).
     details : bool
-        Also return a dict (``peak_frequency``, ``lu_count``, ``samples``, ``refinements``, ...).
+        Also return a dict (``lower_bound``, ``upper_bound``, ``certified``, ``certificate``,
+        ``peak_frequency``, ``lu_count``, ``samples``, ``refinements``, ...).
 
     Returns
     -------
     float, or (float, dict)
+        The largest peak found: a lower bound of the norm (``details["lower_bound"]``).
     """
     check_fom(fom)
     _check(max_lus, rtol, per_decade, certify_dim, certify_tol, certify_lus)
@@ -408,26 +283,33 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
 def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-10, per_decade: int = 8,
                refine: int = 1, n_peaks: int = 8, adi=None, certify_dim: int = CERTIFY_DIM, certify_tol: float = 1e-6,
                certify_lus: int = 100, details: bool = False):
-    r""":math:`\|T - T_r\|_{\mathcal H_\infty}`: a lower bound, exact (to ``rtol``) at the peak it found.
+    r""":math:`\|T - T_r\|_{\mathcal H_\infty}`: the peak found (a lower bound, exact to ``rtol`` at that
+    peak), with a certified upper bound where :math:`n_1 - n_2 \le` ``certify_dim``.
 
     The peak of :math:`\sigma_{\max}(T(j\omega) - T_r(j\omega))` over the whole
     axis :math:`\omega \in [0, \infty]` (module docstring): a start grid at the
     reduced model's and the model's resonances and on a log grid, then the
-    best local maxima refined with the derivative from the singular vectors.
-    Cost: at most ``max_lus`` sparse LUs (default 190), each with one plain and one
-    transposed solve.
+    best local maxima refined with the derivative from the singular vectors;
+    then, on a small hidden manifold, the level-set test of the dense error
+    system at :math:`(1 + \tau)` times the peak, which certifies it as an upper
+    bound or points to missed peaks. Cost: at most ``max_lus`` sparse LUs
+    (default 190), each with one plain and one transposed solve; the certificate
+    one dense eigenvalue problem of order :math:`2(2(n_1 - n_2) + r)` a round and
+    at most ``certify_lus`` LUs.
 
     Parameters
     ----------
     fom : Index3Model
     rom : SecondOrderROM or FirstOrderROM
-    max_lus, grid_lus, rtol, per_decade, refine, n_peaks, adi, details
+    max_lus, grid_lus, rtol, per_decade, refine, n_peaks, adi, certify_dim, certify_tol, certify_lus, details
         As in :func:`hinf_norm`.
 
     Returns
     -------
     float, or (float, dict)
-        ``inf`` with a :class:`StabilityWarning` for an unstable reduced model.
+        The largest peak found, a lower bound (``details``: ``lower_bound``,
+        ``upper_bound`` or None, ``certified``); ``inf`` with a
+        :class:`StabilityWarning` for an unstable reduced model.
 
     Raises
     ------
@@ -458,11 +340,17 @@ def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float
 
 
 def hinf_rel_error(fom, rom, *, details: bool = False, **options):
-    r""":math:`\|T - T_r\|_{\mathcal H_\infty} / \|T\|_{\mathcal H_\infty}` (both by
-    :func:`hinf_error` / :func:`hinf_norm` with ``options``; lower bounds over a lower bound)."""
+    r""":math:`\|T - T_r\|_{\mathcal H_\infty} / \|T\|_{\mathcal H_\infty}`: the ratio of the peaks found
+    by :func:`hinf_error` and :func:`hinf_norm` (with ``options``), neither bound. Where both are
+    certified, ``details`` has ``rel_lower_bound`` = error lower / norm upper and
+    ``rel_upper_bound`` = error upper / norm lower, and ``certified`` is True."""
     e, d = hinf_error(fom, rom, details=True, **options)
     n, dn = hinf_norm(fom, details=True, **options)
     value = e / n if np.isfinite(e) else np.inf
     if not details:
         return value
-    return value, {**d, "norm": n, "norm_details": dn, "rel_value": value}
+    ok = bool(d.get("certified") and dn.get("certified"))
+    lo = e / dn["upper_bound"] if ok else None
+    up = d["upper_bound"] / n if ok else None
+    return value, {**d, "norm": n, "norm_details": dn, "rel_value": value, "certified": ok,
+                   "rel_lower_bound": lo, "rel_upper_bound": up}
