@@ -357,8 +357,12 @@ def test_reduce_json_prints_the_exact_norms(capsys):
     assert out["hinf_error"] == pytest.approx(ref["hinf"], rel=1e-6)
     assert out["hinf_rel_error"] == pytest.approx(ref["hinf"] / ref["norm_hinf"], rel=1e-6)
     assert out["h2_route"] == "pole-residue" and out["h2_trusted"] is True and out["hinf_lu_count"] > 0
+    # hinf_error is the peak found (lower bound); ab13dd's value lies below the certified upper bound
+    assert out["hinf_certified"] is True and out["hinf_error"] < out["hinf_upper_bound"]
+    assert ref["hinf"] <= out["hinf_upper_bound"] * (1 + 1e-9)
     none = _json(capsys, ["reduce", "--model", "dsms:g=40", "--method", "bt", "--r", "4", "--json", "--no-norms"])
-    assert all(none[k] is None for k in ("h2_error", "h2_rel_error", "hinf_error", "hinf_rel_error", "h2_route"))
+    assert all(none[k] is None for k in ("h2_error", "h2_rel_error", "hinf_error", "hinf_rel_error", "h2_route",
+                                         "hinf_upper_bound", "hinf_certified"))
     assert none["max_abs_error"] > 0
 
 
