@@ -148,6 +148,7 @@ def test_hamiltonian_has_j_omega_where_gamma_is_a_singular_value():
 def test_bounds_enclose_the_dense_peak(name, make, roms):
     fom = make()
     ms.analysis.h2_norm(fom)  # the model's resonances for the start grid, as the studies have them
+    scale = ms.analysis.hinf_norm(fom)
     for method, r in ([(None, 0)] if fom.n1 < 100 else []) + roms:
         rom = None if method is None else reduce(fom, method, r)
         if rom is not None and not rom.is_stable():
@@ -158,13 +159,17 @@ def test_bounds_enclose_the_dense_peak(name, make, roms):
             value, d = ms.analysis.hinf_error(fom, rom, details=True)
         peak, wpeak, ab = dense_peak(fom, rom, ab13dd=(name == "mimo" and rom is not None))
         what = (name, method, r, value, d["upper_bound"], peak, wpeak, d["certificate"])
-        assert d["certified"] is True, what
         assert d["lower_bound"] == value
         assert value <= peak * (1 + 1e-9), what           # a sample: never above the true peak
+        assert value >= peak * (1 - 1e-7), what            # the missed peaks were found
+        if value >= 1e-9 * scale:
+            assert d["certified"] is True, what
+        if not d["certified"]:  # an error of 2e-11 of ||T|| (dsms60, bt 20): below the test's resolution
+            assert d["upper_bound"] is None and "cannot resolve" in d["certificate"]["reason"], what
+            continue
         assert peak <= d["upper_bound"], what              # the certificate
         if ab is not None:
             assert ab <= d["upper_bound"] * (1 + 1e-9), what
-        assert value >= peak * (1 - 1e-7), what            # the missed peaks were found
         assert d["upper_bound"] <= value * (1 + max(1e-6, d["certificate"]["tol"])) * (1 + 1e-15)
         if name == "tcom60":
             assert d["search_value"] < 0.9 * peak  # the search alone missed it; the certificate found it

@@ -17,9 +17,11 @@ import numpy as np
 
 from ..linalg.levelset import level_set
 
-__all__ = ["refine_peak", "climb", "certify", "certificate", "RESOLUTION"]
+__all__ = ["refine_peak", "climb", "certify", "certificate", "RESOLUTION", "LOCAL"]
 
 EPS = np.finfo(float).eps
+#: an eigenvalue near the axis is checked locally only if |Re| <= LOCAL * max(frequency, lowest band frequency)
+LOCAL = 0.05
 
 
 def refine_peak(sig, lo, c, hi, rtol, budget):
@@ -102,8 +104,13 @@ def climb(sig, w, h, rtol, budget):
     return best[0], best[1], sig.ev.lu_count - lu0, complete
 
 
-def certify(sig, realization, value, w_peak, *, tol, rounds, lus, rtol):
+def certify(sig, realization, value, w_peak, *, tol, rounds, lus, rtol, w_lo):
     r"""Upper bound by the level-set test at :math:`\gamma = (1 + tol)\,\text{peak}`; missed peaks refined.
+
+    An eigenvalue near the axis is dismissed by a climb only when its real part is at most
+    :data:`LOCAL` times its frequency (or ``w_lo``, the model's lowest band frequency): farther
+    off, the true eigenvalue it may stand for could sit on another hump, and the value stays
+    uncertified.
 
     Returns ``(value, w_peak, upper_bound or None, certified, record)``.
     """
@@ -128,6 +135,12 @@ def certify(sig, realization, value, w_peak, *, tol, rounds, lus, rtol):
             break
         if rnd == rounds:
             rec["reason"] = f"imaginary eigenvalues remained after {rounds} rounds"
+            break
+        far = ls.real_parts > LOCAL * np.maximum(ls.frequencies, w_lo)
+        if np.any(far):
+            rec["reason"] = (f"{int(far.sum())} eigenvalue(s) near the axis with real parts up to "
+                             f"{ls.real_parts.max():.2e}, beyond a local check: the double-precision level-set "
+                             "test cannot resolve this error level")
             break
         # Boyd-Balakrishnan: sigma exceeds gamma between crossings; probe them and their midpoints
         ws = ls.frequencies
@@ -182,7 +195,7 @@ def certificate(fom, sig, realization, value, rec, *, certify_dim, certify_tol, 
         return value
     rec["search_value"], rec["search_lu_count"] = value, rec["lu_count"]
     value, w, upper, ok, cert = certify(sig, realization, value, rec["peak_frequency"], tol=certify_tol, rounds=3,
-                                        lus=certify_lus, rtol=rtol)
+                                        lus=certify_lus, rtol=rtol, w_lo=float(fom.band[0]))
     rec.update(peak_frequency=w, lu_count=sig.ev.lu_count, lu_shifts=list(sig.ev.shifts), samples=len(sig.samples),
                lower_bound=value, upper_bound=upper, certified=ok, certificate=cert)
     return value

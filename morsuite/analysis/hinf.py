@@ -34,14 +34,16 @@ The search's result is a lower bound of the H-infinity norm, exact (to ``rtol``)
 at the peak it found; a peak between grid points that no pole announces can be
 missed.
 
-Certificate (where the hidden manifold is small, :math:`n_1 - n_2 \le`
-``certify_dim``, default 300)
+Certificate
+    Where the hidden manifold is small, :math:`n_1 - n_2 \le` ``certify_dim``
+    (default 300):
+
     4. A dense standard realization of the error system on the hidden manifold
        (:mod:`morsuite.analysis._hinf_dense`: an orthonormal basis of
        :math:`\ker G`, the reduced model stacked) and the level-set test
        (:func:`morsuite.linalg.levelset.level_set`) at
        :math:`\gamma = (1 + \tau)\,\text{peak}`,
-       :math:`\tau = \max(` ``certify_tol`` :math:`,\ 10^3\varepsilon\|T\|/\text{peak})`
+       :math:`\tau = \max(c,\ 10^3\varepsilon\|T\|/\text{peak})`, :math:`c` = ``certify_tol``
        (the second term: the double-precision realization of :math:`T - T_r`
        cancels :math:`\|T\|` to the peak's size). No eigenvalue of the
        Hamiltonian on (or within :math:`\sqrt\varepsilon\|H\|` of) the

@@ -133,8 +133,9 @@ def level_set(A, B, C, D, gamma: float, *, rel_tol: float | None = None) -> Leve
     w, rp = np.abs(lam.imag[near]), re[near]
     order = np.argsort(w)
     w, rp = w[order], rp[order]
-    # +-j w (and a real pair +-a at w = 0) give one frequency each
+    # a conjugate pair +-j w, and the pair -conj(lambda), lambda split off the axis by rounding, give one
+    # frequency each; distinct crossings closer than 1e-9 relative are one frequency too
     keep = np.ones(w.size, dtype=bool)
-    keep[1:] = np.diff(w) > thr
+    keep[1:] = np.diff(w) > 1e-9 * w[1:]
     return LevelSet(float(gamma), w[keep], rp[keep], float(thr), nrm, int(H.shape[0]),
                     float(re.min() / nrm) if re.size and nrm > 0 else np.inf)
