@@ -63,9 +63,9 @@ not computed), ``certified``, ``certificate`` (the record of the test: order,
 :math:`\tau`, the rounds with their candidate frequencies and climbs, LUs,
 time, or why there is none), ``search_value`` and ``search_lu_count`` (the
 search alone), the peak frequency, the LUs, the samples and the refinement
-record of each candidate. Cost and measured gaps: ``docs/design/norms.md``
-(the level-set test is one dense eigenvalue problem of order
-:math:`2(2(n_1 - n_2) + r)`: about 0.1 s at :math:`n_1 - n_2 = 100`, 4 s at 300).
+record of each candidate. The level-set test is one dense eigenvalue problem of
+order :math:`2(2(n_1 - n_2) + r)` a round, :math:`O((n_1 - n_2)^3)`; its measured
+cost, the threshold and the measured gaps: ``docs/design/norms.md``.
 
 Responses are refined in extended precision and subtracted in long double
 (:class:`~morsuite.analysis._fom.FomResponse`), so that an error of 1e-12 of
