@@ -26,6 +26,7 @@ import pandas as pd
 import pytest
 
 import morsuite as ms
+from morsuite.analysis.compare import HINF_ROUTES
 from morsuite.cli import main
 from morsuite.report.tables import read_markdown
 from morsuite.studies import run
@@ -219,12 +220,13 @@ def test_only_the_asked_norms_and_one_shared_simulation(study):
 def test_manifest_records_how_each_number_was_computed(study):
     _, res = study
     for a in _arts(res, "norm_error"):
-        assert a["route"] in ("pole-residue", "quadrature", "peak search (lower bound)")
+        assert a["route"] in ("pole-residue", "quadrature") + HINF_ROUTES
         assert a["lu_count"] > 0 and a["trusted"] is True and a["options"] and a["warnings"] == []
         if a["norm"] == "h2":
             assert a["rel_floor"] < 1e-6 and a["floor"] > 0
-        else:
-            assert a["peak_frequency"] > 0
+        else:  # dsms(40): small enough for the level-set certificate
+            assert a["peak_frequency"] > 0 and a["certified"] and a["lower_bound"] == a["value"]
+            assert a["value"] < a["upper_bound"] <= a["value"] * (1 + 1e-3)
     h2 = [a for a in _arts(res, "model_norm") if a["norm"] == "h2"]
     assert all(a["route"] == "gramian" and a["trusted"] for a in h2)
     # bt ran before the norms of its model: it paid (and reports) its own LR-ADI
@@ -355,8 +357,12 @@ def test_reduce_json_prints_the_exact_norms(capsys):
     assert out["hinf_error"] == pytest.approx(ref["hinf"], rel=1e-6)
     assert out["hinf_rel_error"] == pytest.approx(ref["hinf"] / ref["norm_hinf"], rel=1e-6)
     assert out["h2_route"] == "pole-residue" and out["h2_trusted"] is True and out["hinf_lu_count"] > 0
+    # hinf_error is the peak found (lower bound); ab13dd's value lies below the certified upper bound
+    assert out["hinf_certified"] is True and out["hinf_error"] < out["hinf_upper_bound"]
+    assert ref["hinf"] <= out["hinf_upper_bound"] * (1 + 1e-9)
     none = _json(capsys, ["reduce", "--model", "dsms:g=40", "--method", "bt", "--r", "4", "--json", "--no-norms"])
-    assert all(none[k] is None for k in ("h2_error", "h2_rel_error", "hinf_error", "hinf_rel_error", "h2_route"))
+    assert all(none[k] is None for k in ("h2_error", "h2_rel_error", "hinf_error", "hinf_rel_error", "h2_route",
+                                         "hinf_upper_bound", "hinf_certified"))
     assert none["max_abs_error"] > 0
 
 

@@ -47,7 +47,7 @@ from .h2 import h2_error, h2_norm
 from .hinf import hinf_error, hinf_norm
 from .simulate import simulate
 
-__all__ = ["NORM_KINDS", "model_norm", "error_norm", "error_norms", "norm_options", "time_input",
+__all__ = ["NORM_KINDS", "HINF_ROUTES", "model_norm", "error_norm", "error_norms", "norm_options", "time_input",
            "time_response", "MAX_STEPS"]
 
 NORM_KINDS = ("h2", "hinf")
@@ -88,6 +88,21 @@ def _prepare_hinf(fom, opts):
     gramian_factors(fom, **adi_options(opts.get("adi")))
 
 
+#: routes of an H-infinity value: a lower bound alone, or enclosed by a certified upper bound
+HINF_ROUTES = ("peak search (lower bound)", "peak search + level-set certificate")
+
+
+def _hinf_bounds(value, d) -> dict:
+    """Route, bounds and flags of an H-infinity record: ``trusted`` is ``certified`` (the value is the
+    lower bound, ``floor`` the certified gap ``upper_bound - lower_bound``)."""
+    ok = bool(d.get("certified", False))
+    up = d.get("upper_bound")
+    floor = float(up - value) if ok and up is not None and np.isfinite(value) else None
+    return {"route": HINF_ROUTES[ok], "lower_bound": d.get("lower_bound", value), "upper_bound": up,
+            "certified": ok, "trusted": ok, "floor": floor,
+            "rel_floor": floor / value if floor is not None and value > 0 else (0.0 if floor == 0 else None)}
+
+
 def model_norm(fom, kind: str, options=None) -> dict:
     r""":math:`\|T\|_{\mathcal H_2}` or :math:`\|T\|_{\mathcal H_\infty}` of the model, with its record.
 
@@ -103,7 +118,9 @@ def model_norm(fom, kind: str, options=None) -> dict:
     -------
     dict
         ``value``, ``kind``, ``route``, ``lu_count``, ``trusted``, ``rel_floor``,
-        ``time_s``, ``warnings``, ``options``.
+        ``time_s``, ``warnings``, ``options``; for ``"hinf"`` also ``lower_bound``,
+        ``upper_bound`` (None where not certified) and ``certified`` (``trusted`` is
+        ``certified``; ``value`` is the lower bound).
 
     Notes
     -----
@@ -120,8 +137,8 @@ def model_norm(fom, kind: str, options=None) -> dict:
     else:
         _prepare_hinf(fom, opts)
         (value, d), warned = _captured(hinf_norm, fom, details=True, **opts)
-        rec = {"route": "peak search (lower bound)", "lu_count": d["lu_count"], "trusted": True, "rel_floor": None,
-               "peak_frequency": d["peak_frequency"], "samples": d.get("samples")}
+        rec = {"lu_count": d["lu_count"], **_hinf_bounds(value, d), "peak_frequency": d["peak_frequency"],
+               "samples": d.get("samples")}
     return {"value": float(value), "kind": kind, **rec, "time_s": time.perf_counter() - t0, "warnings": warned,
             "options": opts}
 
@@ -141,11 +158,15 @@ def error_norm(fom, rom, kind: str, options=None) -> dict:
     -------
     dict
         ``value`` (``inf`` for an unstable reduced model, with a warning and
-        ``reason``), ``route`` (``"pole-residue"`` or ``"quadrature"`` for H2,
-        ``"peak search (lower bound)"`` for H-infinity), ``lu_count``, ``floor``,
+        ``reason``), ``route`` (``"pole-residue"`` or ``"quadrature"`` for H2; for
+        H-infinity one of :data:`HINF_ROUTES`), ``lu_count``, ``floor``,
         ``rel_floor``, ``trusted`` (False: the value is not accurate to four digits,
         never to be shown as exact), ``nodes`` (H2 quadrature), ``peak_frequency``
-        (H-infinity), ``time_s``, ``warnings``, ``options``.
+        (H-infinity), ``time_s``, ``warnings``, ``options``. H-infinity: ``value`` is
+        the peak found, a lower bound (``lower_bound``); ``upper_bound`` and
+        ``certified`` come from the level-set test (None and False above
+        ``certify_dim``); ``trusted`` is ``certified`` and ``floor`` the gap between
+        the bounds.
 
     Raises
     ------
@@ -163,8 +184,9 @@ def error_norm(fom, rom, kind: str, options=None) -> dict:
         rec.update(route=d.get("method"), trusted=bool(d.get("trusted", False)), floor=d.get("floor"),
                    rel_floor=d.get("rel_floor"), rtol_met=d.get("rtol_met"), nodes=d.get("nodes", 0))
     else:
-        rec.update(route="peak search (lower bound)" if np.isfinite(value) else None, trusted=True, floor=None,
-                   rel_floor=None, peak_frequency=d.get("peak_frequency"), samples=d.get("samples"))
+        rec.update(**_hinf_bounds(value, d), peak_frequency=d.get("peak_frequency"), samples=d.get("samples"))
+        if not np.isfinite(value):
+            rec["route"] = None
     return {**rec, "time_s": time.perf_counter() - t0, "warnings": warned, "options": opts}
 
 
@@ -187,6 +209,9 @@ def error_norms(fom, rom, kinds=NORM_KINDS, options=None) -> dict:
         of the same kind), ``K_norm``, ``K_route``, ``K_trusted``, ``K_lu_count``
         (LUs of the error and of the model's norm, the Gramian factors included
         when this call computed them), ``K_time_s``; ``norm_warnings`` (list).
+        H-infinity: ``hinf_error`` and ``hinf_norm`` are the peaks found (lower
+        bounds); ``hinf_upper_bound`` (None where not certified), ``hinf_certified``
+        and ``hinf_norm_certified`` say whether each is enclosed by the level-set test.
     """
     options = {} if options is None else options
     bad = sorted(set(options) - set(NORM_KINDS))
@@ -203,7 +228,9 @@ def error_norms(fom, rom, kinds=NORM_KINDS, options=None) -> dict:
                     f"{kind}_route": e["route"], f"{kind}_trusted": bool(e["trusted"] and n["trusted"]),
                     f"{kind}_lu_count": e["lu_count"] + n["lu_count"], f"{kind}_time_s": e["time_s"] + n["time_s"]})
         if kind == "hinf":
-            out["hinf_peak_frequency"] = e.get("peak_frequency")
+            # the value is a lower bound; an upper bound where the level-set test certified one
+            out.update(hinf_peak_frequency=e.get("peak_frequency"), hinf_certified=bool(e["certified"]),
+                       hinf_upper_bound=e["upper_bound"], hinf_norm_certified=bool(n["certified"]))
         warned += e["warnings"] + n["warnings"]
     out["norm_warnings"] = warned
     return out

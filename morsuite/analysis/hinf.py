@@ -1,4 +1,4 @@
-r"""H-infinity norms of the full model and of the error of a reduced model, by refined peak search.
+r"""H-infinity norms of the full model and of a reduced model's error: refined peak search, certified bounds.
 
 :math:`\|H\|_{\mathcal H_\infty} = \sup_{\omega \ge 0}\sigma_{\max}(H(j\omega))` (real
 data: :math:`H(-j\omega) = \overline{H(j\omega)}`), for :math:`H = T` and
@@ -30,10 +30,42 @@ Search
        LU budget ``max_lus`` is spent. Also :math:`\|D\|` at
        :math:`\omega = \infty`.
 
-The result is a lower bound of the H-infinity norm, exact (to ``rtol``) at
-the peak it found; a peak between grid points that no pole announces can be
-missed. ``details`` gives the peak frequency, the LUs, the samples and the
-refinement record of each candidate.
+The search's result is a lower bound of the H-infinity norm, exact (to ``rtol``)
+at the peak it found; a peak between grid points that no pole announces can be
+missed.
+
+Certificate
+    Where the hidden manifold is small, :math:`n_1 - n_2 \le` ``certify_dim``
+    (default 300):
+
+    4. A dense standard realization of the error system on the hidden manifold
+       (:mod:`morsuite.analysis._hinf_dense`: an orthonormal basis of
+       :math:`\ker G`, the reduced model stacked) and the level-set test
+       (:func:`morsuite.linalg.levelset.level_set`) at
+       :math:`\gamma = (1 + \tau)\,\text{peak}`,
+       :math:`\tau = \max(c,\ 10^3\varepsilon\|T\|/\text{peak})`, :math:`c` = ``certify_tol``
+       (the second term: the double-precision realization of :math:`T - T_r`
+       cancels :math:`\|T\|` to the peak's size). No eigenvalue of the
+       Hamiltonian on (or within :math:`\sqrt\varepsilon\|H\|` of) the
+       imaginary axis: :math:`\gamma` is a certified upper bound.
+    5. Otherwise the frequencies of those eigenvalues and their midpoints are
+       sampled (Boyd-Balakrishnan-Bruinsma-Steinbuch); a sample above
+       :math:`\gamma` is a missed peak: it is refined (steps 2-3), and the test
+       repeated above it (at most 3 rounds). An eigenvalue near the axis whose
+       hump of :math:`\sigma_{\max}` (climbed and refined from its frequency)
+       peaks below :math:`\gamma` is not a crossing (rounding near a local
+       maximum just below :math:`\gamma`, or near a lightly damped pole): when
+       every one is explained so, :math:`\gamma` is certified. At most
+       ``certify_lus`` further LUs.
+
+``details``: ``lower_bound`` (the value returned), ``upper_bound`` (None where
+not computed), ``certified``, ``certificate`` (the record of the test: order,
+:math:`\tau`, the rounds with their candidate frequencies and climbs, LUs,
+time, or why there is none), ``search_value`` and ``search_lu_count`` (the
+search alone), the peak frequency, the LUs, the samples and the refinement
+record of each candidate. The level-set test is one dense eigenvalue problem of
+order :math:`2(2(n_1 - n_2) + r)` a round, :math:`O((n_1 - n_2)^3)`; its measured
+cost, the threshold and the measured gaps: ``docs/design/norms.md``.
 
 Responses are refined in extended precision and subtracted in long double
 (:class:`~morsuite.analysis._fom.FomResponse`), so that an error of 1e-12 of
@@ -52,15 +84,25 @@ from ..linalg.gramians import cached_gramian_factors
 from ..utils import blas_threads
 from ._common import adi_options, check_fom, infinite, validate_rom
 from ._fom import FomResponse
+from ._hinf_certify import certificate as _certificate, refine_peak as _refine
+from ._hinf_dense import error_realization, hidden_realization
 from ._rom import RomResponse
 from .h2 import breakpoints
 
 __all__ = ["hinf_norm", "hinf_error", "hinf_rel_error"]
 
 EPS = np.finfo(float).eps
+#: largest hidden-manifold dimension n1 - n2 given the dense level-set test by default (docs/design/norms.md)
+CERTIFY_DIM = 300
 
 
-def _check(max_lus, rtol, per_decade):
+def _check(max_lus, rtol, per_decade, certify_dim=0, certify_tol=0.5, certify_lus=4):
+    if isinstance(certify_dim, bool) or not isinstance(certify_dim, (int, np.integer)) or certify_dim < 0:
+        raise OptionError(f"certify_dim must be a non-negative integer; got {certify_dim!r}")
+    if not (isinstance(certify_tol, (float, int)) and 0 < certify_tol < 1):
+        raise OptionError(f"certify_tol must be a float in (0, 1); got {certify_tol!r}")
+    if isinstance(certify_lus, bool) or not isinstance(certify_lus, (int, np.integer)) or certify_lus < 4:
+        raise OptionError(f"certify_lus must be an integer >= 4; got {certify_lus!r}")
     if isinstance(max_lus, bool) or not isinstance(max_lus, (int, np.integer)) or max_lus < 4:
         raise OptionError(f"max_lus must be an integer >= 4; got {max_lus!r}")
     if not (isinstance(rtol, (float, int)) and 0 < rtol < 1):
@@ -77,6 +119,8 @@ class _Sigma:
         self.rr = rr
         self.rtol = rtol
         self.samples = {}
+        #: the largest ||T(jw)||_F sampled: the scale of the cancellation in T - T_r
+        self.scale = 0.0
 
     def __call__(self, w):
         w = float(w)
@@ -90,9 +134,12 @@ class _Sigma:
             # refine only where the unrefined difference would lose more than rtol / 100 (16 eps |T| / |E|)
             need = lambda T0: bool(16.0 * EPS * np.linalg.norm(T0) > 0.01 * self.rtol * np.linalg.norm(T0 - Tr))  # noqa: E731
             T, dT = self.ev.transfer_and_derivative(s, need=need)
+            self.scale = max(self.scale, float(np.linalg.norm(np.asarray(T, dtype=complex))))
             T = T - Tr
             dT = dT - self.rr.derivative(s)
         E = np.asarray(T, dtype=complex)
+        if self.rr is None:
+            self.scale = max(self.scale, float(np.linalg.norm(E)))
         U, sv, Vh = np.linalg.svd(E)
         u, v = U[:, 0], Vh[0].conj()
         ds = float(np.real(u.conj() @ (1j * dT) @ v)) if w > 0 else 0.0
@@ -124,53 +171,6 @@ def _grid(fom, rom_poles, ritz, per_decade, budget):
     # a conjugate pair's |Im| can differ in the last bit: one sample per frequency
     pts = pts[np.concatenate([[True], np.diff(pts) > 1e-10 * pts[1:]])]
     return pts, {"rom_resonances": int(own.size), "model_resonances": int(model.size), "log_grid": int(logs.size)}
-
-
-def _refine(sig, lo, c, hi, rtol, budget):
-    r"""Maximise sig on [lo, hi] around the sample c (secant on the derivative, bisection safeguard).
-
-    Stops when the gain still predicted by the local quadratic model,
-    :math:`\sigma'(x)^2 / (2|\sigma''|)` with :math:`\sigma''` from the last two
-    derivatives, is below ``rtol`` times the best value, when the bracket has
-    shrunk to rounding, or when ``budget`` LUs are spent.
-    """
-    fl, dl = sig(lo)
-    fc, dc = sig(c)
-    fh, dh = sig(hi)
-    best = (fc, c)
-    used = 0
-    if dc > 0:  # the maximum next to c is on the side its derivative points to
-        a, fa, da, b, fb, db = c, fc, dc, hi, fh, dh
-    else:
-        a, fa, da, b, fb, db = lo, fl, dl, c, fc, dc
-    prev = (c, dc)
-    history = []
-    while used < budget and b - a > 1e-13 * abs(b):
-        if da > 0 > db:
-            x = a + (b - a) * da / (da - db)  # secant root of the derivative
-            if not (a + 0.01 * (b - a) < x < b - 0.01 * (b - a)):
-                x = 0.5 * (a + b)
-        else:
-            x = 0.5 * (a + b)
-        fx, dx = sig(x)
-        used += 1
-        history.append((x, fx, dx))
-        if fx > best[0]:
-            best = (fx, x)
-        curv = (dx - prev[1]) / (x - prev[0]) if x != prev[0] else 0.0
-        prev = (x, dx)
-        if da > 0 > db:
-            if dx > 0:
-                a, fa, da = x, fx, dx
-            else:
-                b, fb, db = x, fx, dx
-        elif fa >= fb:  # no sign change: keep the half that holds the larger end value
-            b, fb, db = x, fx, dx
-        else:
-            a, fa, da = x, fx, dx
-        if curv < 0 and fx >= best[0] and dx * dx / (2.0 * -curv) <= rtol * fx:
-            break
-    return best, used, history
 
 
 def _search(fom, rr, rom_poles, feed, *, max_lus, grid_lus, rtol, per_decade, refine, n_peaks, adi):
@@ -209,16 +209,20 @@ def _search(fom, rr, rom_poles, feed, *, max_lus, grid_lus, rtol, per_decade, re
     rec = {"peak_frequency": w_peak, "lu_count": sig.ev.lu_count, "lu_shifts": list(sig.ev.shifts),
            "samples": len(sig.samples),
            "grid": how, "grid_size": int(pts.size), "model_resonances_from": "cached LR-ADI shifts" if gf else None,
-           "refinements": refinements, "lower_bound": True}
-    return float(value), rec
+           "refinements": refinements}
+    return float(value), rec, sig
 
 
 def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-10, per_decade: int = 8,
-              refine: int = 1, n_peaks: int = 8, adi=None, details: bool = False):
-    r""":math:`\|T\|_{\mathcal H_\infty} = \sup_\omega \sigma_{\max}(T(j\omega))`, a lower bound exact at the peak found.
+              refine: int = 1, n_peaks: int = 8, adi=None, certify_dim: int = CERTIFY_DIM, certify_tol: float = 1e-6,
+              certify_lus: int = 100, details: bool = False):
+    r""":math:`\|T\|_{\mathcal H_\infty} = \sup_\omega \sigma_{\max}(T(j\omega))`: the peak found (a lower
+    bound), with a certified upper bound where :math:`n_1 - n_2 \le` ``certify_dim``.
 
-    See the module docstring for the search. The value is cached in
-    ``fom.cache`` per options: relative errors of many reduced models pay for it once.
+    See the module docstring for the search and the certificate. The value is
+    cached in ``fom.cache`` per options and per whether the model's resonances
+    (cached Gramian factors) were available: relative errors of many reduced
+    models pay for it once.
 
     Parameters
     ----------
@@ -237,17 +241,29 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
         Local maxima of the grid refined, best first (default 8).
     adi : dict, optional
         ADI options under which cached Gramian factors supply the model's resonances.
+    certify_dim : int
+        Largest :math:`n_1 - n_2` given the dense level-set test (default 300; 0: never).
+    certify_tol : float
+        Relative gap :math:`\tau` of the upper bound above the peak (default 1e-6; raised
+        to the realization's resolution, module docstring).
+    certify_lus : int
+        LUs for the certificate's samples (default 100).
     details : bool
-        Also return a dict (``peak_frequency``, ``lu_count``, ``samples``, ``refinements``, ...).
+        Also return a dict (``lower_bound``, ``upper_bound``, ``certified``, ``certificate``,
+        ``peak_frequency``, ``lu_count``, ``samples``, ``refinements``, ...).
 
     Returns
     -------
     float, or (float, dict)
+        The largest peak found: a lower bound of the norm (``details["lower_bound"]``).
     """
     check_fom(fom)
-    _check(max_lus, rtol, per_decade)
+    _check(max_lus, rtol, per_decade, certify_dim, certify_tol, certify_lus)
     adi = adi_options(adi)
-    key = ("hinf_norm", max_lus, grid_lus, rtol, per_decade, refine, n_peaks, tuple(sorted(adi.items())))
+    # the start grid depends on whether the model's resonances (cached Gramian factors) are there
+    resonances = cached_gramian_factors(fom, **adi) is not None
+    key = ("hinf_norm", max_lus, grid_lus, rtol, per_decade, refine, n_peaks, tuple(sorted(adi.items())),
+           certify_dim, certify_tol, certify_lus, resonances)
     cache = getattr(fom, "cache", None)
     if cache is not None and key in cache:
         value, rec = cache[key]
@@ -255,8 +271,10 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
     else:
         t0 = time.perf_counter()
         with blas_threads(1):
-            value, rec = _search(fom, None, np.zeros(0), None, max_lus=max_lus, grid_lus=grid_lus, rtol=rtol,
-                                 per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi)
+            value, rec, sig = _search(fom, None, np.zeros(0), None, max_lus=max_lus, grid_lus=grid_lus, rtol=rtol,
+                                      per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi)
+            value = _certificate(fom, sig, lambda: hidden_realization(fom), value, rec, certify_dim=certify_dim,
+                                 certify_tol=certify_tol, certify_lus=certify_lus, rtol=rtol)
         rec["time_s"] = time.perf_counter() - t0
         rec["cached"] = False
         if cache is not None:
@@ -265,27 +283,35 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
 
 
 def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-10, per_decade: int = 8,
-               refine: int = 1, n_peaks: int = 8, adi=None, details: bool = False):
-    r""":math:`\|T - T_r\|_{\mathcal H_\infty}`: a lower bound, exact (to ``rtol``) at the peak it found.
+               refine: int = 1, n_peaks: int = 8, adi=None, certify_dim: int = CERTIFY_DIM, certify_tol: float = 1e-6,
+               certify_lus: int = 100, details: bool = False):
+    r""":math:`\|T - T_r\|_{\mathcal H_\infty}`: the peak found (a lower bound, exact to ``rtol`` at that
+    peak), with a certified upper bound where :math:`n_1 - n_2 \le` ``certify_dim``.
 
     The peak of :math:`\sigma_{\max}(T(j\omega) - T_r(j\omega))` over the whole
     axis :math:`\omega \in [0, \infty]` (module docstring): a start grid at the
     reduced model's and the model's resonances and on a log grid, then the
-    best local maxima refined with the derivative from the singular vectors.
-    Cost: at most ``max_lus`` sparse LUs (default 190), each with one plain and one
-    transposed solve.
+    best local maxima refined with the derivative from the singular vectors;
+    then, on a small hidden manifold, the level-set test of the dense error
+    system at :math:`(1 + \tau)` times the peak, which certifies it as an upper
+    bound or points to missed peaks. Cost: at most ``max_lus`` sparse LUs
+    (default 190), each with one plain and one transposed solve; the certificate
+    one dense eigenvalue problem of order :math:`2(2(n_1 - n_2) + r)` a round and
+    at most ``certify_lus`` LUs.
 
     Parameters
     ----------
     fom : Index3Model
     rom : SecondOrderROM or FirstOrderROM
-    max_lus, grid_lus, rtol, per_decade, refine, n_peaks, adi, details
+    max_lus, grid_lus, rtol, per_decade, refine, n_peaks, adi, certify_dim, certify_tol, certify_lus, details
         As in :func:`hinf_norm`.
 
     Returns
     -------
     float, or (float, dict)
-        ``inf`` with a :class:`StabilityWarning` for an unstable reduced model.
+        The largest peak found, a lower bound (``details``: ``lower_bound``,
+        ``upper_bound`` or None, ``certified``); ``inf`` with a
+        :class:`StabilityWarning` for an unstable reduced model.
 
     Raises
     ------
@@ -294,28 +320,39 @@ def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float
     InputError
         ``rom`` has non-finite matrices or a singular E.
     """
-    _check(max_lus, rtol, per_decade)
+    _check(max_lus, rtol, per_decade, certify_dim, certify_tol, certify_lus)
     adi = adi_options(adi)
     arrays, why = validate_rom(fom, rom, "rom")
     if why is not None:
-        return infinite(*why, details)
+        out = infinite(*why, details)
+        if details:
+            out[1].update(lower_bound=np.inf, upper_bound=np.inf, certified=True)
+        return out
     t0 = time.perf_counter()
     rr = RomResponse(*arrays, refine=refine)
     feed = float(np.linalg.norm(arrays[4], 2)) if np.any(arrays[4] != 0) else None
     with blas_threads(1):
-        value, rec = _search(fom, rr, rom.poles(), feed, max_lus=max_lus, grid_lus=grid_lus, rtol=rtol,
-                             per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi)
+        value, rec, sig = _search(fom, rr, rom.poles(), feed, max_lus=max_lus, grid_lus=grid_lus, rtol=rtol,
+                                  per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi)
+        value = _certificate(fom, sig, lambda: error_realization(fom, arrays), value, rec, certify_dim=certify_dim,
+                             certify_tol=certify_tol, certify_lus=certify_lus, rtol=rtol)
     rec["time_s"] = time.perf_counter() - t0
     rec["value"] = value
     return (value, rec) if details else value
 
 
 def hinf_rel_error(fom, rom, *, details: bool = False, **options):
-    r""":math:`\|T - T_r\|_{\mathcal H_\infty} / \|T\|_{\mathcal H_\infty}` (both by
-    :func:`hinf_error` / :func:`hinf_norm` with ``options``; lower bounds over a lower bound)."""
+    r""":math:`\|T - T_r\|_{\mathcal H_\infty} / \|T\|_{\mathcal H_\infty}`: the ratio of the peaks found
+    by :func:`hinf_error` and :func:`hinf_norm` (with ``options``), neither bound. Where both are
+    certified, ``details`` has ``rel_lower_bound`` = error lower / norm upper and
+    ``rel_upper_bound`` = error upper / norm lower, and ``certified`` is True."""
     e, d = hinf_error(fom, rom, details=True, **options)
     n, dn = hinf_norm(fom, details=True, **options)
     value = e / n if np.isfinite(e) else np.inf
     if not details:
         return value
-    return value, {**d, "norm": n, "norm_details": dn, "rel_value": value}
+    ok = bool(d.get("certified") and dn.get("certified"))
+    lo = e / dn["upper_bound"] if ok else None
+    up = d["upper_bound"] / n if ok else None
+    return value, {**d, "norm": n, "norm_details": dn, "rel_value": value, "certified": ok,
+                   "rel_lower_bound": lo, "rel_upper_bound": up}

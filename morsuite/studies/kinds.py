@@ -60,7 +60,7 @@ KINDS = {
     "compare": Kind("method against method at one r: error over frequency",
                     {"r": _R, "grid": _GRID, "paper_csv": _PAPER, "error": ("abs", ("abs", "rel"))}, True, True,
                     min_methods=2),
-    "error_vs_r": Kind("an error measure (band maximum on a grid, or an exact norm) against r",
+    "error_vs_r": Kind("an error measure (band maximum on a grid, or a norm over the whole axis) against r",
                        {"r": _R, "grid": _GRID, "paper_csv": _PAPER, "measure": ("max_abs", MEASURES),
                         "axis": ("r", AXES)}, True, False),
     "time_vs_r": Kind("reduction time against r",

@@ -62,7 +62,7 @@ def _artifacts(plan, res) -> list:
 
 #: what the manifest keeps of a norm entry (the route, LUs, accuracy, warnings), and of a simulation's
 _NORM_FIELDS = ("value", "route", "lu_count", "trusted", "floor", "rel_floor", "rtol_met", "nodes", "peak_frequency",
-                "samples", "factor_rank", "adi_converged", "reason", "options", "time_s", "warnings", "error",
+                "lower_bound", "upper_bound", "certified", "samples", "factor_rank", "adi_converged", "reason", "options", "time_s", "warnings", "error",
                 "scheduler", "host", "created")
 _SIM_FIELDS = ("integrator", "steps", "lu_count", "solves", "time_s", "growth", "unstable_poles", "growth_factor",
                "finite", "constraint_residual", "warnings", "error", "scheduler", "host", "created")

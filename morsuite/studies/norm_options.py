@@ -32,11 +32,12 @@ def _adi(ctx, where, value):
 
 #: kind -> option -> (default, validator); the keyword options of h2_error / hinf_error
 NORM_OPTIONS = {
-    "h2": {"method": ("auto", choice_of(("auto", "pole-residue", "quadrature"))), "rtol": (1e-8, float_in_01),
+    "h2": {"method": ("auto", choice_of(("auto", "error-gramian", "pole-residue", "quadrature"))), "rtol": (1e-8, float_in_01),
            "max_nodes": (1500, int_at_least(15)), "refine": (1, nonnegative_int), "adi": (None, _adi)},
     "hinf": {"max_lus": (190, int_at_least(4)), "grid_lus": (120, positive_int), "rtol": (1e-10, float_in_01),
              "per_decade": (8, positive_int), "refine": (1, nonnegative_int), "n_peaks": (8, positive_int),
-             "adi": (None, _adi)},
+             "adi": (None, _adi), "certify_dim": (300, nonnegative_int), "certify_tol": (1e-6, float_in_01),
+             "certify_lus": (100, int_at_least(4))},
 }
 
 

@@ -27,7 +27,8 @@ __all__ = ["Results", "summary", "SUMMARY_COLUMNS", "NORM_COLUMNS", "TIME_COLUMN
 SUMMARY_COLUMNS = ["model", "method", "reducer", "r_requested", "r", "states", "converged", "reducer_status",
                    "iterations", "stable", "time_s", "time_standalone_s", "lu_count", "lu_count_shared",
                    "lu_count_standalone", "max_abs_error", "max_rel_error", "error_bound", "grid"]
-NORM_COLUMNS = {"h2": ["h2_error", "h2_rel_error", "h2_trusted"], "hinf": ["hinf_error", "hinf_rel_error"]}
+NORM_COLUMNS = {"h2": ["h2_error", "h2_rel_error", "h2_trusted"],
+                "hinf": ["hinf_error", "hinf_rel_error", "hinf_upper_bound", "hinf_certified"]}
 TIME_COLUMNS = list(ERROR_COLUMNS) + ["time_scene"]
 TAIL = ["worse_than_zero", "cached", "status"]
 
@@ -46,8 +47,12 @@ BAND_NOTE = ("max_abs_error and max_rel_error are band quantities: the maximum o
 NORM_NOTE = ("h2_error is the exact H2 norm of T - T_r over the whole "
              "axis (h2_rel_error: divided by ||T||_H2); h2_trusted = False marks a value whose estimated accuracy "
              "is worse than four digits (never to be read as exact). hinf_error is the peak of sigma_max(T - T_r) "
-             "over the whole axis that the search found: a lower bound, exact at that peak (hinf_rel_error: "
-             "divided by the peak of sigma_max(T)). An unstable reduced model has infinite norms.")
+             "over the whole axis that the search found: a lower bound of the Hinf norm, exact at that peak "
+             "(hinf_rel_error: divided by the peak of sigma_max(T) found, a lower bound too). hinf_upper_bound is "
+             "an upper bound certified by a level-set (Hamiltonian) test of the dense error system, computed where "
+             "the model's hidden manifold is small (n1 - n2 <= certify_dim); hinf_certified = True: the Hinf norm "
+             "lies between hinf_error and hinf_upper_bound; False (bound empty): only the lower bound is known. "
+             "An unstable reduced model has infinite norms.")
 TIME_DOMAIN_NOTE = ("max_output_error and l2_output_error are max_t and the L2 norm over the horizon of "
                     "||y(t) - y_r(t)||_2 for the input of the time scene named in time_scene (full and reduced "
                     "model by the same time-stepping scheme); the relative versions divide by max_t ||y(t)||_2 "
@@ -89,8 +94,8 @@ class Results:
         return self._nerr.get(gid, {}).get(r) if gid else None
 
     def norm_columns(self, model, method, r) -> dict:
-        """``K_error``, ``K_rel_error`` (and ``h2_trusted``) of each norm kind computed for this
-        reduction; ``K_failed`` says why one is missing."""
+        """``K_error``, ``K_rel_error`` (and ``h2_trusted``; ``hinf_upper_bound``, ``hinf_certified``) of
+        each norm kind computed for this reduction; ``K_failed`` says why one is missing."""
         out = {}
         for kind in ("h2", "hinf"):
             if (model, method, kind) not in self.plan.norm_group_of:
@@ -105,6 +110,9 @@ class Results:
             out[f"{kind}_rel_error"] = value / float(n["value"]) if ok else None
             if kind == "h2":
                 out["h2_trusted"] = bool(e["trusted"] and (n is None or n.get("trusted", True)))
+            else:  # the value is a lower bound; the level-set test's upper bound where it ran
+                out["hinf_upper_bound"] = e.get("upper_bound")
+                out["hinf_certified"] = bool(e.get("certified", False))
         return out
 
     def simulation(self, scene):

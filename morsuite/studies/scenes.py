@@ -80,8 +80,8 @@ YLABEL = {
     "max_rel": r"$\max_\omega \sigma_{\max}(T - T_r)/\sigma_{\max}(T)$ on the grid",
     "h2": r"$\|T - T_r\|_{\mathcal{H}_2}$",
     "h2_rel": r"$\|T - T_r\|_{\mathcal{H}_2} \,/\, \|T\|_{\mathcal{H}_2}$",
-    "hinf": r"$\|T - T_r\|_{\mathcal{H}_\infty}$ (peak found)",
-    "hinf_rel": r"$\|T - T_r\|_{\mathcal{H}_\infty} \,/\, \|T\|_{\mathcal{H}_\infty}$",
+    "hinf": r"$\|T - T_r\|_{\mathcal{H}_\infty}$, peak found (lower bound)",
+    "hinf_rel": r"$\|T - T_r\|_{\mathcal{H}_\infty} \,/\, \|T\|_{\mathcal{H}_\infty}$, peaks found",
 }
 MEASURE_COLUMN = {"max_abs": "max_abs_error", "max_rel": "max_rel_error", "h2": "h2_error", "h2_rel": "h2_rel_error",
                   "hinf": "hinf_error", "hinf_rel": "hinf_rel_error"}
@@ -194,6 +194,15 @@ def _r_rows(scene, study, res, m):
                 continue
         rows.append((r, (red, values), None))
     return rows
+
+
+def _hinf_flag(best, second) -> str:
+    """What an Hinf ranking rests on: peaks found are lower bounds; certified when the winner's upper
+    bound is below the next one's lower bound."""
+    up = best.get("hinf_upper_bound")
+    if best.get("hinf_certified") and up is not None and up < second["hinf_error"]:
+        return " (peaks found, lower bounds; the order is certified by the upper bounds)"
+    return " (peaks found, lower bounds; the order is not certified)"
 
 
 def _trust(values, measure, notes, scene, m, r):
@@ -359,6 +368,9 @@ def _verdict(rows, study) -> str:
                      f"{second / best:.3g}x smaller than the next" if best > 0 else "zero")
             flag = " (an untrusted value among them)" if col == "h2_error" and any(
                 row.get("h2_trusted") is False for row in at) else ""
+            if col == "hinf_error":
+                flag = _hinf_flag([row for row in at if row["method"] == who][0],
+                                  [row for row in at if row["method"] != who and row.get(col) == second][0])
             lines.append(f"{where}, {col}: {study.methods[who].label} ({best:.3g}; {ratio}){flag}")
     if not lines:
         return _zero_note(ok, study).strip()

@@ -1,0 +1,201 @@
+r"""The H-infinity search's refinement of a peak, and the certificate of its value (:mod:`morsuite.analysis.hinf`).
+
+:func:`refine_peak` maximises :math:`\sigma_{\max}` on a bracket (secant on the derivative, bisection
+safeguard); :func:`climb` finds the maximum of the hump that holds a frequency; :func:`certify`
+runs the level-set test (:func:`morsuite.linalg.levelset.level_set`) on the dense error system
+(:mod:`morsuite.analysis._hinf_dense`) at :math:`(1 + \tau)` times the peak, samples the
+frequencies it reports, refines missed peaks and repeats; :func:`certificate` decides whether the
+test is affordable (:math:`n_1 - n_2 \le` ``certify_dim``) and records the result. The
+mathematics and the rules are in the module docstring of :mod:`morsuite.analysis.hinf`.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..linalg.levelset import level_set
+
+__all__ = ["refine_peak", "climb", "certify", "certificate", "RESOLUTION", "LOCAL"]
+
+EPS = np.finfo(float).eps
+#: an eigenvalue near the axis is checked locally only if |Re| <= LOCAL * max(frequency, lowest band frequency)
+LOCAL = 0.05
+
+
+def refine_peak(sig, lo, c, hi, rtol, budget):
+    r"""Maximise sig on [lo, hi] around the sample c (secant on the derivative, bisection safeguard).
+
+    Stops when the gain still predicted by the local quadratic model,
+    :math:`\sigma'(x)^2 / (2|\sigma''|)` with :math:`\sigma''` from the last two
+    derivatives, is below ``rtol`` times the best value, when the bracket has
+    shrunk to rounding, or when ``budget`` LUs are spent.
+    """
+    fl, dl = sig(lo)
+    fc, dc = sig(c)
+    fh, dh = sig(hi)
+    best = (fc, c)
+    used = 0
+    if dc > 0:  # the maximum next to c is on the side its derivative points to
+        a, fa, da, b, fb, db = c, fc, dc, hi, fh, dh
+    else:
+        a, fa, da, b, fb, db = lo, fl, dl, c, fc, dc
+    prev = (c, dc)
+    history = []
+    while used < budget and b - a > 1e-13 * abs(b):
+        if da > 0 > db:
+            x = a + (b - a) * da / (da - db)  # secant root of the derivative
+            if not (a + 0.01 * (b - a) < x < b - 0.01 * (b - a)):
+                x = 0.5 * (a + b)
+        else:
+            x = 0.5 * (a + b)
+        fx, dx = sig(x)
+        used += 1
+        history.append((x, fx, dx))
+        if fx > best[0]:
+            best = (fx, x)
+        curv = (dx - prev[1]) / (x - prev[0]) if x != prev[0] else 0.0
+        prev = (x, dx)
+        if da > 0 > db:
+            if dx > 0:
+                a, fa, da = x, fx, dx
+            else:
+                b, fb, db = x, fx, dx
+        elif fa >= fb:  # no sign change: keep the half that holds the larger end value
+            b, fb, db = x, fx, dx
+        else:
+            a, fa, da = x, fx, dx
+        if curv < 0 and fx >= best[0] and dx * dx / (2.0 * -curv) <= rtol * fx:
+            break
+    return best, used, history
+
+
+#: the dense level-set test's resolution: the certified gap is at least RESOLUTION * eps * ||T|| / peak
+RESOLUTION = 1e3
+
+
+def climb(sig, w, h, rtol, budget):
+    """The local maximum of sigma on the hump that holds ``w``: march uphill in steps h, 2h, 4h, ..., then refine.
+
+    Returns ``(value, frequency, lus, complete)``; ``complete`` is False when the budget ran out
+    before the maximum was bracketed and refined.
+    """
+    lu0 = sig.ev.lu_count
+    fa, da = sig(w)
+    a, step = w, h
+    direction = 1.0 if (da >= 0 or w == 0) else -1.0
+    b, fb, complete = a, fa, False
+    while sig.ev.lu_count - lu0 < budget - 2:
+        b = max(a + direction * step, 0.0)
+        fb, db = sig(b)
+        if direction * db <= 0 or fb < fa or b == 0.0:
+            complete = True
+            break
+        a, fa = b, fb
+        step *= 2.0
+    best = max((fa, a), (fb, b))
+    lo, hi = min(a, b), max(a, b)
+    left = budget - (sig.ev.lu_count - lu0)
+    if complete and hi > lo:
+        (fv, wv), used, _ = refine_peak(sig, lo, 0.5 * (lo + hi), hi, rtol, left - 1)
+        complete = used < left - 1
+        best = max(best, (fv, wv))
+    return best[0], best[1], sig.ev.lu_count - lu0, complete
+
+
+def certify(sig, realization, value, w_peak, *, tol, rounds, lus, rtol, w_lo):
+    r"""Upper bound by the level-set test at :math:`\gamma = (1 + tol)\,\text{peak}`; missed peaks refined.
+
+    An eigenvalue near the axis is dismissed by a climb only when its real part is at most
+    :data:`LOCAL` times its frequency (or ``w_lo``, the model's lowest band frequency): farther
+    off, the true eigenvalue it may stand for could sit on another hump, and the value stays
+    uncertified.
+
+    Returns ``(value, w_peak, upper_bound or None, certified, record)``.
+    """
+    t0, lu0 = time.perf_counter(), sig.ev.lu_count
+    A, B, C, D = realization()
+    t_real = time.perf_counter() - t0
+    scale = max(sig.scale, value)
+    tol = max(tol, RESOLUTION * EPS * scale / value) if value > 0 else tol
+    rec = {"method": "level set (Hamiltonian of the dense error system on the hidden manifold)",
+           "order": 2 * A.shape[0], "tol": tol, "realization_s": t_real, "rounds": [], "reason": None}
+    upper, certified = None, False
+    for rnd in range(rounds + 1):
+        gamma = (1.0 + tol) * value
+        if not gamma > 0:
+            rec["reason"] = "the error is zero to rounding: no level to test"
+            break
+        ls = level_set(A, B, C, D, gamma)
+        entry = {"gamma": gamma, "candidates": ls.frequencies.tolist(), "closest": ls.closest, "climbs": []}
+        rec["rounds"].append(entry)
+        if not ls.crossed:
+            upper, certified = gamma, True
+            break
+        if rnd == rounds:
+            rec["reason"] = f"imaginary eigenvalues remained after {rounds} rounds"
+            break
+        far = ls.real_parts > LOCAL * np.maximum(ls.frequencies, w_lo)
+        if np.any(far):
+            rec["reason"] = (f"{int(far.sum())} eigenvalue(s) near the axis with real parts up to "
+                             f"{ls.real_parts.max():.2e}, beyond a local check: the double-precision level-set "
+                             "test cannot resolve this error level")
+            break
+        # Boyd-Balakrishnan: sigma exceeds gamma between crossings; probe them and their midpoints
+        ws = ls.frequencies
+        probe = np.unique(np.concatenate([ws, 0.5 * (ws[1:] + ws[:-1])]))
+        if probe.size + 4 > lus - (sig.ev.lu_count - lu0):
+            rec["reason"] = f"LU budget certify_lus = {lus} too small for {ws.size} candidates"
+            break
+        vals = np.array([sig(w)[0] for w in probe])
+        i = int(np.argmax(vals))
+        if vals[i] >= gamma:
+            h = 0.25 * float(np.min(np.abs(np.delete(probe, i) - probe[i]))) if probe.size > 1 else 1e-4 * probe[i]
+            fv, wv, used, _ = climb(sig, float(probe[i]), max(h, 1e-12 * probe[i]), rtol,
+                                    max(lus - (sig.ev.lu_count - lu0), 4))
+            entry["climbs"].append({"candidate": float(probe[i]), "peak": wv, "value": fv, "lus": used,
+                                    "complete": True})
+            value, w_peak = max((value, w_peak), (fv, wv))
+            continue  # a peak the search missed: test again above it
+        improved, dismissed = False, 0
+        for w, re in zip(ls.frequencies, ls.real_parts):
+            left = lus - (sig.ev.lu_count - lu0)
+            if left < 4:
+                break
+            h = max(4.0 * re, 1e-4 * w, 1e-8 * ls.threshold)
+            fv, wv, used, complete = climb(sig, float(w), h, rtol, left)
+            entry["climbs"].append({"candidate": float(w), "peak": wv, "value": fv, "lus": used,
+                                    "complete": complete})
+            if fv > value:
+                value, w_peak = fv, wv
+            if fv >= gamma:
+                improved = True  # a peak the search missed: test again above it
+            elif complete:
+                dismissed += 1  # its hump peaks below gamma: an eigenvalue near the axis, not on it
+        if improved:
+            continue
+        if dismissed == ls.frequencies.size:
+            upper, certified = gamma, True
+        else:
+            rec["reason"] = f"LU budget certify_lus = {lus} spent on {dismissed} of {ls.frequencies.size} candidates"
+        break
+    rec.update(lu_count=sig.ev.lu_count - lu0, time_s=time.perf_counter() - t0)
+    return value, w_peak, upper, certified, rec
+
+
+def certificate(fom, sig, realization, value, rec, *, certify_dim, certify_tol, certify_lus, rtol):
+    """Add ``lower_bound``, ``upper_bound``, ``certified``, ``certificate`` to ``rec`` (and a better peak)."""
+    k = fom.n1 - fom.n2
+    if k > certify_dim or not np.isfinite(value):
+        why = (f"n1 - n2 = {k} exceeds certify_dim = {certify_dim}: no dense level-set test" if k > certify_dim
+               else "infinite value")
+        rec.update(search_value=value, search_lu_count=rec["lu_count"], lower_bound=value, upper_bound=None,
+                   certified=False, certificate={"reason": why})
+        return value
+    rec["search_value"], rec["search_lu_count"] = value, rec["lu_count"]
+    value, w, upper, ok, cert = certify(sig, realization, value, rec["peak_frequency"], tol=certify_tol, rounds=3,
+                                        lus=certify_lus, rtol=rtol, w_lo=float(fom.band[0]))
+    rec.update(peak_frequency=w, lu_count=sig.ev.lu_count, lu_shifts=list(sig.ev.shifts), samples=len(sig.samples),
+               lower_bound=value, upper_bound=upper, certified=ok, certificate=cert)
+    return value
