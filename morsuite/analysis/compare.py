@@ -158,7 +158,7 @@ def error_norm(fom, rom, kind: str, options=None) -> dict:
     -------
     dict
         ``value`` (``inf`` for an unstable reduced model, with a warning and
-        ``reason``), ``route`` (``"pole-residue"`` or ``"quadrature"`` for H2; for
+        ``reason``), ``route`` (``"error-gramian"``, ``"pole-residue"`` or ``"quadrature"`` for H2; for
         H-infinity one of :data:`HINF_ROUTES`), ``lu_count``, ``floor``,
         ``rel_floor``, ``trusted`` (False: the value is not accurate to four digits,
         never to be shown as exact), ``nodes`` (H2 quadrature), ``peak_frequency``

@@ -61,7 +61,7 @@ def error_norms(source: str, kind: str, options: dict, rs, keys: dict, run_by: s
     ``after``: results of tasks that must run first (not used).
 
     Cost: the Gramian factors once per model (shared with ``bt`` in this process),
-    then per r about r LUs (H2, pole-residue), 100-1000 (H2, quadrature) or at most
+    then per r none to about r LUs (H2, error-Gramian route), 100-1000 (H2, quadrature, rare) or at most
     ``max_lus`` (H-infinity).
     """
     from ..analysis.compare import error_norm
