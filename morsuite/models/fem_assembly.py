@@ -30,7 +30,7 @@ import scipy.sparse as sp
 
 from ..errors import ModelError
 
-__all__ = ["Body", "grid_body", "tie_rows", "clamp_rows"]
+__all__ = ["Body", "grid_body", "clamp_rows", "tie_rows", "constraint_matrix", "lame_plane"]
 
 
 @dataclass
