@@ -20,13 +20,13 @@ Inputs are unit forces and outputs displacements at named points of the box
 (the nearest mesh node, first in node order on a tie) in a direction ``x``,
 ``y`` or ``z``, written ``"point:direction"``:
 
-==========  ==========================================
-``tip``     centre of the free face, :math:`(L_x, L_y/2, L_z/2)`
-``mid``     centre of the box, :math:`(L_x/2, L_y/2, L_z/2)`
-``quarter`` :math:`(L_x/4, L_y/2, L_z/2)`
-``corner``  free corner, :math:`(L_x, L_y, L_z)`
-``edge``    middle of a free edge, :math:`(L_x, L_y, L_z/2)`
-==========  ==========================================
+============  ======================================================
+``tip``       centre of the free face, :math:`(L_x, L_y/2, L_z/2)`
+``mid``       centre of the box, :math:`(L_x/2, L_y/2, L_z/2)`
+``quarter``   :math:`(L_x/4, L_y/2, L_z/2)`
+``corner``    free corner, :math:`(L_x, L_y, L_z)`
+``edge``      middle of a free edge, :math:`(L_x, L_y, L_z/2)`
+============  ======================================================
 
 In 2D the box is :math:`[0, L_x] \times [0, L_y]` (``length`` x ``height``,
 ``nx`` x ``ny`` elements; ``width`` and ``nz`` are unused) and directions are
@@ -211,8 +211,8 @@ def fem_beam(nx: int = 40, ny: int = 4, nz: int = 4, *, dim: int = 3, length: fl
         frequency (:func:`eb_cantilever_omega`, weaker direction), and a plain-data
         ``model.fem`` dict (mesh, material, constraint counts, assembly time).
 
-    Cost: assembly O(nnz) plus one sparse COO-to-CSR sort; about 2 s at n1 = 1e5
-    (``docs/design/fem.md``). Deterministic: the same arguments give the same bits.
+    Cost: assembly O(nnz) plus one sparse COO-to-CSR sort (timings at n1 = 1e3 to 2e5 in
+    ``docs/design/fem.md``). Deterministic: the same arguments give the same bits.
     """
     dim = int(dim) if isinstance(dim, (int, np.integer)) and not isinstance(dim, bool) else dim
     nx, ny = _int("nx", nx), _int("ny", ny)
@@ -264,7 +264,7 @@ def fem_block(n1: int = 20000, *, aspect=(1.0, 1.0, 1.0), E: float = 1.0, nu: fl
         ``band`` = (0.01, 10) times :math:`\sqrt{E/\rho}/L_x`; ``model.fem`` as in
         :func:`fem_beam`.
 
-    Cost: as :func:`fem_beam`; about 2 s at n1 = 1e5 (``docs/design/fem.md``).
+    Cost: as :func:`fem_beam`.
     """
     target = _int("n1", n1, minimum=81)
     try:

@@ -16,8 +16,8 @@ are assembled by scikit-fem on a one-element mesh. On a uniform grid every
 element is a translate of that one (checked, node by node), so the global
 matrices are the scatter :math:`K = \sum_e P_e^T K_e P_e` done once with
 ``scipy.sparse`` (one COO-to-CSR conversion): no quadrature over the whole
-mesh. This is the same sum scikit-fem forms, 10-20 times faster at n1 = 1e5
-(timings in ``docs/design/fem.md``); ``tests/test_fem.py`` checks it against
+mesh. This is the same sum scikit-fem forms, computed faster (side-by-side
+timings in ``docs/design/fem.md``); ``tests/test_fem.py`` checks it against
 scikit-fem's own global assembly.
 """
 
