@@ -108,6 +108,7 @@ def test_fast_assembly_equals_skfem(dim):
     ref = grid_body(axes, lam, mu, 3.0, 0.5, method="skfem")
     for a, b in ((fast.K, ref.K), (fast.M, ref.M)):
         assert abs(a - b).max() <= 1e-13 * abs(b).max()
+        assert (a != a.T).nnz == 0 and np.all(a.data != 0)  # symmetric bit for bit, no stored zeros
     # symmetric, M positive definite, K with exactly 2D: 3 / 3D: 6 rigid-body modes
     ev = np.linalg.eigvalsh(fast.K.toarray())
     assert np.sum(ev < 1e-10 * ev[-1]) == (3 if dim == 2 else 6)
