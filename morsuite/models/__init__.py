@@ -2,9 +2,11 @@
 
 from .index3 import Index3Model
 from .generators import dsms, tcom
+from .fem import fem_beam, fem_block, eigenfrequencies
 from .io import load, load_mat, load_mtx, load_npz, save_npz
 from .catalog import available, get, parse, register
 
-__all__ = ["Index3Model", "dsms", "tcom", "load", "load_mat", "load_mtx", "load_npz", "save_npz",
+__all__ = ["Index3Model", "dsms", "tcom", "fem_beam", "fem_block", "eigenfrequencies",
+           "load", "load_mat", "load_mtx", "load_npz", "save_npz",
            "available", "get", "parse", "register"]
 from .random import random_constrained; __all__.append("random_constrained")  # noqa: E402,E702

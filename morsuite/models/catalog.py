@@ -13,12 +13,13 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..modelfiles import is_model_path
+from .fem import fem_beam, fem_block
 from .generators import dsms, tcom
 from .index3 import Index3Model
 
 __all__ = ["CATALOG", "get", "parse", "available"]
 
-CATALOG = {"dsms": dsms, "tcom": tcom}
+CATALOG = {"dsms": dsms, "tcom": tcom, "fem_beam": fem_beam, "fem_block": fem_block}
 
 
 def available() -> list[str]:
