@@ -41,8 +41,8 @@ def _artifacts(plan, res) -> list:
                          "time_s": e.get("time_s"), "time_standalone_s": e.get("time_standalone_s"),
                          "wall_s": e.get("wall_s"), "call_index": e.get("call_index"),
                          "converged": info.get("converged"), "iterations": info.get("iterations"),
-                         "lu_count": info.get("lu_count"), "time_breakdown": info.get("time_breakdown"),
-                         "warnings": info.get("warnings"), "error": e.get("error"), "scheduler": e.get("scheduler"),
+                         "lu_count": info.get("lu_count"), "lu_backend": info.get("lu_backend"),
+                         "time_breakdown": info.get("time_breakdown"), "warnings": info.get("warnings"), "error": e.get("error"), "scheduler": e.get("scheduler"),
                          "host": e.get("host"),
                          "created": e.get("created")})
     for mid, mg in plan.metrics.items():
