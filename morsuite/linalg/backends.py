@@ -39,6 +39,7 @@ environment overrides ``"auto"``.
 
 from __future__ import annotations
 
+import ctypes
 import os
 
 import numpy as np
@@ -188,6 +189,28 @@ def analyse(pattern, backend: str = "auto") -> dict:
     return info
 
 
+_GBTRS: dict = {}
+
+
+def _gbtrs_nogil(prefix: str):
+    """LAPACK's ``?gbtrs`` called through ctypes, which releases the GIL (SciPy's f2py wrapper
+    holds it: measured, docs/design/backends.md), or None where SciPy's Cython LAPACK is not there."""
+    if prefix not in _GBTRS:
+        try:
+            import scipy.linalg.cython_lapack as cl
+            cap = cl.__pyx_capi__[prefix + "gbtrs"]
+            name = ctypes.pythonapi.PyCapsule_GetName
+            name.restype, name.argtypes = ctypes.c_char_p, [ctypes.py_object]
+            get = ctypes.pythonapi.PyCapsule_GetPointer
+            get.restype, get.argtypes = ctypes.c_void_p, [ctypes.py_object, ctypes.c_char_p]
+            ip, vp = ctypes.POINTER(ctypes.c_int), ctypes.c_void_p
+            _GBTRS[prefix] = ctypes.CFUNCTYPE(None, ctypes.c_char_p, ip, ip, ip, ip, vp, ip, vp, vp, ip, ip)(
+                get(cap, name(cap)))
+        except (ImportError, KeyError, AttributeError, ValueError):
+            _GBTRS[prefix] = None
+    return _GBTRS[prefix]
+
+
 def banded_structure(perm: dict, n1: int, kl: int, ku: int) -> dict:
     """Where each entry of a renumbered pattern (CSC order) goes in the banded LU's arrays, found once.
 
@@ -244,11 +267,12 @@ class BandedBorderLU:
         sel, pos = structure["a11"]
         ab.ravel()[pos] = data[sel]
         pfx = "z" if self.dtype == np.complex128 else "d"
-        self._gbtrs = getattr(lapack, pfx + "gbtrs")
+        self._gbtrs, self._gbtrs_c = getattr(lapack, pfx + "gbtrs"), _gbtrs_nogil(pfx)
         lu, piv, info = getattr(lapack, pfx + "gbtrf")(ab.T, kl, ku, overwrite_ab=1)
         if info > 0:
             raise SingularShiftError(f"banded LU: the (1,1) block is exactly singular (pivot {info})")
         self._lu, self._piv = lu, piv
+        self._piv1 = (piv + 1).astype(np.intc)  # LAPACK's 1-based pivots (SciPy's wrappers shift them)
         if n2:
             sel, ind, ptr = structure["b21"]
             self.B21 = sp.csr_matrix((data[sel], ind, ptr), shape=(n2, n1))
@@ -269,9 +293,17 @@ class BandedBorderLU:
         return np.concatenate([d, np.diag(self._schur[0])]) if self.n2 else d
 
     def _band(self, b, trans: bool):
-        x, info = self._gbtrs(self._lu, self.kl, self.ku, np.asarray(b, dtype=self.dtype), self._piv,
-                              trans=1 if trans else 0, overwrite_b=1)
-        return x
+        """A11^{-1} b (``trans``: A11^{-T} b), b overwritten where it already is a Fortran array of the LU's type."""
+        b = np.asarray(b, dtype=self.dtype, order="F")
+        f = self._gbtrs_c
+        if f is None:
+            x, info = self._gbtrs(self._lu, self.kl, self.ku, b, self._piv, trans=1 if trans else 0, overwrite_b=1)
+            return x
+        c = ctypes.c_int
+        info = c(0)
+        f(b"T" if trans else b"N", c(self.n1), c(self.kl), c(self.ku), c(b.shape[1]), self._lu.ctypes.data,
+          c(self._lu.shape[0]), self._piv1.ctypes.data, b.ctypes.data, c(max(b.shape[0], 1)), ctypes.byref(info))
+        return b
 
     def solve(self, b, trans: str = "N"):
         """Solve ``A x = b`` (``trans="N"``) or ``A^T x = b`` (``"T"``); b of shape (N, k) or (N,)."""
@@ -284,14 +316,14 @@ class BandedBorderLU:
         n1 = self.n1
         b1, b2 = b[:n1], b[n1:]
         if trans == "N":
-            y1 = self._band(b1.copy(), False)
+            y1 = self._band(np.array(b1, dtype=self.dtype, order="F"), False)
             if self.n2:
                 x2 = sla.lu_solve(self._schur, b2 - self.B21 @ y1, check_finite=False)
                 x = np.vstack([y1 - self.W @ x2, x2])
             else:
                 x = y1
         else:
-            y1 = self._band(b1.copy(), True)
+            y1 = self._band(np.array(b1, dtype=self.dtype, order="F"), True)
             if self.n2:
                 x2 = sla.lu_solve(self._schur, b2 - self.B12T @ y1, trans=1, check_finite=False)
                 x = np.vstack([self._band(b1 - self.B21.T @ x2, True), x2])
