@@ -11,12 +11,14 @@ load of a shared machine hits all alike. Parts:
    matrix plus its solve (assembly not timed): DSMS and TCOM at n1 = 2e5 (target:
    auto / splu <= 1/3).
 2. ``scaling``: the same automatic LU + solve, and one IRKA iteration (r = 10),
-   at n1 = 2e4 and 2e5 on the DSMS: exponent log(t2 / t1) / log(10) (target 1.10).
+   at n1 = 2e4 and 2e5 on the DSMS, the two sizes interleaved: exponent
+   log(t2 / t1) / log(10) (target 1.10).
 3. ``grid3d``: a 3D elasticity-like model (27-point stencil, 3 displacements per
    node, one face clamped by constraints; n1 = 3 n^3): LU + solve per backend, the
    automatic choice against the best available and against SuperLU.
 4. ``parallel``: IRKA at n1 = 2e5 (DSMS, r = 10, fixed 3 iterations), solver_threads
-   2 against 1 (target t2 / t1 <= 1/1.6).
+   2 against 1 (target t2 / t1 <= 1/1.6); and the LU + solve of 6 shifts alone on 2
+   threads against 1 (what the threads can gain without IRKA's serial dense work).
 5. ``agree``: converged IRKA ROMs (r = 10) from every backend against SuperLU's, max
    relative transfer-function difference on 200 frequencies (target 1e-8).
 
@@ -36,9 +38,10 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..utils import blas_threads
+from ..reducers.shift_solves import map_threads
 from . import benchmark
 
-__all__ = ["bench_lu_backends", "grid3d_elastic"]
+__all__ = ["bench_lu_backends", "bench_lu_rule", "grid3d_elastic", "strip_model"]
 
 
 def grid3d_elastic(n: int):
@@ -63,6 +66,27 @@ def grid3d_elastic(n: int):
     rng = np.random.default_rng(0)
     return Index3Model(M, 1e-3 * M + 1e-3 * K, K, G, rng.standard_normal((n1, 1)), rng.standard_normal((1, n1)),
                        name=f"grid3d(n={n})", band=(1e-2, 1.0), check_constraints=False)
+
+
+def strip_model(w: int, n1: int = 40000, n2: int = 2):
+    """A 2D strip of width ``w`` (5-point stencil, n1 positions), n2 positions held by constraints.
+
+    Its RCM bandwidth is about 2 w: the family on which the rule of ``"auto"`` is
+    checked (``morsuite bench lu-rule``).
+    """
+    from ..models import Index3Model
+
+    length = n1 // w
+    T = lambda n: sp.diags([-np.ones(n - 1), 2 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1])  # noqa: E731
+    K = (sp.kron(T(length), sp.identity(w)) + sp.kron(sp.identity(length), T(w))
+         + 0.01 * sp.identity(length * w)).tocsr()
+    n = K.shape[0]
+    M = sp.identity(n, format="csr")
+    held = np.linspace(0, n - 1, n2).astype(int)
+    G = sp.csr_matrix((np.ones(n2), (np.arange(n2), held)), shape=(n2, n))
+    rng = np.random.default_rng(0)
+    return Index3Model(M, 0.01 * K + 0.01 * M, K, G, rng.standard_normal((n, 1)), rng.standard_normal((1, n)),
+                       name=f"strip(w={w}, n2={n2})", check_constraints=False)
 
 
 def _lu_solve_variants(fom, s, backends):
@@ -131,21 +155,21 @@ def bench_lu_backends(quick: bool) -> dict:
             judge(f"lu {spec}: auto / splu", med["auto"] / med["splu"], 1 / 3,
                   f"one LU + solve through the solver ({a['backend']}; assembly, scaling, check included) over "
                   f"splu COLAMD + solve, median of {rounds} interleaved rounds")
-        # 2. growth with n1 (DSMS)
-        t_lu, t_it = {}, {}
-        for g in (small, big):
-            fom = models.parse(f"dsms:g={g}")
-            s = 1j * math.sqrt(fom.band[0] * fom.band[1])
-            t_lu[g] = _interleaved({k: v for k, v in _lu_solve_variants(fom, s, ("auto",)).items() if k == "auto"},
-                                   rounds)["auto"]
-            t_it[g] = float(np.median([_irka_iteration(fom, 10, 1)[0] for _ in range(max(1, rounds // 2))]))
-            rows.append({"part": "scaling", "model": f"dsms:g={g}", "n1": fom.n1, "t_lu_solve": t_lu[g],
+        # 2. growth with n1 (DSMS): both sizes in every round
+        foms = {g: models.parse(f"dsms:g={g}") for g in (small, big)}
+        lu_runs = {g: _lu_solve_variants(f, 1j * math.sqrt(f.band[0] * f.band[1]), ("auto",))["auto"]
+                   for g, f in foms.items()}
+        t_lu = _interleaved(lu_runs, rounds)
+        t_it = _interleaved({g: (lambda f=f: _irka_iteration(f, 10, 1)[0]) for g, f in foms.items()},
+                            max(1, rounds // 2))
+        for g, f in foms.items():
+            rows.append({"part": "scaling", "model": f"dsms:g={g}", "n1": f.n1, "t_lu_solve": t_lu[g],
                          "t_irka_iteration": t_it[g]})
         dec = math.log10(big / small)
         judge("scaling: LU + solve exponent", math.log10(t_lu[big] / t_lu[small]) / dec, 1.10,
-              f"time per LU + solve (auto) from n1 = {small} to {big} on the DSMS, as n1^x")
+              f"time per LU + solve (auto) from n1 = {small} to {big} on the DSMS, as n1^x, sizes interleaved")
         judge("scaling: IRKA iteration exponent", math.log10(t_it[big] / t_it[small]) / dec, 1.10,
-              f"IRKA (r = 10) time per iteration from n1 = {small} to {big} on the DSMS, as n1^x")
+              f"IRKA (r = 10) time per iteration from n1 = {small} to {big} on the DSMS, as n1^x, sizes interleaved")
         # 3. a 3D elasticity-like grid
         fom = grid3d_elastic(n3)
         s = 0.1j
@@ -158,16 +182,25 @@ def bench_lu_backends(quick: bool) -> dict:
               "LU + solve of the automatic choice over the fastest backend available here")
         judge(f"grid3d n1={fom.n1}: auto / superlu", med[auto] / med["superlu"], 0.5,
               "LU + solve of the automatic choice over SuperLU (target: 2x faster)")
-    # 4. shift-parallel IRKA (BLAS single-threaded inside reduce)
+    # 4. shift-parallel IRKA (BLAS single-threaded inside reduce), and its LUs + solves alone
     fom = models.parse(f"dsms:g={big}")
-    t1, t2 = [], []
-    for _ in range(max(1, rounds // 2)):
-        t1.append(_irka_iteration(fom, 10, 1)[0])
-        t2.append(_irka_iteration(fom, 10, 2)[0])
-    rows.append({"part": "parallel", "model": f"dsms:g={big}", "t_serial": float(np.median(t1)),
-                 "t_threads2": float(np.median(t2))})
-    judge("parallel: IRKA iteration 2 threads / 1", float(np.median(t2) / np.median(t1)), 1 / 1.6,
-          f"IRKA r = 10 per iteration on dsms(g={big}), solver_threads 2 over 1, median of {len(t1)} pairs")
+    med = _interleaved({1: lambda: _irka_iteration(fom, 10, 1)[0], 2: lambda: _irka_iteration(fom, 10, 2)[0]},
+                       max(1, rounds // 2))
+    solver = fom.new_solver(cache_size=0)
+    shifts = 1j * np.geomspace(fom.band[0], fom.band[1], 6) + 0.05
+
+    def lus(threads):
+        t0 = time.perf_counter()
+        map_threads(lambda a: solver.factor(a).solve(fom.F), list(shifts), threads)
+        return time.perf_counter() - t0
+    with blas_threads(1):
+        med_lu = _interleaved({1: lambda: lus(1), 2: lambda: lus(2)}, rounds)
+    rows.append({"part": "parallel", "model": f"dsms:g={big}", "t_serial": med[1], "t_threads2": med[2],
+                 "t_6lu_serial": med_lu[1], "t_6lu_threads2": med_lu[2]})
+    judge("parallel: IRKA iteration 2 threads / 1", med[2] / med[1], 1 / 1.6,
+          f"IRKA r = 10 per iteration on dsms(g={big}), solver_threads 2 over 1, interleaved medians")
+    judge("parallel: 6 LUs + solves 2 threads / 1", med_lu[2] / med_lu[1], 1 / 1.6,
+          "the same shifts' LU + solve on 2 threads over 1 (no IRKA dense work), interleaved medians")
     # 5. converged ROMs of every backend against SuperLU's
     for spec in (("dsms:g=600", "tcom:nc=200") if quick else ("dsms:g=6000", "tcom:nc=2000")):
         omega = None
@@ -187,3 +220,28 @@ def bench_lu_backends(quick: bool) -> dict:
         judge(f"agree {spec}: banded vs superlu ROM", diff, 1e-8,
               "max |T_banded - T_superlu| / max |T_superlu| of the converged IRKA ROMs (r = 10), 200 frequencies")
     return {"rows": rows, "ratios": ratios}
+
+
+@benchmark("lu-rule")
+def bench_lu_rule(quick: bool) -> dict:
+    """The rule of the automatic LU backend: banded against SuperLU on 2D strips of growing width and border."""
+    from ..linalg.backends import BAND_RULE
+
+    n1, rounds = (4000, 1) if quick else (40000, 3)
+    cases = [(w, 2) for w in (1, 2, 4, 8, 16, 24, 32, 48)] + [(1, n2) for n2 in (4, 8, 16, 32, 64)]
+    rows, agree = [], 0
+    with blas_threads(1):
+        for w, n2 in cases:
+            fom = strip_model(w, n1=n1, n2=n2)
+            a = fom.lu_analysis()
+            med = _interleaved(_lu_solve_variants(fom, 0.3j, ("superlu", "banded")), rounds)
+            faster = "banded" if med["banded"] < med["superlu"] else "superlu"
+            agree += faster == a["backend"]
+            rows.append({"w": w, "n2": n2, "kl_ku": a["kl"] + a["ku"], "auto": a["backend"], "faster": faster,
+                         "t_superlu": med["superlu"], "t_banded": med["banded"],
+                         "banded_over_superlu": med["banded"] / med["superlu"]})
+    share = agree / len(cases)
+    return {"rows": rows, "rule": dict(BAND_RULE),
+            "ratios": {"rule misses": {"value": 1 - share, "target": 0.25, "pass": None if quick else 1 - share <= 0.25,
+                                       "what": f"share of the {len(cases)} strips on which auto did not pick the "
+                                               f"faster backend (n1 = {n1}, medians of {rounds} interleaved rounds)"}}}

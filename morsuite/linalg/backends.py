@@ -59,7 +59,7 @@ BACKENDS = ("auto", "superlu", "banded")
 
 #: the structural rule of ``"auto"``: banded LU when the RCM half-bandwidths satisfy
 #: ``kl + ku <= max_band`` and ``n2 <= max_border`` (docs/design/backends.md, 2026-11-25)
-BAND_RULE = {"max_band": 40, "max_border": 32}
+BAND_RULE = {"max_band": 64, "max_border": 8}
 
 
 def resolve_backend(backend: str) -> str:

@@ -25,7 +25,10 @@ later shift. Solves and their accuracy check are in
 Options of :class:`SaddlePointSolver` (defaults): ``cache_size=2``,
 ``pivot_tol=0`` (off), ``rcond_tol=0`` (off), ``permc_spec="COLAMD"``,
 ``diag_pivot_thresh=0.1``, ``backward_tol=1e-10``, ``scaling="diagonal"``,
-``ruiz_sweeps=2``, ``reuse_ordering=True``.
+``ruiz_sweeps=2``, ``reuse_ordering=True``, ``backend="auto"`` (the LU:
+banded with a Schur-complement border for narrow RCM bands, SuperLU otherwise,
+chosen from the pattern alone by :mod:`morsuite.linalg.backends`; measurements
+in ``docs/design/backends.md``).
 
 Cost: one sparse LU per distinct shift, none for a cached shift or the
 conjugate of one (real data); ``rcond_tol > 0`` adds 10-20% of an LU, Ruiz
