@@ -85,8 +85,8 @@ class IRKA(IRKABase):
                                "transposed solve shares) or all of them",
                                choices=("first", "all")),
         "solver_threads": Option(0, "int", "threads that factor and solve an iteration's shifts concurrently "
-                                 "(executor 'threads'); 0: automatic, 2 for the banded LU backend on two or "
-                                 "more cores, 1 for SuperLU (it holds the GIL)", low=0),
+                                 "(executor 'threads'); 0: automatic, 2 on two or more cores (the LUs release "
+                                 "the GIL)", low=0),
         "executor": Option("threads", "choice", "what runs the shifts' solves: a thread pool in this process, "
                            "or the current dask.distributed client ('dask'); the result does not depend on it",
                            choices=("threads", "dask")),

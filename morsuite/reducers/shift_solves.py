@@ -10,10 +10,10 @@ solves were scheduled.
 Executors of :class:`~.irka.IRKA` (option ``executor``):
 
 ``"threads"`` (default)
-    A thread pool of ``solver_threads`` workers (0: :func:`default_threads`). LAPACK's
-    banded LU releases the GIL, SciPy's SuperLU does not (measured:
-    ``docs/design/backends.md``), so the automatic count is 2 on two or more cores
-    for the banded backend and 1 (serial) for SuperLU.
+    A thread pool of ``solver_threads`` workers (0: :func:`default_threads`, 2 on two
+    or more cores). SciPy's SuperLU and LAPACK's banded LU release the GIL while they
+    factor, the banded solves go through ctypes to release it too (measured:
+    ``docs/design/backends.md``).
 ``"dask"``
     The current ``distributed`` client (``distributed.get_client()``): the model's
     solver is broadcast to the workers once per reduction and each job returns its
@@ -76,18 +76,19 @@ def shift_solves(red):
 
 
 def default_threads(backend: str) -> int:
-    """The automatic ``solver_threads``: 2 for the banded backend on two or more cores, else 1.
+    """The automatic ``solver_threads``: 2 on two or more cores, else 1 (for either backend).
 
-    SciPy's SuperLU holds the GIL while it factors (two threads were slower than one,
-    docs/design/backends.md); LAPACK's ``?gbtrf`` releases it. BLAS runs single-threaded
+    Measured on a quiet moment of this 2-core machine (docs/design/backends.md): six LUs of
+    dsms(2e5) or tcom(2e5) on 2 threads took 0.46-0.55 of the serial time with SuperLU and
+    0.48-0.64 with the banded LU (0.70-0.79 with their solves). BLAS runs single-threaded
     inside a reduction (``reducers.base.BLAS_THREADS``), so the threads do not compete
-    with BLAS threads.
+    with BLAS threads. More than 2 was not measured.
     """
     try:
         cores = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):
         cores = os.cpu_count() or 1
-    return 2 if backend == "banded" and cores >= 2 else 1
+    return 2 if cores >= 2 else 1
 
 
 def map_threads(fn, jobs, threads: int) -> list:
