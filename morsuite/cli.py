@@ -148,10 +148,12 @@ def _direction_arg(text):
 def cmd_info(args) -> int:
     """``morsuite info MODEL``: print the model's summary (sizes, band, name) as JSON; returns 0.
 
-    Builds the model (a catalog spec or a file); no factorization.
+    Builds the model (a catalog spec or a file) and analyses its sparsity pattern for
+    the LU backend (``lu_backend``: one RCM ordering, no factorization).
     """
     from . import models
-    print(json.dumps(models.parse(args.model).summary(), indent=2))
+    model = models.parse(args.model)
+    print(json.dumps({**model.summary(), "lu_backend": model.lu_analysis()}, indent=2))
     return 0
 
 

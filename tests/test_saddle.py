@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 import morsuite as ms
 from morsuite.linalg import SaddlePointSolver
@@ -290,7 +291,8 @@ def test_reused_ordering_solves_vs_dense(small_random, scaling, reuse):
     """Later shifts factor the column-permuted matrix with the first shift's ordering;
     plain, transposed, full, conjugate and unchecked solves must still be exact."""
     fom = small_random
-    solver = SaddlePointSolver(fom.M, fom.D, fom.K, fom.G, scaling=scaling, reuse_ordering=reuse)
+    solver = SaddlePointSolver(fom.M, fom.D, fom.K, fom.G, scaling=scaling, reuse_ordering=reuse,
+                               backend="superlu")
     rng = np.random.default_rng(3)
     B = rng.standard_normal((fom.n1 + fom.n2, 2)) + 1j * rng.standard_normal((fom.n1 + fom.n2, 2))
     for s in (0.4 + 0.2j, 1.5j, 0.7, 0.3 - 2j):
@@ -307,7 +309,7 @@ def test_reused_ordering_solves_vs_dense(small_random, scaling, reuse):
     reused = ("ordering", "COLAMD") in solver.pattern
     assert reused == (reuse and scaling != "ruiz")
     if reused:  # the model's other solvers see the same ordering
-        other = SaddlePointSolver(fom.M, fom.D, fom.K, fom.G, pattern=solver.pattern)
+        other = SaddlePointSolver(fom.M, fom.D, fom.K, fom.G, pattern=solver.pattern, backend="superlu")
         assert other._ordering() is solver.pattern[("ordering", "COLAMD")]
 
 
@@ -315,8 +317,11 @@ def test_reused_ordering_rcond_check():
     """The condition estimate goes through the permuted LU: a pole is still found."""
     fom = ms.models.Index3Model(np.eye(2), np.zeros((2, 2)), np.diag([1.0, 2.0]), None,
                                 [[1.0], [1.0]], [[1.0, 1.0]])
-    solver = fom.new_solver(rcond_tol=1e-14)
-    assert solver.factor(0.5j).min_pivot_ratio > 0.1  # rcond of a well-conditioned shift
+    for backend in ("superlu", "banded"):
+        solver = fom.new_solver(rcond_tol=1e-14, backend=backend)
+        assert solver.factor(0.5j).min_pivot_ratio > 0.1  # rcond of a well-conditioned shift
+        with pytest.raises(ms.SingularShiftError, match="reciprocal condition"):
+            solver.factor(1j * (1 + 2.2e-16))
     assert ("ordering", "COLAMD") in solver.pattern
     with pytest.raises(ms.SingularShiftError, match="reciprocal condition"):
         solver.factor(1j * (1 + 2.2e-16))
@@ -338,7 +343,9 @@ def test_fallbacks_are_tried_in_order_and_exhausted_raises(dsms50):
         def solve(self, b, trans="N"):
             return good.solve(b, trans=trans) * (1 + 1e-3)
 
-    assert len(f.fallback) == 3
+    # the banded LU pivots within the (1,1) block only: SuperLU on the same matrix comes first
+    assert solver.backend == "banded" and len(f.fallback) == 4
+    assert isinstance(f.fallback[0](), spla.SuperLU)
     calls = []
     f.lu = Off()
     f.fallback = (lambda: calls.append(1) or Off(), lambda: calls.append(2) or good, lambda: calls.append(3) or good)

@@ -25,7 +25,10 @@ later shift. Solves and their accuracy check are in
 Options of :class:`SaddlePointSolver` (defaults): ``cache_size=2``,
 ``pivot_tol=0`` (off), ``rcond_tol=0`` (off), ``permc_spec="COLAMD"``,
 ``diag_pivot_thresh=0.1``, ``backward_tol=1e-10``, ``scaling="diagonal"``,
-``ruiz_sweeps=2``, ``reuse_ordering=True``.
+``ruiz_sweeps=2``, ``reuse_ordering=True``, ``backend="auto"`` (the LU:
+banded with a Schur-complement border for narrow RCM bands, SuperLU otherwise,
+chosen from the pattern alone by :mod:`morsuite.linalg.backends`; measurements
+in ``docs/design/backends.md``).
 
 Cost: one sparse LU per distinct shift, none for a cached shift or the
 conjugate of one (real data); ``rcond_tol > 0`` adds 10-20% of an LU, Ruiz
@@ -36,6 +39,7 @@ the backward-error check costs one more LU per fallback tried.
 
 from __future__ import annotations
 
+import threading
 import time
 from collections import OrderedDict
 
@@ -44,6 +48,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..errors import InputError, SingularShiftError
+from .backends import BandedBorderLU, analyse, permuted_pattern, resolve_backend, superlu_ordering
 from .saddle_lu import SaddleLU, SolverStats, rcond_estimate
 
 __all__ = ["SaddlePointSolver", "SaddleLU", "SolverStats"]
@@ -103,6 +108,12 @@ class SaddlePointSolver:
     pattern : dict, optional
         The ``pattern`` of another solver of the same M, D, K, G (shared,
         read-only, with its stored column ordering); default: built here.
+    backend : {"auto", "superlu", "banded"}
+        The sparse LU (:mod:`morsuite.linalg.backends`): ``"auto"`` (default)
+        chooses from the pattern alone (banded LU with a Schur-complement border
+        for narrow RCM bands and few constraints, SuperLU otherwise); the
+        analysis, done once per pattern, is in ``analysis``. The banded backend
+        falls back to SuperLU wherever its solve fails the backward-error check.
 
     Notes
     -----
@@ -113,7 +124,7 @@ class SaddlePointSolver:
     def __init__(self, M, D, K, G, *, cache_size: int = 2, pivot_tol: float = 0.0,
                  rcond_tol: float = 0.0, permc_spec: str = "COLAMD", diag_pivot_thresh: float = 0.1,
                  backward_tol: float = 1e-10, scaling: str = "diagonal", ruiz_sweeps: int = 2,
-                 pattern: dict | None = None, reuse_ordering: bool = True):
+                 pattern: dict | None = None, reuse_ordering: bool = True, backend: str = "auto"):
         self.n1 = M.shape[0]
         self.n2 = G.shape[0]
         self.cache_size = int(cache_size)
@@ -142,6 +153,12 @@ class SaddlePointSolver:
             if isinstance(k, str) and k != "shape":
                 setattr(self, k, v)
         self._work = (np.empty(self._m.size), np.empty(self._m.size))  # scratch of _combine / _assemble_scaled
+        backend = resolve_backend(backend)
+        if backend == "banded" and scaling == "ruiz":
+            raise InputError("backend='banded' needs scaling 'diagonal' or 'none' (Ruiz scales per column of S)")
+        #: the structural analysis of the pattern (plain data; ``analysis["backend"]`` is the LU used)
+        self.analysis = dict(analyse(pattern, "superlu" if scaling == "ruiz" and backend == "auto" else backend))
+        self.backend = self.analysis["backend"]
 
     # -- pattern ---------------------------------------------------------
     def _build_pattern(self, M, D, K, G) -> dict:
@@ -219,12 +236,12 @@ class SaddlePointSolver:
         conj_key = tuple(np.conj(k) for k in key)
         if key in self._cache:
             self._cache.move_to_end(key)
-            self.stats.reused += 1
+            self.stats.add(reused=1)
             return self._cache[key]
         if self.real and conj_key in self._cache:
             base = self._cache[conj_key]
             self._cache.move_to_end(conj_key)
-            self.stats.reused += 1
+            self.stats.add(reused=1)
             return SaddleLU(key, base.lu, self.n1, self.n2, not base.conjugate, self.stats,
                             base.min_pivot_ratio, base.complex_lu, base.matrix, base.backward_tol, base.norms,
                             base.dr, base.dc, q=base.q)
@@ -232,11 +249,18 @@ class SaddlePointSolver:
         perm = self._ordering()
         dr, dc, As = self._assemble_scaled(a, b, c, perm)
         t1 = time.perf_counter()
+        banded = self.backend == "banded"
         try:
-            lu = spla.splu(As, permc_spec="NATURAL" if perm else self.permc_spec,
-                           diag_pivot_thresh=self.diag_pivot_thresh)
-            if perm is None and self._reusable() and getattr(lu, "perm_c", None) is not None:
-                self._store_ordering(lu.perm_c)
+            lu = None
+            if banded:
+                try:
+                    lu = BandedBorderLU(As.data, self.n1, self.n2, self.analysis["kl"], self.analysis["ku"],
+                                        perm["banded"])
+                except SingularShiftError:  # A11 singular where S need not be: SuperLU decides
+                    self.stats.add(refactorizations=1)
+            if lu is None:
+                lu = spla.splu(As, permc_spec="NATURAL" if perm and not banded else self.permc_spec,
+                               diag_pivot_thresh=self.diag_pivot_thresh)
         except RuntimeError as exc:  # "Factor is exactly singular"
             raise SingularShiftError(
                 f"saddle-point matrix at s-coefficients {(a, b, c)} is exactly singular: "
@@ -244,7 +268,7 @@ class SaddlePointSolver:
             ) from exc
         ratio = float("nan")
         if self.pivot_tol > 0:
-            u = np.abs(lu.U.diagonal())
+            u = np.abs(lu.u_diagonal() if hasattr(lu, "u_diagonal") else lu.U.diagonal())
             ratio = float(u.min() / u.max()) if u.size else 1.0
             if not ratio > self.pivot_tol:
                 raise SingularShiftError(
@@ -268,13 +292,14 @@ class SaddlePointSolver:
                 )
             ratio = rcond
         t2 = time.perf_counter()
-        self.stats.factorizations += 1
-        self.stats.assemble_time_s += t1 - t0
-        self.stats.factor_time_s += t2 - t1
+        self.stats.add(factorizations=1, assemble_time_s=t1 - t0, factor_time_s=t2 - t1)
         checked = self.backward_tol > 0
 
-        spec = "NATURAL" if perm else self.permc_spec
-        fallback = (
+        spec = "NATURAL" if perm and not banded else self.permc_spec
+        fallback = ((
+            # the banded LU pivots within A11 only: SuperLU on the same matrix first
+            lambda As=As: spla.splu(As, permc_spec="COLAMD", diag_pivot_thresh=self.diag_pivot_thresh),
+        ) if banded and isinstance(lu, BandedBorderLU) else ()) + (
             # more weight on the diagonal of the equilibrated matrix, same ordering (cheap)
             lambda As=As: spla.splu(As, permc_spec=spec, diag_pivot_thresh=min(0.01, self.diag_pivot_thresh)),
             # a fresh column ordering
@@ -296,33 +321,28 @@ class SaddlePointSolver:
         return self.reuse_ordering and self.scaling != "ruiz" and self.permc_spec != "NATURAL"
 
     def _ordering(self):
-        """The column-permuted pattern of an ordering found before, or None."""
-        return self.pattern.get(("ordering", self.permc_spec)) if self._reusable() else None
+        """The renumbered pattern of the backend's ordering (found once per pattern), or None.
 
-    def _store_ordering(self, perm_c):
-        """Keep the column ordering of a first LU for every later shift (shared by the model's solvers).
-
-        SuperLU's column orderings (COLAMD, MMD_*) depend only on the sparsity
-        pattern, which is the same for every shift; the row pivots, which depend
-        on the values, are still chosen per factorization. The ordering's pattern is
-        stored with the entries of M, D, K, G permuted, so that later shifts
-        assemble the permuted matrix directly and factor it with NATURAL.
+        Banded: the RCM renumbering of :func:`~morsuite.linalg.backends.analyse`.
+        SuperLU: its column ordering (COLAMD, MMD_*) depends only on the sparsity
+        pattern, the same for every shift; it is found once, from the pattern alone
+        (:func:`~morsuite.linalg.backends.superlu_ordering`), so that every shift,
+        the first included, is factored the same way whatever ran before (the row
+        pivots, which depend on the values, are still chosen per factorization).
+        The pattern is stored with the entries of M, D, K, G renumbered, so later
+        shifts assemble the renumbered matrix directly and factor it with NATURAL.
         """
-        # symmetric renumbering Ae = As[q][:, q]: SuperLU's threshold pivoting prefers the
-        # diagonal of the matrix it is given, so the rows must follow the columns (a column
-        # permutation alone made it prefer off-diagonal entries)
-        q = np.argsort(perm_c)  # new index j is old index q[j]; perm_c maps old to new
-        new_row = perm_c[self._rows]
-        new_col = perm_c[self._cols]
-        sel = np.lexsort((new_row, new_col))
-        counts = np.bincount(new_col, minlength=self.N)
-        perm = {"q": q, "_indices": new_row[sel].astype(np.int32),
-                "_indptr": np.concatenate([[0], np.cumsum(counts)]).astype(np.int32),
-                "_m": self._m[sel], "_d": self._d[sel], "_k": self._k[sel], "_g": self._g[sel],
-                "_rows": self._rows[sel], "_cols": self._cols[sel]}  # old indices: the scaling uses them
-        for v in perm.values():
-            v.flags.writeable = False
-        self.pattern[("ordering", self.permc_spec)] = perm
+        if self.backend == "banded":
+            return self.pattern[("ordering", "banded")]
+        if not self._reusable():
+            return None
+        key = ("ordering", self.permc_spec)
+        if key not in self.pattern:
+            # symmetric renumbering Ae = As[q][:, q]: SuperLU's threshold pivoting prefers the
+            # diagonal of the matrix it is given, so the rows must follow the columns (a column
+            # permutation alone made it prefer off-diagonal entries)
+            self.pattern[key] = permuted_pattern(self.pattern, superlu_ordering(self.pattern, self.permc_spec))
+        return self.pattern[key]
 
     def _assemble_scaled(self, a, b, c, perm=None):
         """Assemble and equilibrate in one pass: returns (dr, dc, Dr S Dc) ((None, None, S) if off).
@@ -338,7 +358,7 @@ class SaddlePointSolver:
         if self.scaling == "none":
             return None, None, self._csc(data, P)
         d = self._diagonal_scaling(a, b, c)
-        w, w2 = self._work
+        w, w2 = self._scratch()
         np.take(d, P["_rows"], out=w)
         np.take(d, P["_cols"], out=w2)
         w *= w2
@@ -361,7 +381,7 @@ class SaddlePointSolver:
         is_complex = any(x.imag != 0 for x in (a, b, c))
         data = np.empty(self._m.size, dtype=complex if is_complex else float)
         parts = ((data.real, "real"), (data.imag, "imag")) if is_complex else ((data, "real"),)
-        tmp = self._work[0]
+        tmp = self._scratch()[0]
         for out, part in parts:
             first = True
             for coef, arr in ((a, m), (b, d), (c, k)):
@@ -378,6 +398,13 @@ class SaddlePointSolver:
                 out[...] = 0.0
         (data.real if is_complex else data)[...] += g
         return data
+
+    def _scratch(self):
+        """Scratch arrays of the pattern's size: shared in the main thread, fresh in others
+        (factorizations may run in a thread pool, :mod:`morsuite.reducers.shift_solves`)."""
+        if threading.current_thread() is threading.main_thread():
+            return self._work
+        return np.empty(self._m.size), np.empty(self._m.size)
 
     def _csc(self, data, P=None):
         P = self.pattern if P is None else P

@@ -1,6 +1,7 @@
 r"""Solves with one sparse LU of the saddle-point matrix, checked for accuracy.
 
-A :class:`SaddleLU` holds the SuperLU factors of the equilibrated, possibly
+A :class:`SaddleLU` holds the LU factors (SuperLU, or a banded LU of
+:mod:`~morsuite.linalg.backends`) of the equilibrated, possibly
 symmetrically renumbered matrix :math:`A_e = (D_r S D_c)[q][:, q]` of
 
 .. math::
@@ -24,6 +25,7 @@ of an LU); a fallback one more LU (counted in ``stats.factorizations`` and
 
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import dataclass, field
 
@@ -34,6 +36,8 @@ import scipy.sparse.linalg as spla
 from ..errors import InputError, SingularShiftError
 
 __all__ = ["SaddleLU", "SolverStats", "rcond_estimate"]
+
+_STATS_LOCK = threading.Lock()  # the counters are shared by solves that run concurrently (shift-parallel)
 
 
 @dataclass
@@ -47,6 +51,12 @@ class SolverStats:
     factor_time_s: float = 0.0
     solve_time_s: float = 0.0
     assemble_time_s: float = 0.0
+
+    def add(self, **amounts):
+        """Add to counters, thread-safely (factorizations and solves may run in a thread pool)."""
+        with _STATS_LOCK:
+            for k, v in amounts.items():
+                setattr(self, k, getattr(self, k) + v)
 
     def as_dict(self) -> dict:
         """The counters as a plain dict (for ``info`` and manifests)."""
@@ -123,8 +133,7 @@ class SaddleLU:
         if self.matrix is not None:
             x = self._checked(b, x, trans)
         x = self._from_lu_space(x, trans)
-        self.stats.solve_time_s += time.perf_counter() - t0
-        self.stats.solves += b.shape[1]
+        self.stats.add(solve_time_s=time.perf_counter() - t0, solves=b.shape[1])
         if not full:
             x = x[: self.n1]
         return x[:, 0] if vector else x
@@ -182,9 +191,7 @@ class SaddleLU:
             t0 = time.perf_counter()
             make, self.fallback = self.fallback[0], self.fallback[1:]
             self.lu, self.refactored = make(), True
-            self.stats.factorizations += 1
-            self.stats.refactorizations += 1
-            self.stats.factor_time_s += time.perf_counter() - t0
+            self.stats.add(factorizations=1, refactorizations=1, factor_time_s=time.perf_counter() - t0)
             x = self._lu_solve(b, trans)
             eta, r = self._backward_error(b, x, trans)
             if not eta <= self.backward_tol:

@@ -229,14 +229,39 @@ class Index3Model:
     def solver(self) -> SaddlePointSolver:
         """The model's saddle-point solver (pattern built on first use)."""
         if self._solver is None:
-            self._solver = SaddlePointSolver(self.M, self.D, self.K, self.G)
+            self._solver = SaddlePointSolver(self.M, self.D, self.K, self.G, backend=self.lu_backend)
         return self._solver
+
+    @property
+    def lu_backend(self) -> str:
+        """The sparse-LU backend of the model's solvers: ``"auto"`` (default), ``"superlu"`` or ``"banded"``.
+
+        ``"auto"`` chooses from the sparsity pattern alone
+        (:func:`morsuite.linalg.backends.choose`); setting it forces one for every
+        later solver of this model (the pattern and its analysis are kept).
+        """
+        return getattr(self, "_lu_backend", "auto")
+
+    @lu_backend.setter
+    def lu_backend(self, value: str):
+        from ..linalg.backends import resolve_backend
+        resolve_backend(value)  # validates
+        self._lu_backend = value
+        if self._solver is not None:  # the model's own solver follows; its pattern is kept
+            self._solver = SaddlePointSolver(self.M, self.D, self.K, self.G, backend=value,
+                                             pattern=self._solver.pattern)
+
+    def lu_analysis(self) -> dict:
+        """The structural analysis behind the model's LU backend (plain data; see ``SaddlePointSolver.analysis``)."""
+        return dict(self.solver.analysis)
 
     def new_solver(self, **options) -> SaddlePointSolver:
         """A fresh saddle-point solver (own counters and cache) for a reducer run.
 
-        The sparsity pattern is built once per model and shared (read-only).
+        The sparsity pattern is built once per model and shared (read-only); the
+        backend is the model's ``lu_backend`` unless ``backend=`` is given.
         """
+        options.setdefault("backend", self.lu_backend)
         return SaddlePointSolver(self.M, self.D, self.K, self.G, pattern=self.solver.pattern, **options)
 
     def transfer(self, s, *, derivative: bool = False):

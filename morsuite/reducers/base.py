@@ -205,6 +205,9 @@ class Reducer:
                              f"(n1 - n2 = {self.max_order()}) for {self.name}")
         return r
 
+    #: whether the method's solves go through the model's saddle-point solvers (``info["lu_backend"]``)
+    saddle_lu: ClassVar[bool] = True
+
     def warn(self, message: str, category=UserWarning, stacklevel: int = 3):
         """Issue a warning and record it in ``info['warnings']``."""
         self._warnings.append(f"{category.__name__}: {message}")
@@ -236,6 +239,8 @@ class Reducer:
         if "stable" not in base:
             base["stable"] = bool(rom.is_stable())
         base["blas_threads"] = BLAS_THREADS
+        if self.saddle_lu and hasattr(self.fom, "lu_analysis"):  # the sparse LU backend of the model's solvers
+            base["lu_backend"] = self.fom.lu_analysis()
         base["warnings"] = list(self._warnings)
         base["options"] = self.get_params()
         return Reduction(rom=rom, info=to_plain(base))

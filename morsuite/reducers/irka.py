@@ -36,6 +36,7 @@ reduction. Design notes and measurements: ``docs/design/irka.md``.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import replace
 
 import numpy as np
@@ -47,6 +48,7 @@ from ..linalg.orthonormal import gram_schmidt
 from ..linalg.refine import SaddleOperator, refined_solve
 from .base import Option, register
 from .irka_engine import IRKABase
+from .shift_solves import default_threads, map_dask, map_threads
 
 __all__ = ["IRKA"]
 
@@ -82,11 +84,19 @@ class IRKA(IRKABase):
                                "solve with each LU (it probes the stability of the factors, which the "
                                "transposed solve shares) or all of them",
                                choices=("first", "all")),
+        "solver_threads": Option(0, "int", "threads that factor and solve an iteration's shifts concurrently "
+                                 "(executor 'threads'); 0: automatic, 2 on two or more cores (the LUs release "
+                                 "the GIL)", low=0),
+        "executor": Option("threads", "choice", "what runs the shifts' solves: a thread pool in this process, "
+                           "or the current dask.distributed client ('dask'); the result does not depend on it",
+                           choices=("threads", "dask")),
     }
 
     def _setup(self):
         self._solver = self.fom.new_solver(cache_size=0, pivot_tol=self.options["pivot_tol"])
         self._refiner = SaddleOperator(self._solver.pattern)
+        self._local = threading.local()  # a refiner per solver thread: its cache holds one shift's entries
+        self._threads = self.options["solver_threads"] or default_threads(self._solver.backend)
         G = self.fom.G
         # the orthogonal projector onto null(G), X - G^T (G G^T)^{-1} G X, through a sparse LU
         # of the n2 x n2 matrix G G^T (well conditioned: checked when the model was built);
@@ -101,8 +111,26 @@ class IRKA(IRKABase):
         steps = self.options["refine"] if self._refining() else 0
         if steps == 0:
             return lu.solve(rhs, trans=trans)
-        return refined_solve(lu, rhs, trans, a, self._refiner, steps=steps,
-                             ext=self.options["refine_precision"] == "extended")
+        if threading.current_thread() is threading.main_thread():
+            op = self._refiner
+        else:
+            op = getattr(self._local, "op", None) or SaddleOperator(self._solver.pattern)
+            self._local.op = op
+        return refined_solve(lu, rhs, trans, a, op, steps=steps, ext=self.options["refine_precision"] == "extended")
+
+    def _map_shifts(self, fn, jobs):
+        """The shifts' jobs on the executor of option ``executor`` (:mod:`.shift_solves`)."""
+        o = self.options
+        if o["executor"] == "dask":
+            steps = o["refine"] if self._refining() else 0
+            return map_dask(self, jobs, steps, o["refine_precision"] == "extended", o["check_solves"] == "all")
+        return map_threads(fn, jobs, self._threads)
+
+    def _outcome(self, *args, **kwargs):
+        rom, info = super()._outcome(*args, **kwargs)
+        info.update(solver_threads=self._threads if self.options["executor"] == "threads" else None,
+                    executor=self.options["executor"])
+        return rom, info
 
     def _refining(self) -> bool:
         o = self.options

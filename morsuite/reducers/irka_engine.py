@@ -67,6 +67,7 @@ from .base import Option, Reducer
 from .irka_safeguards import GUARD_OPTIONS, CycleGuard, Shortlist, ill_conditioned, instability_culprit, \
     oblique_selection, orthonormal_basis, perturb_shifts, shift_slots, zero_transfer_error
 from .irka_score import iterate_scorer, score_cost
+from .shift_solves import raw_bases
 from .shift_update import COMPLEX_TOL, UpdateSchedule, bt_rule, initial_shifts, relaxed_update, residue_rule, \
     shifts_from_poles
 
@@ -220,25 +221,12 @@ class IRKABase(Reducer):
     def _bases(self, alpha, bdir, cdir, left: bool):
         """Raw real bases: per real shift or conjugate pair one factorization, its solve
         with F b_i and (two-sided) its transposed solve with L^T c_i; complex solutions
-        give their real and imaginary parts."""
-        _, _, _, F, L = self._system()
-        self._begin_bases()
-        Vcols, Wcols = [], []
-        for a, b, c in zip(alpha, bdir, cdir):
-            cplx = abs(a.imag) > COMPLEX_TOL * abs(a)
-            if cplx and a.imag < 0:
-                continue  # its conjugate partner's LU and solve give both columns
-            lu = self._factor(a if cplx else a.real)
-            v = self._basis_vector(self._solve(lu, F @ (b if cplx else b.real), False, a), a, False)
-            Vcols += [v.real, v.imag] if cplx else [np.real(v)]
-            if left:
-                w = self._solve(self._second(lu), L.T @ (c if cplx else c.real), True, a)
-                w = self._basis_vector(w, a, True)
-                Wcols += [w.real, w.imag] if cplx else [np.real(w)]
-            del lu  # a dense LU of the projected baseline is n1 x n1: free it before the next
-        V = np.column_stack(Vcols)
-        W = np.column_stack(Wcols) if left else None
-        return V, W
+        give their real and imaginary parts (:func:`.shift_solves.raw_bases`)."""
+        return raw_bases(self, alpha, bdir, cdir, left)
+
+    def _map_shifts(self, fn, jobs) -> list:
+        """``[fn(job) for job in jobs]``, in order; a variant may run them concurrently."""
+        return [fn(job) for job in jobs]
 
     def _bases_safe(self, alpha, bdir, cdir, left):
         """Bases; a shift at a pole (singular saddle matrix) is perturbed and retried."""

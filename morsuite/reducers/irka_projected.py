@@ -268,6 +268,7 @@ class IRKAProjected(IRKABase):
     """
 
     name = "irka-projected"
+    saddle_lu = False  # dense LUs of the projected pencil
 
     OPTIONS = {
         **IRKABase.OPTIONS,

@@ -42,7 +42,8 @@ def _artifacts(plan, res) -> list:
                          "wall_s": e.get("wall_s"), "call_index": e.get("call_index"),
                          "converged": info.get("converged"), "status": info.get("status"),
                          "iterations": info.get("iterations"), "lu_count": info.get("lu_count"),
-                         "lu_count_shared": info.get("lu_count_shared"), "time_breakdown": info.get("time_breakdown"),
+                         "lu_count_shared": info.get("lu_count_shared"), "lu_backend": info.get("lu_backend"),
+                         "time_breakdown": info.get("time_breakdown"),
                          "warnings": info.get("warnings"), "error": e.get("error"), "scheduler": e.get("scheduler"),
                          "host": e.get("host"),
                          "created": e.get("created")})

@@ -1,0 +1,247 @@
+"""Benchmark ``lu-backends``: the sparse LU backends against scipy's splu, their scaling, shift-parallel IRKA.
+
+Every ratio is measured side by side in one process, the variants interleaved
+(one of each per round, ``rounds`` rounds) and the medians compared, so that the
+load of a shared machine hits all alike. Parts:
+
+1. ``lu``: one LU plus one solve at a shift in the band, through the model's
+   solver (assembly, equilibration, factorization, solve with [F; 0], the
+   backward-error check) with the automatic backend and with SuperLU forced,
+   against ``scipy.sparse.linalg.splu`` (COLAMD, threshold 0.1) of the assembled
+   matrix plus its solve (assembly not timed): DSMS and TCOM at n1 = 2e5 (target:
+   auto / splu <= 1/3).
+2. ``scaling``: the same automatic LU + solve, and one IRKA iteration (r = 10),
+   at n1 = 2e4 and 2e5 on the DSMS, the two sizes interleaved: exponent
+   log(t2 / t1) / log(10) (target 1.10).
+3. ``grid3d``: a 3D elasticity-like model (27-point stencil, 3 displacements per
+   node, one face clamped by constraints; n1 = 3 n^3): LU + solve per backend, the
+   automatic choice against the best available and against SuperLU.
+4. ``parallel``: IRKA at n1 = 2e5 (DSMS, r = 10, fixed 3 iterations), solver_threads
+   2 against 1 (target t2 / t1 <= 1/1.6); and the LU + solve of 6 shifts alone on 2
+   threads against 1 (what the threads can gain without IRKA's serial dense work).
+5. ``agree``: converged IRKA ROMs (r = 10) from every backend against SuperLU's, max
+   relative transfer-function difference on 200 frequencies (target 1e-8).
+
+``quick``: n1 = 2e3 / 2e4, one round, small 3D grid; not judged. Writes
+``lu-backends.json`` (through :func:`morsuite.bench.run`); measurements quoted in
+``docs/design/backends.md``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ..utils import blas_threads
+from ..reducers.shift_solves import map_threads
+from . import benchmark
+
+__all__ = ["bench_lu_backends", "bench_lu_rule", "grid3d_elastic", "strip_model"]
+
+
+def grid3d_elastic(n: int):
+    """An elasticity-like 3D model: n^3 nodes, 3 coupled displacements each, 27-point stencil, x = 0 clamped.
+
+    K is the Kronecker sum of 1D stiffness/mass stencils with a full 3 x 3 coupling of
+    the displacements, M the matching mass pattern, D = 1e-3 M + 1e-3 K (Rayleigh);
+    the 3 n^2 displacements of the face x = 0 are held by G (one row each).
+    """
+    from ..models import Index3Model
+
+    T = sp.diags([-np.ones(n - 1), 2 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1])
+    Mm = sp.diags([np.ones(n - 1), 4 * np.ones(n), np.ones(n - 1)], [-1, 0, 1]) / 6
+    k3 = sp.kron(sp.kron(T, Mm), Mm) + sp.kron(sp.kron(Mm, T), Mm) + sp.kron(sp.kron(Mm, Mm), T)  # 27-point
+    m3 = sp.kron(sp.kron(Mm, Mm), Mm)
+    C = np.array([[2.0, 0.5, 0.5], [0.5, 2.0, 0.5], [0.5, 0.5, 2.0]])  # couples the 3 displacements
+    K = sp.kron(k3, C).tocsr()
+    M = sp.kron(m3, sp.identity(3)).tocsr()
+    n1 = K.shape[0]
+    face = np.flatnonzero((np.arange(n1) // 3) // (n * n) == 0)
+    G = sp.csr_matrix((np.ones(face.size), (np.arange(face.size), face)), shape=(face.size, n1))
+    rng = np.random.default_rng(0)
+    return Index3Model(M, 1e-3 * M + 1e-3 * K, K, G, rng.standard_normal((n1, 1)), rng.standard_normal((1, n1)),
+                       name=f"grid3d(n={n})", band=(1e-2, 1.0), check_constraints=False)
+
+
+def strip_model(w: int, n1: int = 40000, n2: int = 2):
+    """A 2D strip of width ``w`` (5-point stencil, n1 positions), n2 positions held by constraints.
+
+    Its RCM bandwidth is about 2 w: the family on which the rule of ``"auto"`` is
+    checked (``morsuite bench lu-rule``).
+    """
+    from ..models import Index3Model
+
+    length = n1 // w
+    T = lambda n: sp.diags([-np.ones(n - 1), 2 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1])  # noqa: E731
+    K = (sp.kron(T(length), sp.identity(w)) + sp.kron(sp.identity(length), T(w))
+         + 0.01 * sp.identity(length * w)).tocsr()
+    n = K.shape[0]
+    M = sp.identity(n, format="csr")
+    held = np.linspace(0, n - 1, n2).astype(int)
+    G = sp.csr_matrix((np.ones(n2), (np.arange(n2), held)), shape=(n2, n))
+    rng = np.random.default_rng(0)
+    return Index3Model(M, 0.01 * K + 0.01 * M, K, G, rng.standard_normal((n, 1)), rng.standard_normal((1, n)),
+                       name=f"strip(w={w}, n2={n2})", check_constraints=False)
+
+
+def _lu_solve_variants(fom, s, backends):
+    """Callables timing one LU + solve: splu of the assembled matrix, and the solver per backend."""
+    rhs = np.vstack([fom.F, np.zeros((fom.n2, fom.m))])
+    A = fom.new_solver(cache_size=0, backend="superlu").matrix(s)
+
+    def splu():
+        t0 = time.perf_counter()
+        spla.splu(A, permc_spec="COLAMD", diag_pivot_thresh=0.1).solve(rhs.astype(complex))
+        return time.perf_counter() - t0
+
+    out = {"splu": splu}
+    for b in backends:
+        solver = fom.new_solver(cache_size=0, backend=b)
+        solver.factor(s)  # the analysis and orderings: once per model, not timed
+
+        def run(solver=solver):
+            t0 = time.perf_counter()
+            solver.factor(s).solve(fom.F)
+            return time.perf_counter() - t0
+        out[b] = run
+    return out
+
+
+def _interleaved(variants: dict, rounds: int) -> dict:
+    """Median seconds per variant, the variants run one after the other in each round."""
+    times = {k: [] for k in variants}
+    for _ in range(rounds):
+        for k, f in variants.items():
+            times[k].append(f())
+    return {k: float(np.median(v)) for k, v in times.items()}
+
+
+def _irka_iteration(fom, r, threads, iters=3):
+    """Seconds per iteration of IRKA with a fixed number of iterations (tol 0: no early stop)."""
+    from .. import reducers
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        info = reducers.make("irka", fom, solver_threads=threads, maxit=iters, tol=1e-300,
+                             safeguard="off").reduce(r).info
+    return info["time_s"] / max(info["iterations"], 1), info
+
+
+@benchmark("lu-backends")
+def bench_lu_backends(quick: bool) -> dict:
+    """LU backends vs splu on DSMS/TCOM (n1 = 2e5), n1-scaling, a 3D grid, shift-parallel IRKA, ROM agreement."""
+    from .. import models, reducers
+
+    big, small, rounds, n3 = (20000, 2000, 1, 8) if quick else (200000, 20000, 5, 14)
+    rows, ratios = [], {}
+
+    def judge(name, value, target, what):
+        ratios[name] = {"value": value, "target": target, "pass": None if quick else bool(value <= target),
+                        "what": what}
+
+    with blas_threads(1):
+        # 1. one LU + solve against splu
+        for spec in (f"dsms:g={big}", f"tcom:nc={2 * round(big / 6)}"):
+            fom = models.parse(spec)
+            s = 1j * math.sqrt(fom.band[0] * fom.band[1])
+            med = _interleaved(_lu_solve_variants(fom, s, ("auto", "superlu")), rounds)
+            a = fom.lu_analysis()
+            rows.append({"part": "lu", "model": spec, "n1": fom.n1, "n2": fom.n2, "auto": a["backend"],
+                         **{f"t_{k}": v for k, v in med.items()}})
+            judge(f"lu {spec}: auto / splu", med["auto"] / med["splu"], 1 / 3,
+                  f"one LU + solve through the solver ({a['backend']}; assembly, scaling, check included) over "
+                  f"splu COLAMD + solve, median of {rounds} interleaved rounds")
+        # 2. growth with n1 (DSMS): both sizes in every round
+        foms = {g: models.parse(f"dsms:g={g}") for g in (small, big)}
+        lu_runs = {g: _lu_solve_variants(f, 1j * math.sqrt(f.band[0] * f.band[1]), ("auto",))["auto"]
+                   for g, f in foms.items()}
+        t_lu = _interleaved(lu_runs, rounds)
+        t_it = _interleaved({g: (lambda f=f: _irka_iteration(f, 10, 1)[0]) for g, f in foms.items()},
+                            max(1, rounds // 2))
+        for g, f in foms.items():
+            rows.append({"part": "scaling", "model": f"dsms:g={g}", "n1": f.n1, "t_lu_solve": t_lu[g],
+                         "t_irka_iteration": t_it[g]})
+        dec = math.log10(big / small)
+        judge("scaling: LU + solve exponent", math.log10(t_lu[big] / t_lu[small]) / dec, 1.10,
+              f"time per LU + solve (auto) from n1 = {small} to {big} on the DSMS, as n1^x, sizes interleaved")
+        judge("scaling: IRKA iteration exponent", math.log10(t_it[big] / t_it[small]) / dec, 1.10,
+              f"IRKA (r = 10) time per iteration from n1 = {small} to {big} on the DSMS, as n1^x, sizes interleaved")
+        # 3. a 3D elasticity-like grid
+        fom = grid3d_elastic(n3)
+        s = 0.1j
+        med = _interleaved(_lu_solve_variants(fom, s, ("superlu", "banded")), max(1, rounds // 2))
+        auto = fom.lu_analysis()["backend"]
+        best = min(med[b] for b in ("superlu", "banded"))
+        rows.append({"part": "grid3d", "model": fom.name, "n1": fom.n1, "n2": fom.n2, "auto": auto,
+                     "kl": fom.lu_analysis()["kl"], **{f"t_{k}": v for k, v in med.items()}})
+        judge(f"grid3d n1={fom.n1}: auto / best backend", med[auto] / best, 1.2,
+              "LU + solve of the automatic choice over the fastest backend available here")
+        judge(f"grid3d n1={fom.n1}: auto / superlu", med[auto] / med["superlu"], 0.5,
+              "LU + solve of the automatic choice over SuperLU (target: 2x faster)")
+    # 4. shift-parallel IRKA (BLAS single-threaded inside reduce), and its LUs + solves alone
+    fom = models.parse(f"dsms:g={big}")
+    med = _interleaved({1: lambda: _irka_iteration(fom, 10, 1)[0], 2: lambda: _irka_iteration(fom, 10, 2)[0]},
+                       max(1, rounds // 2))
+    solver = fom.new_solver(cache_size=0)
+    shifts = 1j * np.geomspace(fom.band[0], fom.band[1], 6) + 0.05
+
+    def lus(threads):
+        t0 = time.perf_counter()
+        map_threads(lambda a: solver.factor(a).solve(fom.F), list(shifts), threads)
+        return time.perf_counter() - t0
+    with blas_threads(1):
+        med_lu = _interleaved({1: lambda: lus(1), 2: lambda: lus(2)}, rounds)
+    rows.append({"part": "parallel", "model": f"dsms:g={big}", "t_serial": med[1], "t_threads2": med[2],
+                 "t_6lu_serial": med_lu[1], "t_6lu_threads2": med_lu[2]})
+    judge("parallel: IRKA iteration 2 threads / 1", med[2] / med[1], 1 / 1.6,
+          f"IRKA r = 10 per iteration on dsms(g={big}), solver_threads 2 over 1, interleaved medians")
+    judge("parallel: 6 LUs + solves 2 threads / 1", med_lu[2] / med_lu[1], 1 / 1.6,
+          "the same shifts' LU + solve on 2 threads over 1 (no IRKA dense work), interleaved medians")
+    # 5. converged ROMs of every backend against SuperLU's
+    for spec in (("dsms:g=600", "tcom:nc=200") if quick else ("dsms:g=6000", "tcom:nc=2000")):
+        omega = None
+        roms = {}
+        for b in ("superlu", "banded"):
+            fom = models.parse(spec)
+            fom.lu_backend = b
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                res = reducers.make("irka", fom).reduce(10)
+            roms[b] = (res.rom, res.info["converged"])
+            omega = np.logspace(np.log10(fom.band[0]), np.log10(fom.band[1]), 200)
+        Href = roms["superlu"][0].freqresp(omega)
+        diff = float(np.max(np.abs(roms["banded"][0].freqresp(omega) - Href)) / np.max(np.abs(Href)))
+        rows.append({"part": "agree", "model": spec, "converged": {b: v[1] for b, v in roms.items()},
+                     "rel_diff_banded": diff})
+        judge(f"agree {spec}: banded vs superlu ROM", diff, 1e-8,
+              "max |T_banded - T_superlu| / max |T_superlu| of the converged IRKA ROMs (r = 10), 200 frequencies")
+    return {"rows": rows, "ratios": ratios}
+
+
+@benchmark("lu-rule")
+def bench_lu_rule(quick: bool) -> dict:
+    """The rule of the automatic LU backend: banded against SuperLU on 2D strips of growing width and border."""
+    from ..linalg.backends import BAND_RULE
+
+    n1, rounds = (4000, 1) if quick else (40000, 3)
+    cases = [(w, 2) for w in (1, 2, 4, 8, 16, 24, 32, 48)] + [(1, n2) for n2 in (4, 8, 16, 32, 64)]
+    rows, agree = [], 0
+    with blas_threads(1):
+        for w, n2 in cases:
+            fom = strip_model(w, n1=n1, n2=n2)
+            a = fom.lu_analysis()
+            med = _interleaved(_lu_solve_variants(fom, 0.3j, ("superlu", "banded")), rounds)
+            faster = "banded" if med["banded"] < med["superlu"] else "superlu"
+            agree += faster == a["backend"]
+            rows.append({"w": w, "n2": n2, "kl_ku": a["kl"] + a["ku"], "auto": a["backend"], "faster": faster,
+                         "t_superlu": med["superlu"], "t_banded": med["banded"],
+                         "banded_over_superlu": med["banded"] / med["superlu"]})
+    share = agree / len(cases)
+    return {"rows": rows, "rule": dict(BAND_RULE),
+            "ratios": {"rule misses": {"value": 1 - share, "target": 0.25, "pass": None if quick else 1 - share <= 0.25,
+                                       "what": f"share of the {len(cases)} strips on which auto did not pick the "
+                                               f"faster backend (n1 = {n1}, medians of {rounds} interleaved rounds)"}}}

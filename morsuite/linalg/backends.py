@@ -1,0 +1,332 @@
+r"""Sparse LU backends of the saddle-point matrix: the pattern analysed once, a choice by rule.
+
+:class:`~morsuite.linalg.saddle.SaddlePointSolver` factors
+
+.. math::
+
+    S(s) = \begin{bmatrix} A_{11} & G^T \\ G & 0 \end{bmatrix}, \qquad A_{11} = s^2 M + s D + K,
+
+once per shift. Its sparsity pattern is that of the model, the same for every
+shift, so everything that depends only on it -- the ordering, the band
+structure, the backend itself -- is decided once per model by :func:`analyse`,
+deterministically and from the pattern alone (no timing, no values): a
+reduction's result never depends on what ran before on the same model object.
+
+Backends (``backend=`` of the solver; ``"auto"`` applies :func:`choose`):
+
+``"superlu"``
+    scipy's SuperLU with a COLAMD column ordering found once, at analysis, on the
+    pattern (a factorization of a matrix with the pattern's magnitudes) and applied as
+    a symmetric renumbering to every shift; row pivots per shift (threshold 0.1).
+    Always available; the fallback of the others.
+``"banded"``
+    Reverse Cuthill-McKee renumbering of the :math:`A_{11}` block (found once),
+    LAPACK's banded LU with partial pivoting (``?gbtrf``) of :math:`A_{11}`, and the
+    n2 constraint rows and columns as a border eliminated through the dense Schur
+    complement :math:`C = -G A_{11}^{-1} G^T` (its LU by ``?getrf``). Cost
+    :math:`O(n_1 k_l (k_l + k_u))` plus n2 banded solves, O(n1 (2k_l + k_u + 1)) memory;
+    scipy only. Forward solve: one banded solve and a product with the stored
+    :math:`A_{11}^{-1} G^T`; transposed solve: two banded solves.
+    Pivoting is confined to :math:`A_{11}`: where :math:`A_{11}` is (nearly)
+    singular and S is not, the solve's backward error check fails and the solver
+    refactors with SuperLU (``stats.refactorizations``).
+
+:func:`choose` takes ``"banded"`` when the RCM bandwidth of :math:`A_{11}` and n2
+are small (:data:`BAND_RULE`; the measurements behind it are in
+``docs/design/backends.md``), else ``"superlu"``. ``MORSUITE_LU_BACKEND`` in the
+environment overrides ``"auto"``.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.linalg.lapack as lapack
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+from ..errors import InputError, SingularShiftError
+
+__all__ = ["BACKENDS", "BAND_RULE", "BandedBorderLU", "analyse", "banded_structure", "choose",
+           "permuted_pattern", "resolve_backend", "superlu_ordering"]
+
+#: the backends a solver accepts (``"auto"``: :func:`choose`)
+BACKENDS = ("auto", "superlu", "banded")
+
+#: the structural rule of ``"auto"``: banded LU when the RCM half-bandwidths satisfy
+#: ``kl + ku <= max_band`` and ``n2 <= max_border`` (docs/design/backends.md, 2026-11-25)
+BAND_RULE = {"max_band": 64, "max_border": 8}
+
+
+def resolve_backend(backend: str) -> str:
+    """Validate a backend name; ``"auto"`` is replaced by ``MORSUITE_LU_BACKEND`` when that is set."""
+    if backend == "auto":
+        backend = os.environ.get("MORSUITE_LU_BACKEND", "auto") or "auto"
+    if backend not in BACKENDS:
+        raise InputError(f"backend must be one of {', '.join(map(repr, BACKENDS))}; got {backend!r}")
+    return backend
+
+
+def _a11_pattern(pattern) -> sp.csr_matrix:
+    """The symmetrised sparsity pattern of the (1,1) block (values 1)."""
+    n1 = pattern["shape"][0]
+    rows, cols = pattern["_rows"], pattern["_cols"]
+    keep = (rows < n1) & (cols < n1)
+    P = sp.csr_matrix((np.ones(int(keep.sum())), (rows[keep], cols[keep])), shape=(n1, n1))
+    return (P + P.T).tocsr()
+
+
+def _bandwidths(pattern, perm_c) -> tuple[int, int]:
+    """(kl, ku) of the (1,1) block renumbered by ``perm_c`` (old -> new)."""
+    n1 = pattern["shape"][0]
+    rows, cols = pattern["_rows"], pattern["_cols"]
+    keep = (rows < n1) & (cols < n1)
+    d = perm_c[rows[keep]] - perm_c[cols[keep]]
+    return (int(max(d.max(), 0)), int(max(-d.min(), 0))) if d.size else (0, 0)
+
+
+def choose(kl: int, ku: int, n2: int) -> tuple[str, str]:
+    """The backend of ``"auto"`` from the structure: (name, reason).
+
+    Banded when ``kl + ku <= BAND_RULE["max_band"]`` and ``n2 <= BAND_RULE["max_border"]``
+    (band and border narrow: the banded LU costs O(n1 (kl + ku)^2) and the border n2
+    banded solves), SuperLU otherwise. Decided from the pattern alone.
+    """
+    if kl + ku <= BAND_RULE["max_band"] and n2 <= BAND_RULE["max_border"]:
+        return "banded", f"RCM bandwidth kl + ku = {kl + ku} <= {BAND_RULE['max_band']} and n2 = {n2} " \
+                         f"<= {BAND_RULE['max_border']}"
+    return "superlu", f"RCM bandwidth kl + ku = {kl + ku} or n2 = {n2} above the banded rule {BAND_RULE}"
+
+
+def permuted_pattern(pattern, perm_c) -> dict:
+    """The pattern's entries renumbered symmetrically, ``Ae = A[q][:, q]`` with ``q = argsort(perm_c)``.
+
+    ``perm_c`` maps an old index to its new one. Returns a dict with ``q``, the
+    CSC structure ``_indices, _indptr`` of the renumbered matrix, the block values
+    ``_m, _d, _k, _g`` in that order and the old row and column indices
+    ``_rows, _cols`` of each entry (the scalings use them). Read-only arrays.
+    """
+    N = pattern["N"]
+    rows, cols = pattern["_rows"], pattern["_cols"]
+    q = np.argsort(perm_c)
+    new_row, new_col = perm_c[rows], perm_c[cols]
+    sel = np.lexsort((new_row, new_col))
+    counts = np.bincount(new_col, minlength=N)
+    perm = {"q": q, "_indices": new_row[sel].astype(np.int32),
+            "_indptr": np.concatenate([[0], np.cumsum(counts)]).astype(np.int32),
+            "_m": pattern["_m"][sel], "_d": pattern["_d"][sel], "_k": pattern["_k"][sel],
+            "_g": pattern["_g"][sel], "_rows": rows[sel], "_cols": cols[sel]}
+    for v in perm.values():
+        v.flags.writeable = False
+    return perm
+
+
+def superlu_ordering(pattern, permc_spec: str = "COLAMD") -> np.ndarray:
+    """SuperLU's column ordering (old -> new) of the pattern, from values alone of the pattern.
+
+    One real LU of the matrix whose entries are the magnitudes
+    :math:`|m| + |d| + |k| + |g|` (no cancellation, so the pattern is the model's):
+    SuperLU's orderings (COLAMD, MMD_*) and its elimination-tree postorder depend only
+    on the pattern, so the ordering is that of any shift -- but found the same way
+    whatever shift comes first.
+    """
+    data = np.abs(pattern["_m"]) + np.abs(pattern["_d"]) + np.abs(pattern["_k"]) + np.abs(pattern["_g"])
+    N = pattern["N"]
+    A = sp.csc_matrix((data, pattern["_indices"].copy(), pattern["_indptr"].copy()), shape=(N, N))
+    return np.asarray(spla.splu(A, permc_spec=permc_spec, diag_pivot_thresh=0.1).perm_c)
+
+
+def analyse(pattern, backend: str = "auto") -> dict:
+    """The structural analysis of a saddle pattern for ``backend``, done once and stored in ``pattern``.
+
+    Parameters
+    ----------
+    pattern : dict
+        ``SaddlePointSolver.pattern`` (shared by the solvers of one model).
+    backend : {"auto", "superlu", "banded"}
+        ``"auto"``: :func:`choose` from the RCM bandwidth of the (1,1) block and n2.
+
+    Returns
+    -------
+    dict
+        Plain data: ``backend`` (the one used), ``requested``, ``reason``, ``kl``, ``ku``
+        (RCM half-bandwidths of the (1,1) block), ``n1``, ``n2``, ``nnz``. The banded
+        renumbering is stored in ``pattern[("ordering", "banded")]``.
+
+    Notes
+    -----
+    Cost: one RCM ordering, O(nnz); deterministic (no values, no timing).
+    """
+    backend = resolve_backend(backend)
+    key = ("analysis", backend)
+    if key in pattern:
+        return pattern[key]
+    n1, n2 = pattern["shape"]
+    if ("rcm",) not in pattern:
+        rcm = np.asarray(reverse_cuthill_mckee(_a11_pattern(pattern), symmetric_mode=True), dtype=np.int64)
+        perm_c = np.empty(n1 + n2, dtype=np.int64)
+        perm_c[rcm] = np.arange(n1)
+        perm_c[n1:] = np.arange(n1, n1 + n2)
+        perm_c.flags.writeable = False
+        pattern[("rcm",)] = perm_c
+    perm_c = pattern[("rcm",)]
+    kl, ku = _bandwidths(pattern, perm_c)
+    if backend == "auto":
+        name, reason = choose(kl, ku, n2)
+    else:
+        name, reason = backend, "forced"
+    if name == "banded" and ("ordering", "banded") not in pattern:
+        perm = permuted_pattern(pattern, perm_c)
+        perm["banded"] = banded_structure(perm, int(n1), kl, ku)
+        pattern[("ordering", "banded")] = perm
+    info = {"backend": name, "requested": backend, "reason": reason, "kl": kl, "ku": ku,
+            "n1": int(n1), "n2": int(n2), "nnz": int(pattern["_indices"].size)}
+    pattern[key] = info
+    return info
+
+
+_GBTRS: dict = {}
+
+
+def _gbtrs_nogil(prefix: str):
+    """LAPACK's ``?gbtrs`` called through ctypes, which releases the GIL (SciPy's f2py wrapper
+    holds it: measured, docs/design/backends.md), or None where SciPy's Cython LAPACK is not there."""
+    if prefix not in _GBTRS:
+        try:
+            import scipy.linalg.cython_lapack as cl
+            cap = cl.__pyx_capi__[prefix + "gbtrs"]
+            name = ctypes.pythonapi.PyCapsule_GetName
+            name.restype, name.argtypes = ctypes.c_char_p, [ctypes.py_object]
+            get = ctypes.pythonapi.PyCapsule_GetPointer
+            get.restype, get.argtypes = ctypes.c_void_p, [ctypes.py_object, ctypes.c_char_p]
+            ip, vp = ctypes.POINTER(ctypes.c_int), ctypes.c_void_p
+            _GBTRS[prefix] = ctypes.CFUNCTYPE(None, ctypes.c_char_p, ip, ip, ip, ip, vp, ip, vp, vp, ip, ip)(
+                get(cap, name(cap)))
+        except (ImportError, KeyError, AttributeError, ValueError):
+            _GBTRS[prefix] = None
+    return _GBTRS[prefix]
+
+
+def banded_structure(perm: dict, n1: int, kl: int, ku: int) -> dict:
+    """Where each entry of a renumbered pattern (CSC order) goes in the banded LU's arrays, found once.
+
+    ``a11``: (entry numbers, flat positions in the (n1, 2 kl + ku + 1) transposed band
+    array); ``b12``: (entry numbers, flat positions in the dense (n1, n2) block);
+    ``b21`` and ``b12t``: (entry numbers in CSR order, indices, indptr) of the sparse
+    (n2, n1) blocks B21 and B12^T.
+    """
+    N = perm["_indptr"].size - 1
+    n2 = N - n1
+    rows = perm["_indices"].astype(np.int64)
+    cols = np.repeat(np.arange(N), np.diff(perm["_indptr"]))
+    ldab = 2 * kl + ku + 1
+    in11 = np.flatnonzero((rows < n1) & (cols < n1))
+    in12 = np.flatnonzero((rows < n1) & (cols >= n1))
+
+    def csr(sel, r, c, nrows):
+        order = np.lexsort((c, r))
+        return (sel[order], c[order].astype(np.int32),
+                np.concatenate([[0], np.cumsum(np.bincount(r, minlength=nrows))]).astype(np.int32))
+
+    in21 = np.flatnonzero((rows >= n1) & (cols < n1))
+    out = {"ldab": ldab,
+           "a11": (in11, cols[in11] * ldab + (kl + ku) + rows[in11] - cols[in11]),
+           "b12": (in12, rows[in12] * n2 + cols[in12] - n1),
+           "b21": csr(in21, rows[in21] - n1, cols[in21], n2),
+           "b12t": csr(in12, cols[in12] - n1, rows[in12], n2)}
+    return out
+
+
+class BandedBorderLU:
+    r"""LU of a bordered matrix ``[[A11, B12], [B21, 0]]`` (renumbered, equilibrated): banded plus Schur.
+
+    Made from the entries ``data`` of a renumbered pattern (:func:`permuted_pattern` of the
+    RCM ordering) placed by ``structure`` (:func:`banded_structure`):
+    :math:`A_{11} = P L U` by ``?gbtrf`` (band storage, ``kl`` sub- and ``ku``
+    super-diagonals), :math:`W = A_{11}^{-1} B_{12}` (n2 banded solves) and the LU of
+    the Schur complement :math:`C = -B_{21} W`. :meth:`solve` has the interface of
+    SuperLU's ``solve`` (``trans="N"`` or ``"T"``, a 2-D right-hand side).
+
+    Raises
+    ------
+    SingularShiftError
+        If :math:`A_{11}` or C is exactly singular (the caller then falls back to SuperLU).
+    """
+
+    def __init__(self, data, n1: int, n2: int, kl: int, ku: int, structure: dict):
+        self.n1, self.n2 = n1, n2
+        self.kl, self.ku = kl, ku
+        self.dtype = np.result_type(data.dtype, np.float64)
+        self.shape = (n1 + n2, n1 + n2)
+        ldab = structure["ldab"]
+        ab = np.zeros((n1, ldab), dtype=self.dtype)  # the transpose of LAPACK's (ldab, n1) band array
+        sel, pos = structure["a11"]
+        ab.ravel()[pos] = data[sel]
+        pfx = "z" if self.dtype == np.complex128 else "d"
+        self._gbtrs, self._gbtrs_c = getattr(lapack, pfx + "gbtrs"), _gbtrs_nogil(pfx)
+        lu, piv, info = getattr(lapack, pfx + "gbtrf")(ab.T, kl, ku, overwrite_ab=1)
+        if info > 0:
+            raise SingularShiftError(f"banded LU: the (1,1) block is exactly singular (pivot {info})")
+        self._lu, self._piv = lu, piv
+        self._piv1 = (piv + 1).astype(np.intc)  # LAPACK's 1-based pivots (SciPy's wrappers shift them)
+        if n2:
+            sel, ind, ptr = structure["b21"]
+            self.B21 = sp.csr_matrix((data[sel], ind, ptr), shape=(n2, n1))
+            sel, ind, ptr = structure["b12t"]
+            self.B12T = sp.csr_matrix((data[sel], ind, ptr), shape=(n2, n1))
+            sel, pos = structure["b12"]
+            B12 = np.zeros((n1, n2), dtype=self.dtype)
+            B12.ravel()[pos] = data[sel]
+            self.W = self._band(B12, False)
+            C = -(self.B21 @ self.W)
+            self._schur = sla.lu_factor(C, check_finite=False)
+            if not np.all(np.abs(np.diag(self._schur[0])) > 0):
+                raise SingularShiftError("banded LU: the Schur complement of the border is exactly singular")
+
+    def u_diagonal(self) -> np.ndarray:
+        """The pivots of U (banded part and Schur complement), for the pivot-ratio check."""
+        d = self._lu[self.kl + self.ku, :]
+        return np.concatenate([d, np.diag(self._schur[0])]) if self.n2 else d
+
+    def _band(self, b, trans: bool):
+        """A11^{-1} b (``trans``: A11^{-T} b), b overwritten where it already is a Fortran array of the LU's type."""
+        b = np.asarray(b, dtype=self.dtype, order="F")
+        f = self._gbtrs_c
+        if f is None:
+            x, info = self._gbtrs(self._lu, self.kl, self.ku, b, self._piv, trans=1 if trans else 0, overwrite_b=1)
+            return x
+        c = ctypes.c_int
+        info = c(0)
+        f(b"T" if trans else b"N", c(self.n1), c(self.kl), c(self.ku), c(b.shape[1]), self._lu.ctypes.data,
+          c(self._lu.shape[0]), self._piv1.ctypes.data, b.ctypes.data, c(max(b.shape[0], 1)), ctypes.byref(info))
+        return b
+
+    def solve(self, b, trans: str = "N"):
+        """Solve ``A x = b`` (``trans="N"``) or ``A^T x = b`` (``"T"``); b of shape (N, k) or (N,)."""
+        b = np.asarray(b)
+        vec = b.ndim == 1
+        b = b.reshape(b.shape[0], -1)
+        if np.iscomplexobj(b) and self.dtype != np.complex128:
+            x = self.solve(b.real, trans) + 1j * self.solve(b.imag, trans)
+            return x[:, 0] if vec else x
+        n1 = self.n1
+        b1, b2 = b[:n1], b[n1:]
+        if trans == "N":
+            y1 = self._band(np.array(b1, dtype=self.dtype, order="F"), False)
+            if self.n2:
+                x2 = sla.lu_solve(self._schur, b2 - self.B21 @ y1, check_finite=False)
+                x = np.vstack([y1 - self.W @ x2, x2])
+            else:
+                x = y1
+        else:
+            y1 = self._band(np.array(b1, dtype=self.dtype, order="F"), True)
+            if self.n2:
+                x2 = sla.lu_solve(self._schur, b2 - self.B12T @ y1, trans=1, check_finite=False)
+                x = np.vstack([self._band(b1 - self.B21.T @ x2, True), x2])
+            else:
+                x = y1
+        return x[:, 0] if vec else x

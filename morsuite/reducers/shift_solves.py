@@ -1,0 +1,157 @@
+r"""The solves of one IRKA iteration, one shift at a time or concurrently.
+
+The r shifts of an iteration give independent saddle-point problems: one LU of
+:math:`S(\alpha_i)` per real shift or conjugate pair, a solve with :math:`F b_i` and
+(two-sided) a transposed solve with :math:`L^T c_i`. :func:`raw_bases` forms the
+jobs, has the reducer's ``_map_shifts`` run them (in order, or concurrently), and
+makes the basis vectors in shift order, so the bases do not depend on how the
+solves were scheduled.
+
+Executors of :class:`~.irka.IRKA` (option ``executor``):
+
+``"threads"`` (default)
+    A thread pool of ``solver_threads`` workers (0: :func:`default_threads`, 2 on two
+    or more cores). SciPy's SuperLU and LAPACK's banded LU release the GIL while they
+    factor, the banded solves go through ctypes to release it too (measured:
+    ``docs/design/backends.md``).
+``"dask"``
+    The current ``distributed`` client (``distributed.get_client()``): the model's
+    solver is broadcast to the workers once per reduction and each job returns its
+    solutions and LU counters; for clusters, where each worker has its own cores.
+
+Each job is deterministic, so the reduced model is the same, to the bit, whatever
+the executor and thread count.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from ..errors import InputError, SingularShiftError
+from ..linalg.refine import SaddleOperator, refined_solve
+from .shift_update import COMPLEX_TOL
+
+__all__ = ["raw_bases", "default_threads", "map_threads", "map_dask", "remote_shift_solves"]
+
+
+def raw_bases(red, alpha, bdir, cdir, left: bool):
+    """The raw real bases (V, W) of the IRKA reducer ``red`` at shifts ``alpha`` (W None if not ``left``).
+
+    One job per real shift or conjugate pair (the partner with negative imaginary part
+    is skipped: its solution is the conjugate); ``red._map_shifts(red._shift_solves, jobs)``
+    solves them; complex solutions give their real and imaginary parts, in shift order.
+    """
+    _, _, _, F, L = red._system()
+    red._begin_bases()
+    jobs = []
+    for a, b, c in zip(alpha, bdir, cdir):
+        cplx = abs(a.imag) > COMPLEX_TOL * abs(a)
+        if cplx and a.imag < 0:
+            continue  # its conjugate partner's LU and solve give both columns
+        jobs.append((a if cplx else a.real, F @ (b if cplx else b.real),
+                     (L.T @ (c if cplx else c.real)) if left else None, a))
+    Vcols, Wcols = [], []
+    for (x, w), (af, _, _, a) in zip(red._map_shifts(shift_solves(red), jobs), jobs):
+        cplx = np.iscomplexobj(af)
+        v = red._basis_vector(x, a, False)  # in shift order: a variant may record values here
+        Vcols += [v.real, v.imag] if cplx else [np.real(v)]
+        if left:
+            w = red._basis_vector(w, a, True)
+            Wcols += [w.real, w.imag] if cplx else [np.real(w)]
+    return np.column_stack(Vcols), (np.column_stack(Wcols) if left else None)
+
+
+def shift_solves(red):
+    """The job function of ``red``: (factor shift, F b, L^T c or None, shift) -> (x, w)."""
+    def run(job):
+        af, rhs_v, rhs_w, a = job
+        lu = red._factor(af)
+        x = red._solve(lu, rhs_v, False, a)
+        w = None if rhs_w is None else red._solve(red._second(lu), rhs_w, True, a)
+        return x, w  # the LU is freed here (a dense LU of the projected baseline is n1 x n1)
+    return run
+
+
+def default_threads(backend: str) -> int:
+    """The automatic ``solver_threads``: 2 on two or more cores, else 1 (for either backend).
+
+    Measured on a quiet moment of this 2-core machine (docs/design/backends.md): six LUs of
+    dsms(2e5) or tcom(2e5) on 2 threads took 0.46-0.55 of the serial time with SuperLU and
+    0.48-0.64 with the banded LU (0.70-0.79 with their solves). BLAS runs single-threaded
+    inside a reduction (``reducers.base.BLAS_THREADS``), so the threads do not compete
+    with BLAS threads. More than 2 was not measured.
+    """
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cores = os.cpu_count() or 1
+    return 2 if cores >= 2 else 1
+
+
+def map_threads(fn, jobs, threads: int) -> list:
+    """``[fn(j) for j in jobs]`` on a pool of ``threads`` threads (serial for one thread or one job)."""
+    if threads <= 1 or len(jobs) <= 1:
+        return [fn(j) for j in jobs]
+    with ThreadPoolExecutor(max_workers=min(threads, len(jobs))) as pool:
+        return list(pool.map(fn, jobs))
+
+
+def remote_shift_solves(solver, job, steps: int, ext: bool, check_all: bool):
+    """One job on a Dask worker: (x, w, counters) with the worker's copy of the model's solver.
+
+    The same operations as the in-process job of :class:`~.irka.IRKA`: the LU at the
+    shift, the solve (refined ``steps`` times with an ``ext``-precision residual), the
+    transposed solve (checked when ``check_all``).
+    """
+    import copy
+    from collections import OrderedDict
+    from dataclasses import replace
+
+    from ..linalg.saddle_lu import SolverStats
+    af, rhs_v, rhs_w, a = job
+    # own counters and cache: a worker may run several jobs at once on its copy of the solver
+    solver = copy.copy(solver)
+    solver.stats, solver._cache = SolverStats(), OrderedDict()
+    try:
+        lu = solver.factor(af)
+    except SingularShiftError as exc:
+        exc.shift = a
+        raise
+    op = SaddleOperator(solver.pattern) if steps else None
+
+    def solve(f, rhs, trans):
+        return f.solve(rhs, trans=trans) if not steps else refined_solve(f, rhs, trans, a, op, steps=steps, ext=ext)
+    x = solve(lu, rhs_v, False)
+    w = None
+    if rhs_w is not None:
+        w = solve(lu if check_all or lu.matrix is None else replace(lu, matrix=None), rhs_w, True)
+    return x, w, solver.stats.as_dict()
+
+
+def map_dask(red, jobs, steps: int, ext: bool, check_all: bool) -> list:
+    """Run the jobs on the current ``distributed`` client; the counters are added to ``red``'s solver.
+
+    Raises
+    ------
+    InputError
+        If ``distributed`` is not installed or no client is running.
+    """
+    try:
+        from distributed import get_client
+        client = get_client()
+    except (ImportError, ValueError) as exc:
+        raise InputError("executor='dask' needs a running distributed.Client (e.g. on a LocalCluster)") from exc
+    key = id(client)
+    if getattr(red, "_dask_solver", (None, None))[0] != key:
+        red._dask_solver = (key, client.scatter(red._solver, broadcast=True))
+    futures = [client.submit(remote_shift_solves, red._dask_solver[1], job, steps, ext, check_all, pure=False)
+               for job in jobs]
+    out = []
+    for fut in futures:
+        x, w, counts = fut.result()
+        red._solver.stats.add(**counts)
+        out.append((x, w))
+    return out
