@@ -251,6 +251,7 @@ class IRKAFO(IRKA):
             data = shifts_from_poles(modal.poles.copy(), modal.B, modal.C.T, self.fom.band)[:3]
             tb = info["time_breakdown"]
             self._start.update({"states": int(bt.states), "lu_count": int(info["lu_count"]),
+                                "lu_count_gramians": int(info.get("lu_count_gramians", info["lu_count"])),
                                 "gramians_reused": bool(info["setup_reused"]),
                                 "time_s": time.perf_counter() - t0, "hsv": info["hsv"],
                                 "setup_cost": dict(info["setup_cost"]),
@@ -474,7 +475,17 @@ class IRKAFO(IRKA):
         self._iterates, self._capture, self._data = [], [], None
         self._chord, self._norm2, self._fallback_relaxation = None, None, 1.0
         self._has_start, self._start, self._surrogate = False, {}, None
-        return super()._reduce(r)
+        rom, info = super()._reduce(r)
+        # every LU this call paid: its own (iterations, certification round, safeguard scores) and the
+        # start's LR-ADI when this call computed the Gramian factors (its time includes them); the
+        # r-independent part, shared across r and with bt, in its own column
+        own = int(info["lu_count"])
+        paid = int(self._start.get("lu_count", 0))
+        info.update(lu_count=own + paid, lu_count_own=own, lu_count_start=paid,
+                    lu_count_shared=int(self._start.get("lu_count_gramians", 0)))
+        info["status"] = ("converged" if info["converged"] else "cap"
+                          if not info["engine_converged"] and not info.get("cycle_detected") else "stalled")
+        return rom, info
 
 
 def _sqrt(x):

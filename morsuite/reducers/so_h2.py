@@ -78,9 +78,13 @@ from ..errors import AccuracyWarning, ConvergenceWarning, InputError, OptionErro
 from ..linalg.gramians import ADI_DEFAULTS
 from ..linalg.h2 import norm_squared
 from ..linalg.h2_gradient import FullTarget, gauss_newton_diagonal, h2_objective, h2_value
+from ..linalg.h2_stationarity import full_stationarity
 from ..linalg.lbfgs import Evaluation, lbfgs_descent
+from ..utils import blas_threads
 from .base import Option, Reducer, register
+from .h2_decision import decision_h2
 from .so_h2_params import PARAMETRISATIONS
+from .so_h2_siso import pole_phase
 from .so_h2_starts import LEVELS, STARTS, Surrogates, candidate_roms, standard_realization
 
 __all__ = ["SOH2"]
@@ -101,8 +105,16 @@ class SOH2(Reducer):
                         "of them (second-order BT level or the paper's IRKA)", choices=("best",) + STARTS),
         "levels": Option(LEVELS, "any", "second-order BT levels among the candidates of start='best' (a "
                          "tuple of pp, pv, vp, vv, fv; each level costs one SVD of a product of the factors)"),
-        "irka_start": Option(True, "bool", "include the paper's IRKA among the candidates of start='best' "
+        "irka_start": Option(False, "bool", "include the paper's IRKA among the candidates of start='best' "
                              "(its LUs are counted)"),
+        "descent": Option("auto", "choice", "varpro: pole-residue variable projection and Newton (SISO, "
+                          "general parametrization); lbfgs: L-BFGS in the parametrization's entries; auto: "
+                          "varpro where it applies", choices=("auto", "varpro", "lbfgs")),
+        "gtol": Option(1e-4, "float", "converged when the relative gradient ||Pi E|| / ||E|| against the full "
+                       "model is at most this", low=0, high=1, open_low=True, open_high=True),
+        "starts": Option(5, "int", "varpro: candidates (best by surrogate error first) descended from", low=1),
+        "newton_maxit": Option(200, "int", "varpro: Newton iterations per start against the surrogate", low=1),
+        "chord_maxit": Option(5, "int", "varpro: chord steps against the full model (r LUs each)", low=0),
         "parametrization": Option("general", "choice", "general K, D, F, L with steps leaving the stable set "
                                   "rejected, or passive: K diagonal positive, D = L_D L_D^T (stable by "
                                   "construction; starts from the fv level)", choices=tuple(PARAMETRISATIONS)),
@@ -125,8 +137,8 @@ class SOH2(Reducer):
                                "diagonal or the identity", choices=("gauss-newton", "none")),
         "precond_every": Option(200, "int", "iterations between refreshes of the Gauss-Newton diagonal "
                                 "(0: never)", low=0),
-        "resolution": Option(0.25, "float", "the descent is skipped when the exact error's floor exceeds this "
-                             "fraction of J at the start", low=0, high=1, open_low=True),
+        "resolution": Option(0.25, "float", "the descent is skipped when the floor of the start's exact H2 "
+                             "error exceeds this fraction of it", low=0, high=1, open_low=True),
         "tol": Option(ADI_DEFAULTS["tol"], "float", "LR-ADI tolerance of the Gramian factors (as bt)",
                       low=0, high=1, open_low=True, open_high=True),
         "maxiter": Option(ADI_DEFAULTS["maxiter"], "int", "LR-ADI iteration cap (as bt)", low=1),
@@ -155,6 +167,9 @@ class SOH2(Reducer):
         if o["parametrization"] == "passive" and o["start"] not in ("best", "fv"):
             raise InputError(f"parametrization='passive' starts from the fv level only (symmetric M, D, K); "
                              f"got start={o['start']!r}")
+        if o["descent"] == "varpro" and (self.fom.m != 1 or self.fom.p != 1 or o["parametrization"] != "general"):
+            raise InputError(f"descent='varpro' needs a SISO model and parametrization='general'; got m = "
+                             f"{self.fom.m}, p = {self.fom.p}, parametrization={o['parametrization']!r}")
 
     # -- pieces ---------------------------------------------------------------
     def _labels(self):
@@ -211,7 +226,8 @@ class SOH2(Reducer):
     def _start(self, r, adi, param_cls):
         """Candidates, surrogate, and the start: its label, ROM and exact evaluation (module docstring)."""
         o, fom = self.options, self.fom
-        roms, cands, bt = candidate_roms(fom, r, self._labels(), adi, keep=param_cls.accepts)
+        roms, cands, bt = candidate_roms(fom, r, self._labels(), adi, keep=param_cls.accepts,
+                                         bt=None if self._surrogates is None else self._surrogates.bt)
         if not roms:
             raise InputError(f"so-h2: no stable candidate start at r = {r} "
                              "(" + ", ".join(f"{k}: {v.get('dropped')}" for k, v in cands.items()) + ")")
@@ -232,24 +248,22 @@ class SOH2(Reducer):
         exact = {}
 
         def evaluate(label):
-            rom = roms[label]
-            p = param_cls(rom.order, fom.m, fom.p)
-            exact[label] = ev = h2_objective(full, *p.matrices(p.from_rom(rom)))
-            cands[label]["h2_error"] = float(np.sqrt(max(ev.value, 0.0)))
-            cands[label]["h2_error_floor"] = float(np.sqrt(ev.floor))
+            exact[label] = e, floor, trusted = decision_h2(fom, roms[label], full=full)
+            cands[label].update(h2_error=e, h2_error_floor=floor, h2_error_trusted=trusted)
 
         for label in roms:
             if cands[label]["surrogate_h2_error"] <= band:
                 evaluate(label)
-        start = min(exact, key=lambda k: exact[k].value)
-        resolved = exact[start].floor <= o["resolution"] * abs(exact[start].value)
+        start = min(exact, key=lambda k: exact[k][0])
+        resolved = exact[start][1] <= o["resolution"] * exact[start][0]
         if not resolved:
             # every error is below what the formula resolves (errors near sqrt(eps) ||T||): the ranking is
             # rounding, so take the first of the preference order, the paper's level first
             start = next(k for k in PREFERENCE if k in roms)
             if start not in exact:
                 evaluate(start)
-        return start, roms[start], exact[start], resolved, cands, sur, srec, bt._gram
+        order = sorted(roms, key=lambda k: cands[k]["surrogate_h2_error"])
+        return start, roms, order, exact[start], resolved, cands, sur, srec, bt._gram
 
     def _phases(self, r, param, theta0, ev0, sur, srec, roms_for_refinement):
         """Surrogate phase, exact check (refining the surrogate if needed), full phase; returns
@@ -290,65 +304,90 @@ class SOH2(Reducer):
         rec["evaluations"] += cnt["evaluations"]
         return res.x, res.best, rec
 
+    def _descent(self):
+        o, fom = self.options, self.fom
+        if o["descent"] != "auto":
+            return o["descent"]
+        return "varpro" if (fom.m == 1 and fom.p == 1 and o["parametrization"] == "general") else "lbfgs"
+
     def _reduce(self, r):
-        o = self.options
+        o, fom = self.options, self.fom
         adi = {k: o[k] for k in ADI_OPTIONS}
         t0 = time.perf_counter()
         param_cls = PARAMETRISATIONS[o["parametrization"]]
         lu0 = self._full.lu_count if self._full is not None else 0
-        start, start_rom, ev0, resolved, cands, sur, srec, gram = self._start(r, adi, param_cls)
+        start, roms, order, (e0, f0, _), resolved, cands, sur, srec, gram = self._start(r, adi, param_cls)
+        start_rom = roms[start]
         adi_fresh = bool(gram.get("adi_computed"))
         t_ranked = time.perf_counter()
-        param = param_cls(start_rom.order, self.fom.m, self.fom.p)
+        param = param_cls(start_rom.order, fom.m, fom.p)
         theta0 = param.from_rom(start_rom)
-        skipped = None
-        if ev0.floor > o["resolution"] * ev0.value:
-            skipped = (f"the start's exact H2 error {np.sqrt(max(ev0.value, 0.0)):.3e} is below the resolution "
-                       f"of the objective (floor of J {ev0.floor:.1e} > {o['resolution']:g} J): returned unchanged")
-            theta = theta0
-            cur = Evaluation(ev0.value, ev0.floor, param.gradient(theta0, ev0.gradient), ev0)
-            rec = {"iterations_surrogate": 0, "iterations_full": 0, "evaluations": 0, "refinements": 0,
-                   "history": [], "history_full": [], "stop_reason": "skipped", "stop_reason_full": "skipped",
-                   "precond": None, "surrogate": srec}
+        descent = self._descent()
+        rec = {"iterations_surrogate": 0, "iterations_full": 0, "evaluations": 0, "refinements": 0,
+               "history": [], "history_full": [], "stop_reason": None, "stop_reason_full": None, "surrogate": srec}
+        theta, skipped, gnorm = theta0, None, None
+        if not resolved:
+            skipped = (f"the start's exact H2 error {e0:.3e} is below the resolution of the objective (its "
+                       f"floor {f0:.1e} > {o['resolution']:g} of it): returned unchanged")
+            rec.update(stop_reason="skipped", stop_reason_full="skipped")
+        elif descent == "varpro":
+            with blas_threads(1):
+                kdfl, prec = pole_phase(roms, order, sur, self._full, gtol=o["gtol"], maxit=o["newton_maxit"],
+                                        chord_maxit=o["chord_maxit"], starts=o["starts"])
+            rec.update(prec)
+            if kdfl is not None:
+                theta = np.concatenate([np.asarray(X, dtype=float).ravel() for X in kdfl])
         else:
-            theta, cur, rec = self._phases(r, param, theta0, ev0, sur, srec, {start: start_rom})
+            ev0 = h2_objective(self._full, *param.matrices(theta0))
+            theta, cur, prec = self._phases(r, param, theta0, ev0, sur, srec, {start: start_rom})
+            prec.pop("precond", None)
+            rec.update(prec)
+            gnorm = float(np.linalg.norm(cur.gradient))
         t_desc = time.perf_counter()
-        h = rec.pop("precond")
-        if h is None:
-            h = self._precond(param, theta)
-        g = cur.gradient
-        failed = rec["stop_reason_full"] == "surrogate result not better than the start in exact error"
+        rom = param.rom(theta)
+        returned_start = theta is theta0
+        if skipped:
+            e, floor, st = e0, f0, {"rho": None, "value": e0 ** 2, "lu_count": 0}
+        else:
+            st = full_stationarity(self._full, *standard_realization(rom))
+            e, floor, _ = decision_h2(fom, rom, tracked=(st["value"], st["floor"]))
+            if not returned_start and e > e0 + floor + f0:
+                # never worse than the start (at the decision's accuracy)
+                rec["stop_reason_full"] = f"result ({e:.6e}) worse than the start ({e0:.6e}): start returned"
+                theta, rom, returned_start = theta0, param.rom(theta0), True
+                st = full_stationarity(self._full, *standard_realization(rom))
+                e, floor, _ = decision_h2(fom, rom, tracked=(st["value"], st["floor"]))
+        rho = st["rho"]
+        converged = bool(not skipped and rho is not None and rho <= o["gtol"])
+        reasons = (rec.get("stop_reason"), rec.get("stop_reason_full"))
+        status = ("skipped" if skipped else "converged" if converged
+                  else "cap" if any(x in ("cap", "maxit") for x in reasons) else "stalled")
         lu_exact = self._full.lu_count - lu0
         lu_irka = cands.get("irka", {}).get("lu_count", 0)
         lu_gram = int(gram["c"].lu_count) if adi_fresh else 0
         info = {
-            "start": start, "start_ranking_resolved": bool(resolved),
-            "start_h2_error": float(np.sqrt(max(ev0.value, 0.0))), "candidates": cands,
-            "parametrization": param.name, "variables": param.size, "h2_norm": float(np.sqrt(self._full.norm2)),
-            "h2_error": float(np.sqrt(max(cur.value, 0.0))), "h2_error_floor": float(np.sqrt(cur.floor)),
-            **rec, "skipped": skipped,
+            "start": start, "start_ranking_resolved": bool(resolved), "start_h2_error": e0,
+            "start_h2_error_floor": f0, "candidates": cands, "descent": descent, "parametrization": param.name,
+            "variables": param.size, "h2_norm": float(np.sqrt(self._full.norm2)),
+            "h2_error": float(e), "h2_error_floor": float(floor), **rec, "skipped": skipped,
+            "returned_start": bool(returned_start),
             "iterations": rec["iterations_surrogate"] + rec["iterations_full"],
-            "converged": bool(skipped or (not failed and rec["stop_reason"] != "maxit")),
-            "gradient_norm": float(np.linalg.norm(g)),
-            "gradient_norm_scaled": float((g @ (h * g)) / (2.0 * max(cur.value, 1e-300))),
-            "max_pole_real": float(cur.data.details["max_pole_real"]),
+            "converged": converged, "status": status, "relative_gradient": rho, "gtol": o["gtol"],
+            "gradient_norm": gnorm, "max_pole_real": float(np.max(rom.poles().real)),
             "lu_count": lu_gram + lu_irka + lu_exact,
             "lu_breakdown": {"gramians": lu_gram, "irka": lu_irka, "exact": lu_exact},
             "lu_count_gramians": int(gram["c"].lu_count),
             "time_breakdown": {"adi": gram["times"]["adi"] if adi_fresh else 0.0,
-                               "starts_and_ranking": t_ranked - t0, "descent": t_desc - t_ranked},
+                               "starts_and_ranking": t_ranked - t0, "descent": t_desc - t_ranked,
+                               "certificate": time.perf_counter() - t_desc},
             "setup_reused": not adi_fresh, "setup_cost": {"adi": gram["times"]["adi"]},
         }
         if skipped:
             self.warn(f"so-h2: {skipped}", AccuracyWarning)
-        elif failed:
-            self.warn(f"so-h2 at r = {r}: the surrogate phase's result is not better than the start in exact H2 "
-                      f"error after {rec['refinements']} surrogate refinements; the start ({start}, H2 error "
-                      f"{info['start_h2_error']:.4e}) is returned", ConvergenceWarning)
-        elif rec["stop_reason"] == "maxit":
-            self.warn(f"so-h2 at r = {r}: the surrogate phase stopped at maxit = {o['maxit']} (H2 error "
-                      f"{info['h2_error']:.4e}, start {info['start_h2_error']:.4e})", ConvergenceWarning)
-        return param.rom(theta), info
-
+        elif not converged:
+            self.warn(f"so-h2 at r = {r} did not converge ({status}): relative gradient {rho:.2e} > gtol = "
+                      f"{o['gtol']:g} against the full model (H2 error {e:.4e}, start {start} {e0:.4e})",
+                      ConvergenceWarning)
+        return rom, info
 
 register("so-h2", SOH2)
