@@ -252,9 +252,8 @@ class IRKAFO(IRKA):
             tb = info["time_breakdown"]
             self._start.update({"states": int(bt.states), "lu_count": int(info["lu_count"]),
                                 "lu_count_gramians": int(info.get("lu_count_gramians", info["lu_count"])),
-                                "gramians_reused": bool(info["setup_reused"]),
-                                "time_s": time.perf_counter() - t0, "hsv": info["hsv"],
-                                "setup_cost": dict(info["setup_cost"]),
+                                "gramians_reused": bool(info["setup_reused"]), "time_s": time.perf_counter() - t0,
+                                "hsv": info["hsv"], "setup_cost": dict(info["setup_cost"]),
                                 "setup_paid": {k: float(tb.get(k, 0.0)) for k in info["setup_cost"]},
                                 "warnings": [str(w.message) for w in caught]})
             self._iterates.append({"iteration": 0, "rom": bt, "modal": modal, "data": None, "next": data})
@@ -476,15 +475,11 @@ class IRKAFO(IRKA):
         self._chord, self._norm2, self._fallback_relaxation = None, None, 1.0
         self._has_start, self._start, self._surrogate = False, {}, None
         rom, info = super()._reduce(r)
-        # every LU this call paid: its own (iterations, certification round, safeguard scores) and the
-        # start's LR-ADI when this call computed the Gramian factors (its time includes them); the
-        # r-independent part, shared across r and with bt, in its own column
-        own = int(info["lu_count"])
-        paid = int(self._start.get("lu_count", 0))
+        own, paid = int(info["lu_count"]), int(self._start.get("lu_count", 0))  # the start's LR-ADI if paid now
         info.update(lu_count=own + paid, lu_count_own=own, lu_count_start=paid,
                     lu_count_shared=int(self._start.get("lu_count_gramians", 0)))
-        info["status"] = ("converged" if info["converged"] else "cap"
-                          if not info["engine_converged"] and not info.get("cycle_detected") else "stalled")
+        info["status"] = ("converged" if info["converged"] else "stalled"
+                          if info["engine_converged"] or info.get("cycle_detected") else "cap")
         return rom, info
 
 

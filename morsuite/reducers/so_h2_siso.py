@@ -24,8 +24,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
-from ..linalg.h2_poles import (Coordinates, FullValues, ModalValues, chord_step, evaluate, pole_descent,
-                               second_order_of)
+from ..linalg.h2_poles import Coordinates, FullValues, ModalValues, chord_step, evaluate, second_order_of
+from ..linalg.h2_poles_descent import pole_descent
 from .so_h2_starts import standard_realization
 
 __all__ = ["pole_phase"]
