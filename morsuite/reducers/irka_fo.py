@@ -94,6 +94,7 @@ from ..errors import ConvergenceWarning, InputError, SingularShiftError
 from ..linalg.h2 import modal_form, norm_squared, pole_residue_squared
 from ..rom import FirstOrderROM
 from .base import Option, make, register
+from .h2_decision import decision_h2
 from .irka import IRKA
 from .irka_surrogate import ModalSurrogate, SurrogateMap, fixed_point_jacobian, iterate, newton_fixed_point
 from .shift_update import COMPLEX_TOL, shifts_from_poles
@@ -404,10 +405,8 @@ class IRKAFO(IRKA):
     def _outcome(self, r, best, history, it, converged, cycled, *, times, perturbed, switched):
         """Certify the last iterate (one round of solves at its mirrored poles), return the
         iterate of smallest exact H2 error, and say whether it is a certified fixed point."""
-        o = self.options
-        iters = [x for x in self._iterates if x["iteration"] > 0]
+        o, iters, lu0 = self.options, [x for x in self._iterates if x["iteration"] > 0], self._lu_count()
         last = iters[-1] if iters else None
-        lu0 = self._lu_count()
         if converged and last is not None and "certificate" not in last:
             try:
                 self._bases(*last["next"], o["projection"] == "petrov")
@@ -423,11 +422,12 @@ class IRKAFO(IRKA):
             # at 40 states they scatter by 20% around the quadrature's value)
             pick = last
         elif scored:
-            m = min(scored, key=lambda x: x["h2_squared"])
-            # ties go to the later iterate (a converged last one): within the values' rounding floors, and
-            # within H2_TIE relative, below which the solves' own errors (not in the floors) decide
-            pick = max((x for x in scored if x["h2_squared"] <= m["h2_squared"] * (1.0 + 2.0 * H2_TIE)
-                        + m["h2_floor_squared"] + x["h2_floor_squared"]), key=lambda x: x["iteration"])
+            # decision_h2 per iterate; ties (within the floors, or H2_TIE relative) go to the later iterate
+            d = {id(x): decision_h2(self.fom, x["rom"], tracked=(x["h2_squared"], x["h2_floor_squared"]))
+                 for x in scored}
+            m = min(d.values())
+            pick = max((x for x in scored if d[id(x)][0] <= m[0] * (1.0 + H2_TIE) + m[1] + d[id(x)][1]),
+                       key=lambda x: x["iteration"])
             if converged and last is not None and last not in scored:
                 pick = last  # the certification round failed: keep the engine's fixed point
         else:
@@ -493,8 +493,7 @@ def _same(a, b) -> bool:
 
 def _rel(x, y) -> float:
     x, y = np.atleast_1d(x), np.atleast_1d(y)
-    den = max(np.linalg.norm(x), np.finfo(float).tiny)
-    return float(np.linalg.norm(x - y) / den)
+    return float(np.linalg.norm(x - y) / max(np.linalg.norm(x), np.finfo(float).tiny))
 
 
 register("irka-fo", IRKAFO)

@@ -4,67 +4,48 @@ Minimises :math:`J = \|T - T_r\|_{\mathcal H_2}^2` over second-order reduced mod
 :math:`T_r(s) = \hat L(s^2\hat M + s\hat D + \hat K)^{-1}\hat F` with
 :math:`\hat M = I` (no loss, :mod:`.so_h2_params`), in the spirit of the structured
 H2 literature (Mlinarić, Benner and Gugercin, arXiv 2209.00714 and 2401.10047;
-Sato, arXiv 1803.04097; Schwerdtner and Voigt's SOBMOR, arXiv 2011.07567, for the
-parametrisation). The gradient is Wilson's for the first-order realization,
-carried to :math:`(\hat K, \hat D, \hat F, \hat L)` by the chain rule
-(:mod:`morsuite.linalg.h2_gradient`).
+Sato, arXiv 1803.04097; Schwerdtner and Voigt's SOBMOR, arXiv 2011.07567).
 
-1. **Start**: the best, by exact H2 error, of the second-order BT levels
-   pp, pv, vp, vv, fv and the paper's IRKA at the same r (option ``start``;
-   :mod:`.so_h2_starts`).
-2. **Surrogate phase**: the descent against a first-order BT model :math:`T_N`
-   of the cached Gramian factors whose distance to the model is at most
-   ``surrogate_tol`` times the start's error: dense evaluations,
-   :math:`O(N(2r)^2)` each, no LU; its value without the cancellation of the
-   three-term formula. Monotone L-BFGS (:mod:`morsuite.linalg.lbfgs`) with the
-   inverse Gauss-Newton diagonal as initial Hessian (the variables' scales differ
-   by orders of magnitude where reduced poles are near the axis), refreshed every
-   ``precond_every`` iterations.
-3. **Full phase**: the exact error of the result (one LU per real pole or
-   conjugate pair: r LUs), and up to ``full_maxit`` monotone iterations against
-   the model itself, its gradient from the solves at the mirrored poles, warm
-   started with the surrogate phase's curvature pairs. If the surrogate's result
-   is not better than the start in exact error, the surrogate is refined (twice
-   as many states) and the surrogate phase repeated from the start, at most
-   ``refinements`` times.
+1. **Candidates**: the second-order BT levels ``levels`` (and the paper's IRKA with
+   ``irka_start``) at the same r (:mod:`.so_h2_starts`), ranked against a surrogate
+   :math:`T_N` (first-order BT of the cached Gramian factors, at most ``surrogate_tol``
+   times the best candidate's error from the model); those the surrogate cannot separate
+   get an exact error (:func:`.h2_decision.decision_h2`, r LUs each).
+2. **Descent** (``descent``). ``"varpro"`` (SISO, ``parametrization="general"``; the
+   default there): a second-order model of order r is a first-order one of degree 2r whose
+   residues sum to zero (:mod:`morsuite.linalg.h2_poles`); from the ``starts`` candidates,
+   variable projection (the residues by one linear solve) and trust-region Newton over the
+   poles against :math:`T_N` (:mod:`morsuite.linalg.h2_poles_descent`), then chord steps on
+   the full model's gradient (r LUs each, at most ``chord_maxit``) (:mod:`.so_h2_siso`).
+   ``"lbfgs"`` (the default otherwise): monotone preconditioned L-BFGS in the entries of
+   :math:`\hat K, \hat D, \hat F, \hat L` against :math:`T_N`, then at most ``full_maxit``
+   iterations against the model (:mod:`morsuite.linalg.lbfgs`).
+3. **Certificate**: the relative gradient
+   :math:`\rho = \|\Pi E\|_{\mathcal H_2}/\|E\|_{\mathcal H_2}` of the result against the
+   full model (:math:`\Pi`: projection onto the tangent space of the reduced models;
+   :mod:`morsuite.linalg.h2_stationarity`, r LUs). ``converged`` is
+   :math:`\rho \le` ``gtol``; ``info["status"]`` is ``"converged"``, ``"cap"`` (an iteration
+   limit was reached first), ``"stalled"`` (no further decrease at the objective's accuracy,
+   or the result was worse than the start, which is then returned) or ``"skipped"`` (the
+   start's exact error is below what the formula resolves: its floor above ``resolution``
+   of it; the start is returned with an :class:`~morsuite.errors.AccuracyWarning`).
+   Anything but ``"converged"`` comes with ``converged=False`` and a warning.
 
-The result is never worse than the start in exact H2 error: the start is returned
-otherwise. Every iterate is stable: ``parametrization="general"`` rejects steps
-that leave the stable set (the objective is infinite there),
-``"passive"`` (:math:`\hat K`, :math:`\hat D` symmetric positive definite) is
-stable by construction but can only start from ``fv``.
+The result is never worse than the start in exact H2 error (:func:`.h2_decision.decision_h2`).
 
-When the start's exact error is below what the three-term formula resolves
-(its floor above ``resolution`` times :math:`J`: errors near
-:math:`\sqrt{\varepsilon}\,\|T\|`, as on the DSMS at r = 20), the start is returned
-unchanged, with an :class:`~morsuite.errors.AccuracyWarning` and ``info["skipped"]``.
-
-``info``: ``start`` (label), ``start_h2_error``, ``candidates`` (per label: order,
-stability, surrogate and exact errors, LUs), ``h2_error`` (exact, of the result),
-``h2_error_surrogate`` (against the surrogate), ``h2_norm``, ``surrogate``
-(states, estimated distance, eigenvector condition), ``iterations``
-(``iterations_surrogate`` + ``iterations_full``), ``evaluations``,
-``gradient_norm`` (of :math:`J` in the parameters, exact, at the result) and
-``gradient_norm_scaled`` (:math:`g^Thg/(2J)`, the relative decrease that a Newton step
-with the Gauss-Newton diagonal :math:`h^{-1}` predicts), ``stop_reason`` and
-``stop_reason_full``, ``history`` and ``history_full`` (:math:`\sqrt J` after each
-accepted step against the surrogate and against the model), ``lu_count`` (made by
-this call) with ``lu_breakdown`` (gramians, irka, exact) and ``lu_count_gramians``
-(the ADI LUs of second-order BT, for comparison), ``time_breakdown``,
+``info``: ``start``, ``start_h2_error`` (+ ``_floor``), ``candidates``, ``descent``,
+``h2_error`` (exact, of the result) and ``h2_error_floor``, ``relative_gradient`` and ``gtol``,
+``status``, ``returned_start``, ``iterations`` (``iterations_surrogate`` + ``iterations_full``),
+``history`` and ``history_full``, ``stop_reason`` and ``stop_reason_full``; varpro: ``starts``
+(per start: surrogate errors, iterations, reason), ``descended_from``,
+``relative_gradient_full``; lbfgs: ``gradient_norm``; ``lu_count`` (made by this call) with
+``lu_breakdown`` (gramians, irka, exact) and ``lu_count_gramians``, ``time_breakdown``,
 ``setup_reused``, ``setup_cost``.
 
-Options (:attr:`SOH2.OPTIONS`, defaults): ``start="best"``, ``levels`` (all five),
-``irka_start=True``, ``parametrization="general"``, ``surrogate_tol=0.01``,
-``surrogate_states=None``, ``maxit=3000``, ``full_maxit=3``, ``full_backtracks=3``,
-``refinements=2``, ``rtol=1e-6``, ``window=20``, ``memory=100``,
-``precondition="gauss-newton"``, ``precond_every=200``, ``resolution=0.25``, and the
-LR-ADI options of ``bt``.
-
-Cost: the Gramian factors (shared with ``bt`` through the model's cache), one SVD per
-BT level, the paper's IRKA when it is a candidate (its LUs), r LUs per exact
-evaluation (the candidates that the surrogate cannot separate, the surrogate phase's
-result, at most ``1 + full_maxit * full_backtracks`` in the full phase), and
-:math:`O(N(2r)^2 + r^3)` dense work per surrogate evaluation (``maxit`` at most).
+Options: :attr:`SOH2.OPTIONS` (defaults recorded in ``info["options"]``). Cost: the Gramian
+factors (shared with ``bt`` through the model's cache), one dense SVD per BT level and one for
+the surrogate, r LUs per exact evaluation, dense :math:`O(r^3 + rN)` work per Newton trial (varpro)
+or :math:`O(N(2r)^2)` per L-BFGS evaluation, r LUs per chord step and for the certificate.
 Measurements: ``docs/design/so_h2.md``.
 """
 
@@ -89,6 +70,9 @@ from .so_h2_starts import LEVELS, STARTS, Surrogates, candidate_roms, standard_r
 
 __all__ = ["SOH2"]
 
+#: levels among the default candidates: each costs one dense SVD of a product of the factors (5 s on
+#: tcom(2000)); pv was never the best start, vp only on tcom(200) (docs/design/so_h2.md)
+DEFAULT_LEVELS = ("pp", "vv", "fv")
 ADI_OPTIONS = ("tol", "maxiter", "shifts", "num_shifts", "selection", "refine")
 #: start chosen when no candidate's exact error is resolved: the paper's level first
 PREFERENCE = ("vv", "pp", "vp", "pv", "fv", "irka")
@@ -103,7 +87,7 @@ class SOH2(Reducer):
     OPTIONS = {
         "start": Option("best", "choice", "start model: the best by exact H2 error of the candidates, or one "
                         "of them (second-order BT level or the paper's IRKA)", choices=("best",) + STARTS),
-        "levels": Option(LEVELS, "any", "second-order BT levels among the candidates of start='best' (a "
+        "levels": Option(DEFAULT_LEVELS, "any", "second-order BT levels among the candidates of start='best' (a "
                          "tuple of pp, pv, vp, vv, fv; each level costs one SVD of a product of the factors)"),
         "irka_start": Option(False, "bool", "include the paper's IRKA among the candidates of start='best' "
                              "(its LUs are counted)"),
@@ -113,7 +97,7 @@ class SOH2(Reducer):
         "gtol": Option(1e-4, "float", "converged when the relative gradient ||Pi E|| / ||E|| against the full "
                        "model is at most this", low=0, high=1, open_low=True, open_high=True),
         "starts": Option(5, "int", "varpro: candidates (best by surrogate error first) descended from", low=1),
-        "newton_maxit": Option(200, "int", "varpro: Newton iterations per start against the surrogate", low=1),
+        "newton_maxit": Option(300, "int", "varpro: Newton iterations per start against the surrogate", low=1),
         "chord_maxit": Option(5, "int", "varpro: chord steps against the full model (r LUs each)", low=0),
         "parametrization": Option("general", "choice", "general K, D, F, L with steps leaving the stable set "
                                   "rejected, or passive: K diagonal positive, D = L_D L_D^T (stable by "
