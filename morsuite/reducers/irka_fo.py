@@ -74,10 +74,10 @@ iterate is the stable one of smallest exact H2 error (ties within the values' ac
 or within ``H2_TIE`` relative, go to the later one), with ``converged=False`` and a
 :class:`~morsuite.errors.ConvergenceWarning`.
 
-Options: :attr:`IRKAFO.OPTIONS` (those of ``irka`` plus the ones above). Cost: the
-Gramian factors once per model (the start; ``info["start"]``), then one sparse LU per
-real shift or conjugate pair per full-model iteration (``info["lu_count"]``) plus the
-certification round; the surrogate's work is dense, :math:`O(Nr^2)` per iteration and
+Options: :attr:`IRKAFO.OPTIONS` (those of ``irka`` plus the ones above). Cost: the Gramian
+factors once per model (the start; ``info["lu_count_shared"]``, in ``lu_count`` when paid by this call),
+one sparse LU per real shift or conjugate pair per full-model iteration plus the certification round
+(``info["lu_count_own"]``); ``info["status"]``: converged, cap or stalled. Surrogate: :math:`O(Nr^2)` per step,
 :math:`O(N r^2 \cdot r(m+p))` per Newton step. Design notes and measurements:
 ``docs/design/irka_fo.md``.
 """
