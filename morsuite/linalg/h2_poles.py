@@ -182,11 +182,14 @@ def _bc(co, x):
 class FullValues:
     r"""The index-3 model as target: :math:`T(\sigma) = Lx`, :math:`T'(\sigma) = -w^T(2\sigma M + D)x` from
     the saddle-point solves :math:`P(\sigma)x = F`, :math:`P(\sigma)^Tw = L^T` (one LU per real point or
-    conjugate pair, through the :class:`~morsuite.linalg.h2_gradient.FullTarget`'s solver)."""
+    conjugate pair, through the :class:`~morsuite.linalg.h2_gradient.FullTarget`'s solver), refined
+    ``refine`` times in long double."""
 
-    def __init__(self, full):
+    def __init__(self, full, refine: int = 2):
+        from .h2_stationarity import saddle_solver_refined
         self.full = full
         self.norm2, self.norm2_floor = full.norm2, full.norm2_floor
+        self._solves = saddle_solver_refined(full, refine)
 
     @property
     def lu_count(self):
@@ -202,9 +205,7 @@ class FullValues:
         for k in range(s.size):
             if done[k]:
                 continue
-            lu = self.full.solver.factor(s[k])
-            x = lu.solve(sysm.F[:, 0]).reshape(-1)
-            w = lu.solve(sysm.L[0], trans=True).reshape(-1)
+            x, w = self._solves(s[k], sysm.F[:, 0], sysm.L[0])
             t0[k] = sysm.L[0] @ x
             t1[k] = -(w @ (2.0 * s[k] * (sysm.M @ x) + sysm.D @ x))
             done[k] = True

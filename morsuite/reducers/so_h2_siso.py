@@ -70,7 +70,7 @@ def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
         runs[label] = {"surrogate_h2_error_start": hist[0], "surrogate_h2_error": float(np.sqrt(max(score[label], 0))),
                        "iterations": its, "reason": reason, "relative_gradient": ev.rho, "real_poles": co.nr,
                        "structure_changes": changes}
-    if best is not None and best[4] == "cap" and maxit > probe:
+    if best is not None and best[4] != "converged" and maxit > probe:
         label, co, ev, its, reason, hist, changes = best
         co, ev, its2, reason, hist2, ch2 = pole_descent(co, ev.x, tv, maxit=maxit - probe, gtol=1e-3 * gtol)
         best = (label, co, ev, its + its2, reason, hist + hist2[1:], changes + ch2)
@@ -94,12 +94,15 @@ def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
         if steps >= chord_maxit:
             why = "cap"
             break
-        xn = chord_step(co, evf, ev.H)
-        if xn is None:
-            xn = chord_step(co, evf, ev.H, mu=1e-6)
-        trial = None if xn is None else evaluate(co, xn, fv, hessian=False)
+        trial = None
+        for mu in (0.0, 1e-4, 1e-2, 1.0):     # damped when the surrogate's Hessian misleads (r LUs each)
+            xn = chord_step(co, evf, ev.H, mu=mu)
+            trial = None if xn is None else evaluate(co, xn, fv, hessian=False)
+            if trial is not None and trial.value <= evf.value + 2.0 * max(evf.floor, trial.floor):
+                break
+            trial = None
         steps += 1
-        if trial is None or (trial.value > evf.value + 2.0 * max(evf.floor, trial.floor) and trial.rho >= evf.rho):
+        if trial is None:
             why = "stalled"
             break
         evf = trial
