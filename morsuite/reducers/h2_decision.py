@@ -3,11 +3,10 @@ r"""The H2 value on which ``so-h2`` and ``irka-fo`` decide: one function, so tha
 
 :func:`decision_h2` returns :math:`\|T - T_r\|_{\mathcal H_2}`, an absolute bound of its error and
 whether the value is resolved (its floor below ``RESOLVED`` of the value). Today it evaluates the
-three-term formula from one saddle-point solve per real pole or conjugate pair of the reduced model
-(:func:`~morsuite.linalg.h2_gradient.h2_value` against a
-:class:`~morsuite.linalg.h2_gradient.FullTarget`), or takes a value the caller already tracked
-from the same solves (irka-fo's iterates); it is the single place to route through a certified
-evaluator.
+pole-residue formula from one saddle-point solve per real pole or conjugate pair of the reduced model,
+refined in long double (:func:`~morsuite.linalg.h2_stationarity.full_stationarity`), or takes a value
+the caller already tracked from such solves (irka-fo's iterates: unrefined); it is the single place
+to route through a certified evaluator.
 """
 
 from __future__ import annotations
@@ -15,7 +14,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..linalg.h2 import norm_squared
-from ..linalg.h2_gradient import FullTarget, h2_value
+from ..linalg.h2_gradient import FullTarget
+from ..linalg.h2_stationarity import full_stationarity
 
 __all__ = ["decision_h2", "RESOLVED"]
 
@@ -58,10 +58,11 @@ def decision_h2(fom, rom, *, full=None, tracked=None):
         if full is None:
             n2, f2, _, _ = norm_squared(fom, {})
             full = FullTarget(fom, n2, f2)
-        ev = h2_value(full, *_first_order(rom))
-        if not ev.stable:
+        A, B, C = _first_order(rom)
+        if not np.all(np.linalg.eigvals(A).real < 0):
             return np.inf, 0.0, False
-        J, f = ev.value, ev.floor
+        st = full_stationarity(full, A, B, C)
+        J, f = st["value"], st["floor"]
     else:
         J, f = tracked
     e = float(np.sqrt(max(J, 0.0)))
