@@ -134,16 +134,18 @@ def varpro_descent(co: Coordinates, x, target, *, maxit: int = 300, gtol: float 
     return ev, it, reason, hist
 
 
-#: a conjugate pair with Im/|lambda| below this, or two real poles closer than this relative to their
-#: size, are near the boundary of the coordinates: the descent changes the split and restarts
+#: a conjugate pair with Im(lambda) / abs(lambda) below this, or two real poles closer than this
+#: relative to their size, are near the boundary of the coordinates: the descent changes the split
+#: and restarts
 SPLIT_TOL = 1e-3
 
 
 def restructure(co: Coordinates, x):
     r"""New coordinates after the descent stalled at the boundary of the current ones: the pair nearest
-    the real axis (Im/|lambda| < ``SPLIT_TOL``) becomes two real poles :math:`a(1 \pm 10^{-2})`, or the two
-    closest real poles (relative distance < ``SPLIT_TOL``) become the pair :math:`a(1 \pm 10^{-2}i)`; the
-    residues are re-optimised by the caller. Returns ``(Coordinates, x)`` or None when neither applies."""
+    the real axis (:math:`\mathrm{Im}\,\lambda/|\lambda|` below ``SPLIT_TOL``) becomes two real poles
+    :math:`a(1 \pm 10^{-2})`, or the two closest real poles (relative distance below ``SPLIT_TOL``)
+    become the pair :math:`a(1 \pm 10^{-2}i)`; the residues are re-optimised by the caller. Returns
+    ``(Coordinates, x)`` or None when neither applies."""
     lam, phi = co.split(x)
     nr, nc = co.nr, co.nc
     lr, pr = lam[:nr].real, phi[:nr].real

@@ -9,7 +9,7 @@ whose residues sum to zero, and back (:mod:`morsuite.linalg.h2_poles`): the desc
    projection against the surrogate :math:`T_N` (the residues that minimise J for the poles, one
    linear solve; trust-region Newton over the poles with the exact Hessian's Schur complement),
    to a surrogate relative gradient of ``1e-3 * gtol``, for ``probe`` iterations each; the best by
-   surrogate error continues up to ``maxit``.
+   surrogate error continues up to ``maxit``, and the second if the first does not converge.
 2. Chord steps against the full model: its gradient (one LU per pole pair) with the surrogate's
    Hessian, until the full model's relative gradient is at most ``gtol`` or ``chord_maxit`` steps.
    They converge at the rate of the surrogate's error relative to the model's error.
@@ -31,7 +31,7 @@ from .so_h2_starts import standard_realization
 __all__ = ["pole_phase"]
 
 
-def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, probe=30):
+def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, probe=30, finalists=2):
     """Run steps 1 to 3 of the module docstring.
 
     Parameters
@@ -41,6 +41,8 @@ def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
     sur : ModalTarget (the surrogate); full : FullTarget
     gtol, maxit, chord_maxit, starts : the options of so-h2
     probe : iterations every start gets before the best (by surrogate error) gets the rest of ``maxit``
+    finalists : starts continued, best first, until one reaches stationarity on the surrogate; the
+        result is the best converged one, or the best of all if none converged
 
     Returns
     -------
@@ -61,21 +63,28 @@ def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
             runs[label] = {"failed": f"{type(exc).__name__}: {exc}"}
             continue
         alive.append((label, res))
-    # successive halving: every start gets ``probe`` iterations, the best by surrogate error the rest
+    # successive halving: every start gets ``probe`` iterations; then, best by surrogate error first, up to
+    # ``finalists`` of them continue to ``maxit`` until one reaches the surrogate's stationarity
     score = {label: tv.precise(res[0], res[1].x)[0] for label, res in alive}
-    best = None
+    results = {}
     for label, (co, ev, its, reason, hist, changes) in alive:
-        if best is None or score[label] < score[best[0]]:
-            best = (label, co, ev, its, reason, hist, changes)
+        results[label] = (label, co, ev, its, reason, hist, changes)
         runs[label] = {"surrogate_h2_error_start": hist[0], "surrogate_h2_error": float(np.sqrt(max(score[label], 0))),
                        "iterations": its, "reason": reason, "relative_gradient": ev.rho, "real_poles": co.nr,
                        "structure_changes": changes}
-    if best is not None and best[4] != "converged" and maxit > probe:
-        label, co, ev, its, reason, hist, changes = best
-        co, ev, its2, reason, hist2, ch2 = pole_descent(co, ev.x, tv, maxit=maxit - probe, gtol=1e-3 * gtol)
-        best = (label, co, ev, its + its2, reason, hist + hist2[1:], changes + ch2)
-        runs[label].update(iterations=its + its2, reason=reason, relative_gradient=ev.rho,
-                           surrogate_h2_error=hist[-1] if not hist2 else hist2[-1], structure_changes=changes + ch2)
+    for label in sorted(results, key=score.get)[:finalists]:
+        _, co, ev, its, reason, hist, changes = results[label]
+        if reason != "converged" and maxit > probe:
+            co, ev, its2, reason, hist2, ch2 = pole_descent(co, ev.x, tv, maxit=maxit - probe, gtol=1e-3 * gtol)
+            results[label] = (label, co, ev, its + its2, reason, hist + hist2[1:], changes + ch2)
+            score[label] = tv.precise(co, ev.x)[0]
+            runs[label].update(iterations=its + its2, reason=reason, relative_gradient=ev.rho,
+                               surrogate_h2_error=float(np.sqrt(max(score[label], 0))),
+                               structure_changes=changes + ch2)
+        if reason == "converged":
+            break
+    done = [k for k in results if results[k][4] == "converged"]
+    best = results[min(done or results, key=score.get)] if results else None
     rec = {"starts": runs, "iterations_surrogate": sum(v.get("iterations", 0) for v in runs.values()),
            "history": [], "history_full": [], "iterations_full": 0, "stop_reason": "no start",
            "stop_reason_full": None, "relative_gradient_full": None, "descended_from": None}
