@@ -1,5 +1,5 @@
-r"""The H2 error of a SISO reduced model in pole-residue coordinates: value, gradient, Hessian,
-a trust-region Newton descent, and the relative gradient that certifies a stationary point.
+r"""The H2 error of a SISO reduced model in pole-residue coordinates: value, gradient, Hessian, the
+residues that minimise it for given poles, the relative gradient, and the way back to second order.
 
 A second-order reduced model :math:`T_r(s) = \hat L(s^2I + s\hat D + \hat K)^{-1}\hat F` of order r
 is a first-order model of McMillan degree 2r with :math:`C_rB_r = 0`; conversely a generic SISO
@@ -8,7 +8,8 @@ second-order realizations (:func:`second_order_of`: pick rows :math:`U` with :ma
 :math:`Ub = 0` and :math:`[U; UA]` invertible; :math:`x_1 = Ux`, :math:`x_2 = UAx`). Both sets have
 dimension :math:`4r - 1`, so the second-order H2 problem is the first-order one under the linear
 constraint :math:`\sum_k\varphi_k = 0`, in coordinates with no redundancy (the :math:`2r^2 + 2r`
-entries of :math:`\hat K, \hat D, \hat F, \hat L` have :math:`(r-1)^2 + r^2`... redundant directions).
+entries of :math:`\hat K, \hat D, \hat F, \hat L` have :math:`2r^2 - 2r + 1` directions that leave
+:math:`T_r` unchanged). The descent is in :mod:`.h2_poles_descent`.
 
 With :math:`E = T - T_r` and the holomorphic extension over all 2r poles,
 
@@ -34,9 +35,8 @@ the largest residue by the others.
 
 **Relative gradient** (:func:`relative_gradient`): :math:`\rho = (g^TG^{-1}g/(2J))^{1/2}
 = \|\Pi E\|/\|E\|` with :math:`\Pi` the H2-orthogonal projection onto the tangent space of the
-reduced models at :math:`T_r`: the sine... the cosine of the angle between the error and that
-tangent space, in :math:`[0, 1]`, invariant under reparametrisation; 0 exactly at a stationary
-point. Against a surrogate :math:`T_N`, the full model's :math:`\rho` differs by at most
+reduced models at :math:`T_r`: the cosine of the angle between the error and that tangent space,
+in :math:`[0, 1]`, invariant under reparametrisation; 0 exactly at a stationary point. Against a surrogate :math:`T_N`, the full model's :math:`\rho` differs by at most
 :math:`\|T - T_N\|/\|E\|` (Cauchy-Schwarz).
 
 Cost: :math:`O(nN)` for the target's values at the :math:`n = 2r` mirrored poles (a modal target
