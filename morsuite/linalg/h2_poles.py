@@ -36,7 +36,8 @@ the largest residue by the others.
 **Relative gradient** (:func:`relative_gradient`): :math:`\rho = (g^TG^{-1}g/(2J))^{1/2}
 = \|\Pi E\|/\|E\|` with :math:`\Pi` the H2-orthogonal projection onto the tangent space of the
 reduced models at :math:`T_r`: the cosine of the angle between the error and that tangent space,
-in :math:`[0, 1]`, invariant under reparametrisation; 0 exactly at a stationary point. Against a surrogate :math:`T_N`, the full model's :math:`\rho` differs by at most
+in :math:`[0, 1]`, invariant under reparametrisation; 0 exactly at a stationary point. Against a
+surrogate :math:`T_N`, the full model's :math:`\rho` differs by at most
 :math:`\|T - T_N\|/\|E\|` (Cauchy-Schwarz).
 
 Cost: :math:`O(nN)` for the target's values at the :math:`n = 2r` mirrored poles (a modal target
