@@ -74,10 +74,10 @@ iterate is the stable one of smallest exact H2 error (ties within the values' ac
 or within ``H2_TIE`` relative, go to the later one), with ``converged=False`` and a
 :class:`~morsuite.errors.ConvergenceWarning`.
 
-Options: :attr:`IRKAFO.OPTIONS` (those of ``irka`` plus the ones above). Cost: the
-Gramian factors once per model (the start; ``info["start"]``), then one sparse LU per
-real shift or conjugate pair per full-model iteration (``info["lu_count"]``) plus the
-certification round; the surrogate's work is dense, :math:`O(Nr^2)` per iteration and
+Options: :attr:`IRKAFO.OPTIONS` (those of ``irka`` plus the ones above). Cost: the Gramian
+factors once per model (the start; ``info["lu_count_shared"]``, in ``lu_count`` when paid by this call),
+one sparse LU per real shift or conjugate pair per full-model iteration plus the certification round
+(``info["lu_count_own"]``); ``info["status"]``: converged, cap or stalled. Surrogate: :math:`O(Nr^2)` per step,
 :math:`O(N r^2 \cdot r(m+p))` per Newton step. Design notes and measurements:
 ``docs/design/irka_fo.md``.
 """
@@ -94,6 +94,7 @@ from ..errors import ConvergenceWarning, InputError, SingularShiftError
 from ..linalg.h2 import modal_form, norm_squared, pole_residue_squared
 from ..rom import FirstOrderROM
 from .base import Option, make, register
+from .h2_decision import decision_h2
 from .irka import IRKA
 from .irka_surrogate import ModalSurrogate, SurrogateMap, fixed_point_jacobian, iterate, newton_fixed_point
 from .shift_update import COMPLEX_TOL, shifts_from_poles
@@ -251,9 +252,9 @@ class IRKAFO(IRKA):
             data = shifts_from_poles(modal.poles.copy(), modal.B, modal.C.T, self.fom.band)[:3]
             tb = info["time_breakdown"]
             self._start.update({"states": int(bt.states), "lu_count": int(info["lu_count"]),
-                                "gramians_reused": bool(info["setup_reused"]),
-                                "time_s": time.perf_counter() - t0, "hsv": info["hsv"],
-                                "setup_cost": dict(info["setup_cost"]),
+                                "lu_count_gramians": int(info.get("lu_count_gramians", info["lu_count"])),
+                                "gramians_reused": bool(info["setup_reused"]), "time_s": time.perf_counter() - t0,
+                                "hsv": info["hsv"], "setup_cost": dict(info["setup_cost"]),
                                 "setup_paid": {k: float(tb.get(k, 0.0)) for k in info["setup_cost"]},
                                 "warnings": [str(w.message) for w in caught]})
             self._iterates.append({"iteration": 0, "rom": bt, "modal": modal, "data": None, "next": data})
@@ -404,10 +405,8 @@ class IRKAFO(IRKA):
     def _outcome(self, r, best, history, it, converged, cycled, *, times, perturbed, switched):
         """Certify the last iterate (one round of solves at its mirrored poles), return the
         iterate of smallest exact H2 error, and say whether it is a certified fixed point."""
-        o = self.options
-        iters = [x for x in self._iterates if x["iteration"] > 0]
+        o, iters, lu0 = self.options, [x for x in self._iterates if x["iteration"] > 0], self._lu_count()
         last = iters[-1] if iters else None
-        lu0 = self._lu_count()
         if converged and last is not None and "certificate" not in last:
             try:
                 self._bases(*last["next"], o["projection"] == "petrov")
@@ -423,11 +422,12 @@ class IRKAFO(IRKA):
             # at 40 states they scatter by 20% around the quadrature's value)
             pick = last
         elif scored:
-            m = min(scored, key=lambda x: x["h2_squared"])
-            # ties go to the later iterate (a converged last one): within the values' rounding floors, and
-            # within H2_TIE relative, below which the solves' own errors (not in the floors) decide
-            pick = max((x for x in scored if x["h2_squared"] <= m["h2_squared"] * (1.0 + 2.0 * H2_TIE)
-                        + m["h2_floor_squared"] + x["h2_floor_squared"]), key=lambda x: x["iteration"])
+            # decision_h2 per iterate; ties (within the floors, or H2_TIE relative) go to the later iterate
+            d = {id(x): decision_h2(self.fom, x["rom"], tracked=(x["h2_squared"], x["h2_floor_squared"]))
+                 for x in scored}
+            m = min(d.values())
+            pick = max((x for x in scored if d[id(x)][0] <= m[0] * (1.0 + H2_TIE) + m[1] + d[id(x)][1]),
+                       key=lambda x: x["iteration"])
             if converged and last is not None and last not in scored:
                 pick = last  # the certification round failed: keep the engine's fixed point
         else:
@@ -474,7 +474,13 @@ class IRKAFO(IRKA):
         self._iterates, self._capture, self._data = [], [], None
         self._chord, self._norm2, self._fallback_relaxation = None, None, 1.0
         self._has_start, self._start, self._surrogate = False, {}, None
-        return super()._reduce(r)
+        rom, info = super()._reduce(r)
+        own, paid = int(info["lu_count"]), int(self._start.get("lu_count", 0))  # the start's LR-ADI if paid now
+        info.update(lu_count=own + paid, lu_count_own=own, lu_count_start=paid,
+                    lu_count_shared=int(self._start.get("lu_count_gramians", 0)))
+        info["status"] = ("converged" if info["converged"] else "stalled"
+                          if info["engine_converged"] or info.get("cycle_detected") else "cap")
+        return rom, info
 
 
 def _sqrt(x):
@@ -487,8 +493,7 @@ def _same(a, b) -> bool:
 
 def _rel(x, y) -> float:
     x, y = np.atleast_1d(x), np.atleast_1d(y)
-    den = max(np.linalg.norm(x), np.finfo(float).tiny)
-    return float(np.linalg.norm(x - y) / den)
+    return float(np.linalg.norm(x - y) / max(np.linalg.norm(x), np.finfo(float).tiny))
 
 
 register("irka-fo", IRKAFO)

@@ -41,7 +41,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from ..linalg.dense import shift_distance
-from ..linalg.h2 import modal_form, pole_residue_squared
+from ..linalg.h2 import Modal, modal_form, pole_residue_squared
 from ..rom import FirstOrderROM
 from .shift_update import COMPLEX_TOL, relaxed_update, shifts_from_poles
 
@@ -85,6 +85,18 @@ class ModalSurrogate:
         return e2
 
 
+def _modal_standard(A, B, C, D) -> Modal:
+    """:func:`~morsuite.linalg.h2.modal_form` of (I, A, B, C, D) by the standard eigenproblem."""
+    lam, X = np.linalg.eig(A)
+    Xn = X / np.linalg.norm(X, axis=0)
+    with np.errstate(all="ignore"):
+        kappa = float(np.linalg.cond(Xn))
+    if not np.isfinite(kappa):
+        return Modal(lam, C @ Xn, np.full((lam.size, B.shape[1]), np.nan, dtype=complex), np.asarray(D, float),
+                     np.inf)
+    return Modal(lam, C @ Xn, np.linalg.solve(Xn, B), np.asarray(D, dtype=float), kappa)
+
+
 def _real_basis(alpha):
     """Q with V Q = [.., v_i, .., Re v_j, Im v_j, ..]: a real shift's column kept, a conjugate
     pair's two columns (j, j') mapped to their real and imaginary parts."""
@@ -92,6 +104,9 @@ def _real_basis(alpha):
     Q = np.zeros((k, k), dtype=complex)
     cplx = np.abs(alpha.imag) > COMPLEX_TOL * np.abs(alpha)
     done = np.zeros(k, bool)
+    where = {}
+    for t, a in enumerate(alpha.tolist()):
+        where.setdefault(complex(a), []).append(t)
     for i in range(k):
         if done[i]:
             continue
@@ -99,8 +114,10 @@ def _real_basis(alpha):
             Q[i, i] = 1.0
             done[i] = True
             continue
-        cand = np.flatnonzero(~done & cplx & (np.arange(k) != i))
-        j = cand[np.argmin(np.abs(alpha[cand] - np.conj(alpha[i])))]
+        j = next((t for t in where.get(complex(np.conj(alpha[i])), ()) if not done[t] and t != i), None)
+        if j is None:  # no exact conjugate: the nearest one
+            cand = np.flatnonzero(~done & cplx & (np.arange(k) != i))
+            j = cand[np.argmin(np.abs(alpha[cand] - np.conj(alpha[i])))]
         Q[i, i], Q[j, i] = 0.5, 0.5
         Q[i, j], Q[j, j] = -0.5j, 0.5j
         done[[i, j]] = True
@@ -239,7 +256,10 @@ class SurrogateMap:
             # more shifts than the surrogate's numerical order (the DSMS beyond about 20 states): the
             # full model's iteration caps the order; the surrogate's is not meant to
             raise ArithmeticError(f"the surrogate's interpolant at {alpha.size} shifts has a singular E")
-        modal = modal_form(rom.E, rom.A, rom.B, rom.C, rom.D)
+        # E is well conditioned here (checked above): the standard eigenproblem of E^-1 A, a third of QZ's cost
+        EiAB = np.linalg.solve(rom.E, np.hstack([rom.A, rom.B]))
+        k = rom.A.shape[0]
+        modal = _modal_standard(EiAB[:, :k], EiAB[:, k:], rom.C, rom.D)
         lam = modal.poles
         ok = np.isfinite(modal.kappa) and np.all(lam.real < 0)
         e2 = self.s.error_squared(modal) if ok else np.inf

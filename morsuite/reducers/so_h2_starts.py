@@ -42,16 +42,17 @@ def standard_realization(rom):
     return second_order_realization(solve(rom.M, rom.K), solve(rom.M, rom.D), solve(rom.M, rom.F), rom.L)
 
 
-def candidate_roms(fom, r, labels, adi, keep=None):
+def candidate_roms(fom, r, labels, adi, keep=None, bt=None):
     """The reduced models of the candidate starts ``labels`` at order r.
 
     Returns ``(roms, records, bt)``: label -> SecondOrderROM for the stable ones
     accepted by ``keep`` (a predicate on the ROM), label -> record (order, stable,
     lu_count, time_s, why dropped) for all, and the first-order ``bt`` reducer
-    whose Gramian factors the levels used (the surrogate's source).
+    whose Gramian factors the levels used (the surrogate's source). Passing the ``bt``
+    of an earlier call reuses its factor products and level SVDs (a sweep over r).
     """
     roms, recs = {}, {}
-    bt = make("bt", fom, gramian_cache="model", **adi)
+    bt = bt if bt is not None else make("bt", fom, gramian_cache="model", **adi)
     for label in labels:
         t0 = time.perf_counter()
         with warnings.catch_warnings(record=True) as caught:

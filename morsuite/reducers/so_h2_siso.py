@@ -1,0 +1,124 @@
+r"""The pole-residue phase of ``so-h2`` for SISO models: variable projection and Newton, then chord steps.
+
+A second-order SISO reduced model of order r is, generically, a first-order model of degree 2r
+whose residues sum to zero, and back (:mod:`morsuite.linalg.h2_poles`): the descent runs in those
+4r - 1 coordinates, with no redundancy, where the second-order entries have about
+:math:`(r - 1)^2` redundant directions that make every first-order method crawl.
+
+1. From each of the ``starts`` best candidates (by their error against the surrogate): variable
+   projection against the surrogate :math:`T_N` (the residues that minimise J for the poles, one
+   linear solve; trust-region Newton over the poles with the exact Hessian's Schur complement),
+   to a surrogate relative gradient of ``1e-3 * gtol``, for ``probe`` iterations each; the best by
+   surrogate error continues up to ``maxit``, and the second if the first does not converge.
+2. Chord steps against the full model: its gradient (one LU per pole pair) with the surrogate's
+   Hessian, until the full model's relative gradient is at most ``gtol`` or ``chord_maxit`` steps.
+   They converge at the rate of the surrogate's error relative to the model's error.
+3. The second-order realization of the result (:func:`~morsuite.linalg.h2_poles.second_order_of`).
+
+Cost: dense, :math:`O(r^3 + rN)` per Newton iteration and start; r LUs per chord step.
+Measurements: ``docs/design/so_h2.md``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import InputError
+from ..linalg.h2_poles import Coordinates, FullValues, ModalValues, chord_step, evaluate, second_order_of
+from ..linalg.h2_poles_descent import pole_descent
+from .so_h2_starts import standard_realization
+
+__all__ = ["pole_phase"]
+
+
+def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, probe=30, finalists=2):
+    """Run steps 1 to 3 of the module docstring.
+
+    Parameters
+    ----------
+    roms : dict label -> SecondOrderROM (the candidates)
+    order : labels by increasing surrogate error
+    sur : ModalTarget (the surrogate); full : FullTarget
+    gtol, maxit, chord_maxit, starts : the options of so-h2
+    probe : iterations every start gets before the best (by surrogate error) gets the rest of ``maxit``
+    finalists : starts continued, best first, until one reaches stationarity on the surrogate; the
+        result is the best converged one, or the best of all if none converged
+
+    Returns
+    -------
+    ((K, D, F, L) or None, record)
+        None when no start could be descended from or the result has no second-order realization;
+        ``record``: per start its surrogate error before and after, iterations, reason; the chosen
+        start; ``iterations_surrogate``, ``iterations_full``, ``history``, ``history_full``,
+        ``stop_reason``, ``stop_reason_full``, ``relative_gradient_full`` (after the chord steps).
+    """
+    tv = ModalValues(sur)
+    runs, alive = {}, []
+    for label in list(order)[:starts]:
+        A, B, C = standard_realization(roms[label])
+        try:
+            co, x = Coordinates.of_model(A, B, C)
+            res = pole_descent(co, x, tv, maxit=min(probe, maxit), gtol=1e-3 * gtol)
+        except (InputError, np.linalg.LinAlgError, ValueError) as exc:
+            runs[label] = {"failed": f"{type(exc).__name__}: {exc}"}
+            continue
+        alive.append((label, res))
+    # successive halving: every start gets ``probe`` iterations; then, best by surrogate error first, up to
+    # ``finalists`` of them continue to ``maxit`` until one reaches the surrogate's stationarity
+    score = {label: tv.precise(res[0], res[1].x)[0] for label, res in alive}
+    results = {}
+    for label, (co, ev, its, reason, hist, changes) in alive:
+        results[label] = (label, co, ev, its, reason, hist, changes)
+        runs[label] = {"surrogate_h2_error_start": hist[0], "surrogate_h2_error": float(np.sqrt(max(score[label], 0))),
+                       "iterations": its, "reason": reason, "relative_gradient": ev.rho, "real_poles": co.nr,
+                       "structure_changes": changes}
+    for label in sorted(results, key=score.get)[:finalists]:
+        _, co, ev, its, reason, hist, changes = results[label]
+        if reason != "converged" and maxit > probe:
+            co, ev, its2, reason, hist2, ch2 = pole_descent(co, ev.x, tv, maxit=maxit - probe, gtol=1e-3 * gtol)
+            results[label] = (label, co, ev, its + its2, reason, hist + hist2[1:], changes + ch2)
+            score[label] = tv.precise(co, ev.x)[0]
+            runs[label].update(iterations=its + its2, reason=reason, relative_gradient=ev.rho,
+                               surrogate_h2_error=float(np.sqrt(max(score[label], 0))),
+                               structure_changes=changes + ch2)
+        if reason == "converged":
+            break
+    done = [k for k in results if results[k][4] == "converged"]
+    best = results[min(done or results, key=score.get)] if results else None
+    rec = {"starts": runs, "iterations_surrogate": sum(v.get("iterations", 0) for v in runs.values()),
+           "history": [], "history_full": [], "iterations_full": 0, "stop_reason": "no start",
+           "stop_reason_full": None, "relative_gradient_full": None, "descended_from": None}
+    if best is None:
+        return None, rec
+    label, co, ev, its, reason, hist, _ = best
+    rec.update(descended_from=label, history=hist, stop_reason=reason)
+    fv = FullValues(full)
+    evf = evaluate(co, ev.x, fv, hessian=False)
+    if evf is None:
+        rec["stop_reason_full"] = "the surrogate's result is outside the domain"
+        return None, rec
+    rec["history_full"] = [float(np.sqrt(max(evf.value, 0.0)))]
+    steps, why = 0, "converged"
+    while evf.rho > gtol:
+        if steps >= chord_maxit:
+            why = "cap"
+            break
+        trial = None
+        for mu in (0.0, 1e-4, 1e-2, 1.0):     # damped when the surrogate's Hessian misleads (r LUs each)
+            xn = chord_step(co, evf, ev.H, mu=mu)
+            trial = None if xn is None else evaluate(co, xn, fv, hessian=False)
+            if trial is not None and trial.value <= evf.value + 2.0 * max(evf.floor, trial.floor):
+                break
+            trial = None
+        steps += 1
+        if trial is None:
+            why = "stalled"
+            break
+        evf = trial
+        rec["history_full"].append(float(np.sqrt(max(evf.value, 0.0))))
+    rec.update(iterations_full=steps, stop_reason_full=why, relative_gradient_full=evf.rho)
+    try:
+        return second_order_of(co, evf.x), rec
+    except (InputError, np.linalg.LinAlgError) as exc:
+        rec["stop_reason_full"] = f"no second-order realization: {exc}"
+        return None, rec
