@@ -118,10 +118,7 @@ def count_factorizations(monkeypatch):
     return calls
 
 
-SPARSE = [pytest.param(n, marks=pytest.mark.xfail(
-    reason="irka-fo leaves its start's LR-ADI out of lu_count (20 of 24 LUs on dsms(40) at r = 4); "
-           "its owner fixes it in reducers/irka_fo.py", strict=False)) if n == "irka-fo" else n
-          for n in ms.reducers.available() if n != "irka-projected"]  # (dense LUs: counted below)
+SPARSE = [n for n in ms.reducers.available() if n != "irka-projected"]  # (dense LUs: counted below)
 
 
 @pytest.mark.parametrize("name", SPARSE)

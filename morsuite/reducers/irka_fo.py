@@ -423,8 +423,7 @@ class IRKAFO(IRKA):
             pick = last
         elif scored:
             # decision_h2 per iterate; ties (within the floors, or H2_TIE relative) go to the later iterate
-            d = {id(x): decision_h2(self.fom, x["rom"], tracked=(x["h2_squared"], x["h2_floor_squared"]))
-                 for x in scored}
+            d = {id(x): decision_h2(self.fom, x["rom"], counter=self._decision_lus) for x in scored}
             m = min(d.values())
             pick = max((x for x in scored if d[id(x)][0] <= m[0] * (1.0 + H2_TIE) + m[1] + d[id(x)][1]),
                        key=lambda x: x["iteration"])
@@ -473,11 +472,13 @@ class IRKAFO(IRKA):
     def _reduce(self, r):
         self._iterates, self._capture, self._data = [], [], None
         self._chord, self._norm2, self._fallback_relaxation = None, None, 1.0
-        self._has_start, self._start, self._surrogate = False, {}, None
+        self._has_start, self._start, self._surrogate, self._decision_lus = False, {}, None, {"lu": 0}
         rom, info = super()._reduce(r)
-        own, paid = int(info["lu_count"]), int(self._start.get("lu_count", 0))  # the start's LR-ADI if paid now
-        info.update(lu_count=own + paid, lu_count_own=own, lu_count_start=paid,
-                    lu_count_shared=int(self._start.get("lu_count_gramians", 0)))
+        # the start's LR-ADI if paid now; the H2 evaluator's LUs of the best-iterate choice
+        own, paid = int(info["lu_count"]) + self._decision_lus["lu"], int(self._start.get("lu_count", 0))
+        self._shared_lus = shared = int(self._start.get("lu_count_gramians", 0)) or getattr(self, "_shared_lus", 0)
+        info.update(lu_count=own + paid, lu_count_own=own, lu_count_start=paid, lu_count_shared=shared,
+                    setup_reused=paid == 0)
         info["status"] = ("converged" if info["converged"] else "stalled"
                           if info["engine_converged"] or info.get("cycle_detected") else "cap")
         return rom, info

@@ -41,7 +41,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from ..linalg.dense import shift_distance
-from ..linalg.h2 import Modal, modal_form, pole_residue_squared
+from ..linalg.h2 import modal_form, pole_residue_squared
 from ..rom import FirstOrderROM
 from .shift_update import COMPLEX_TOL, relaxed_update, shifts_from_poles
 
@@ -83,18 +83,6 @@ class ModalSurrogate:
         terms = np.sum(modal.C * (self.C @ G), axis=0)
         e2, _, _ = pole_residue_squared(self.norm2, 0.0, complex(np.sum(terms)), float(np.sum(np.abs(terms))), modal)
         return e2
-
-
-def _modal_standard(A, B, C, D) -> Modal:
-    """:func:`~morsuite.linalg.h2.modal_form` of (I, A, B, C, D) by the standard eigenproblem."""
-    lam, X = np.linalg.eig(A)
-    Xn = X / np.linalg.norm(X, axis=0)
-    with np.errstate(all="ignore"):
-        kappa = float(np.linalg.cond(Xn))
-    if not np.isfinite(kappa):
-        return Modal(lam, C @ Xn, np.full((lam.size, B.shape[1]), np.nan, dtype=complex), np.asarray(D, float),
-                     np.inf)
-    return Modal(lam, C @ Xn, np.linalg.solve(Xn, B), np.asarray(D, dtype=float), kappa)
 
 
 def _real_basis(alpha):
@@ -256,10 +244,7 @@ class SurrogateMap:
             # more shifts than the surrogate's numerical order (the DSMS beyond about 20 states): the
             # full model's iteration caps the order; the surrogate's is not meant to
             raise ArithmeticError(f"the surrogate's interpolant at {alpha.size} shifts has a singular E")
-        # E is well conditioned here (checked above): the standard eigenproblem of E^-1 A, a third of QZ's cost
-        EiAB = np.linalg.solve(rom.E, np.hstack([rom.A, rom.B]))
-        k = rom.A.shape[0]
-        modal = _modal_standard(EiAB[:, :k], EiAB[:, k:], rom.C, rom.D)
+        modal = modal_form(rom.E, rom.A, rom.B, rom.C, rom.D)
         lam = modal.poles
         ok = np.isfinite(modal.kappa) and np.all(lam.real < 0)
         e2 = self.s.error_squared(modal) if ok else np.inf

@@ -232,7 +232,7 @@ class SOH2(Reducer):
         exact = {}
 
         def evaluate(label):
-            exact[label] = e, floor, trusted = decision_h2(fom, roms[label], full=full)
+            exact[label] = e, floor, trusted = decision_h2(fom, roms[label], full=full, counter=self._decision_lus)
             cands[label].update(h2_error=e, h2_error_floor=floor, h2_error_trusted=trusted)
 
         for label in roms:
@@ -300,6 +300,7 @@ class SOH2(Reducer):
         t0 = time.perf_counter()
         param_cls = PARAMETRISATIONS[o["parametrization"]]
         lu0 = self._full.lu_count if self._full is not None else 0
+        self._decision_lus = {"lu": 0}  # LUs of the H2 evaluator's decisions (h2_decision.decision_h2)
         start, roms, order, (e0, f0, _), resolved, cands, sur, srec, gram = self._start(r, adi, param_cls)
         start_rom = roms[start]
         adi_fresh = bool(gram.get("adi_computed"))
@@ -334,19 +335,19 @@ class SOH2(Reducer):
             e, floor, st = e0, f0, {"rho": None, "value": e0 ** 2, "lu_count": 0}
         else:
             st = full_stationarity(self._full, *standard_realization(rom))
-            e, floor, _ = decision_h2(fom, rom, tracked=(st["value"], st["floor"]))
+            e, floor, _ = decision_h2(fom, rom, counter=self._decision_lus)
             if not returned_start and e > e0 + floor + f0:
                 # never worse than the start (at the decision's accuracy)
                 rec["stop_reason_full"] = f"result ({e:.6e}) worse than the start ({e0:.6e}): start returned"
                 theta, rom, returned_start = theta0, param.rom(theta0), True
                 st = full_stationarity(self._full, *standard_realization(rom))
-                e, floor, _ = decision_h2(fom, rom, tracked=(st["value"], st["floor"]))
+                e, floor, _ = decision_h2(fom, rom, counter=self._decision_lus)
         rho = st["rho"]
         converged = bool(not skipped and rho is not None and rho <= o["gtol"])
         reasons = (rec.get("stop_reason"), rec.get("stop_reason_full"))
         status = ("skipped" if skipped else "converged" if converged
                   else "cap" if any(x in ("cap", "maxit") for x in reasons) else "stalled")
-        lu_exact = self._full.lu_count - lu0
+        lu_exact = self._full.lu_count - lu0 + self._decision_lus["lu"]
         lu_irka = cands.get("irka", {}).get("lu_count", 0)
         lu_gram = int(gram["c"].lu_count) if adi_fresh else 0
         info = {
