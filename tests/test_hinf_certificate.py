@@ -171,8 +171,8 @@ def test_bounds_enclose_the_dense_peak(name, make, roms):
         if ab is not None:
             assert ab <= d["upper_bound"] * (1 + 1e-9), what
         assert d["upper_bound"] <= value * (1 + max(1e-6, d["certificate"]["tol"])) * (1 + 1e-15)
-        if name == "tcom60":
-            assert d["search_value"] < 0.9 * peak  # the search alone missed it; the certificate found it
+        # (on tcom60, bt at 30 states, the search alone once stopped 16% below the peak with the SuperLU
+        # backend; whether it misses depends on the LU's rounding: the missed-peak tests below plant one)
 
 
 def test_missed_peaks_are_found_by_the_level_set_test():
