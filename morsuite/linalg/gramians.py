@@ -38,7 +38,7 @@ import numpy as np
 from ..errors import ConvergenceWarning, InputError
 from .lradi import LRADIResult, lradi_pair
 
-__all__ = ["ADI_DEFAULTS", "GramianFactors", "gramian_factors", "cached_gramian_factors", "residual_weights",
+__all__ = ["ADI_DEFAULTS", "GramianFactors", "gramian_factors", "cached_gramian_factors", "residual_weights", "residual_selection",
            "h2_tail"]
 
 #: LR-ADI options of the shared factors, with balanced truncation's defaults (``bt`` declares the same);
@@ -183,6 +183,16 @@ def residual_weights(result: LRADIResult, width: int) -> np.ndarray:
     return gam
 
 
+def residual_selection(result: LRADIResult, width: int) -> np.ndarray:
+    r""":math:`S` (k x ``width``) with :math:`W = W_0 + EZS`: the weights of :func:`residual_weights`
+    placed so that column :math:`j` of the factor feeds column :math:`j \bmod` ``width`` of :math:`W`."""
+    gam = residual_weights(result, width)
+    k = result.rank
+    S = np.zeros((k, width))
+    S[np.arange(k), np.arange(k) % width] = gam
+    return S
+
+
 def h2_tail(factors: GramianFactors, fom) -> float:
     r"""Estimate of :math:`\|T\|_{\mathcal H_2}^2 - \|LZ_p\|_F^2`, the part the ADI factor misses.
 
@@ -197,10 +207,7 @@ def h2_tail(factors: GramianFactors, fom) -> float:
     of the factors, no solve.
     """
     c, o = factors.controllability, factors.observability
-    gam = residual_weights(c, fom.m)
-    k = c.rank
-    S = np.zeros((k, fom.m))
-    S[np.arange(k), np.arange(k) % fom.m] = gam
+    S = residual_selection(c, fom.m)
     # Z_p is in ker G, so the unprojected observability position block gives the same products
     YEZS = o.position_unprojected.T @ (c.position @ S) + o.velocity.T @ (fom.M @ (c.velocity @ S))
     YW = o.velocity.T @ fom.F + YEZS

@@ -92,7 +92,6 @@ def integrate_half_axis(f, w0: float, breakpoints=(), *, rtol: float = 1e-10, at
     bp = np.asarray([w for w in breakpoints if np.isfinite(w) and w > 0], dtype=float)
     tb = np.unique(np.concatenate([[0.0, 1.0], bp / (w0 + bp)]))
     samples = []
-    aux_total = [0.0]
 
     def piece(a, b):
         t = 0.5 * (a + b) + 0.5 * (b - a) * _NODES

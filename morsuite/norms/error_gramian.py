@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
-from ..linalg.gramians import residual_weights
+from ..linalg.gramians import residual_selection
 
 __all__ = ["RomADI", "rom_adi", "output_columns", "residual_factor", "ErrorGramian", "error_gramian"]
 
@@ -57,6 +57,8 @@ class RomADI:
     CZ: np.ndarray      # (p, k): C_r Z_r, the output columns of its factor
     U: np.ndarray       # (n_r, m): E_r^{-1} W_r, its final residual factor in standard form
     schur_cond: float   # norm of the Schur basis' reconstruction error, relative (rounding check)
+    As: np.ndarray      # E_r^{-1} A_r (the standard form the recurrence ran on)
+    poles: np.ndarray   # its eigenvalues, the Schur form's diagonal
     u_ratio: float      # ||U_0||_F / ||U||_F: how much the residual factor shrank (its rounding grows as this)
 
 
@@ -108,19 +110,25 @@ def rom_adi(shifts, E, A, B, C) -> RomADI:
             U = U + w * V
             i += 1
     CZ = np.hstack(cols) if cols else np.zeros((C.shape[0], 0))
-    return RomADI(CZ, U, schur_cond, u0 / max(float(np.linalg.norm(U)), 1e-300 * max(u0, 1e-300)))
+    return RomADI(CZ, U, schur_cond, As, Td, u0 / max(float(np.linalg.norm(U)), 1e-300 * max(u0, 1e-300)))
+
+
+def _per_model(fom, factors, name, make):
+    """``make()`` once per model and ADI options: kept in ``fom.cache`` beside the factors."""
+    cache = getattr(fom, "cache", None)
+    key = (name, tuple(sorted(factors.options.items())))
+    if cache is not None and key in cache and not factors.computed:
+        return cache[key]
+    value = make()
+    if cache is not None:
+        cache[key] = value
+    return value
 
 
 def output_columns(fom, factors) -> np.ndarray:
     r""":math:`LZ_p` (p x k) of the model's cached controllability factor, computed once per model and options."""
-    cache = getattr(fom, "cache", None)
-    key = ("h2_output_columns", tuple(sorted(factors.options.items())))
-    if cache is not None and key in cache and not factors.computed:
-        return cache[key]
-    LZ = np.asarray(fom.L @ factors.controllability.position)
-    if cache is not None:
-        cache[key] = LZ
-    return LZ
+    return _per_model(fom, factors, "h2_output_columns",
+                      lambda: np.asarray(fom.L @ factors.controllability.position))
 
 
 def residual_factor(fom, factors):
@@ -128,17 +136,15 @@ def residual_factor(fom, factors):
 
     :math:`W_0 = [0; F]` (``F`` and :math:`\Pi F` differ by a vector of
     :math:`\mathrm{range}(G^T)`, which the saddle-point solves absorb);
-    :func:`~morsuite.linalg.gramians.residual_weights` gives :math:`S`. Cost: two products with
-    the factor's blocks.
+    :func:`~morsuite.linalg.gramians.residual_selection` gives :math:`S`. Cost: two products with
+    the factor's blocks, once per model and options (kept beside the factors).
     """
-    c = factors.controllability
-    gam = residual_weights(c, fom.m)
-    k = c.rank
-    S = np.zeros((k, fom.m))
-    S[np.arange(k), np.arange(k) % fom.m] = gam
-    W1 = c.position @ S
-    W2 = np.asarray(fom.F, dtype=float) + fom.M @ (c.velocity @ S)
-    return W1, W2
+    def make():
+        c = factors.controllability
+        S = residual_selection(c, fom.m)
+        return c.position @ S, np.asarray(fom.F, dtype=float) + fom.M @ (c.velocity @ S)
+
+    return _per_model(fom, factors, "h2_residual_factor", make)
 
 
 @dataclass
@@ -197,13 +203,13 @@ def error_gramian(fom, arrays, factors, norm_record, unit: float) -> ErrorGramia
     run = rom_adi(c.shifts, E, A, B, C)
     d = LZ - run.CZ
     columns = float(np.sum(d * d))
-    As = np.linalg.solve(E, A)
+    As = run.As
     Qs = sla.solve_continuous_lyapunov(As.T, -(C.T @ C))
     Qs = 0.5 * (Qs + Qs.T)
     t3 = float(max(np.sum(run.U * (Qs @ run.U)), 0.0))
-    lam = np.linalg.eigvals(As)
+    lam = run.poles
     sep = float(np.min(np.abs(lam.real))) if lam.size else 1.0
-    t3_error = 10.0 * EPS * As.shape[0] * np.linalg.norm(As, 2) / max(sep, 1e-300) * t3
+    t3_error = 10.0 * EPS * As.shape[0] * np.linalg.norm(As, "fro") / max(sep, 1e-300) * t3
     t1 = float(norm_record["tail"])
     t1_error = 10.0 * t1 * max(o.residual, EPS) if factors.converged else max(t1, 0.0)
     k = max(c.rank, 1)

@@ -22,16 +22,13 @@ __all__ = ["decision_h2", "DECISION_RTOL"]
 DECISION_RTOL = 1e-6
 
 
-def decision_h2(fom, rom, *, full=None, tracked=None, counter=None):
+def decision_h2(fom, rom, *, counter=None):
     r"""``(value, floor, trusted)`` of :math:`\|T - T_r\|_{\mathcal H_2}` for a decision.
 
     Parameters
     ----------
     fom : Index3Model
     rom : SecondOrderROM or FirstOrderROM
-    full, tracked : optional
-        Accepted for compatibility and ignored: the value always comes from the evaluator, never
-        from a caller's own tracked sums (which had a second, unrefined standard).
 
     Returns
     -------

@@ -23,16 +23,8 @@ import numpy as np
 from ..errors import AccuracyWarning
 from ..linalg.gramians import ADI_DEFAULTS
 from ..norms.h2 import h2_error
-from .so_h2_starts import standard_realization
 
-__all__ = ["ExactH2Score", "rom_realization", "iterate_scorer", "score_cost"]
-
-
-def rom_realization(rom):
-    """(A, B, C) with E = I of a reduced model: M (second-order) or E (first-order) applied as its inverse."""
-    if rom.kind == "second-order":
-        return standard_realization(rom)
-    return np.linalg.solve(rom.E, rom.A), np.linalg.solve(rom.E, rom.B), rom.C
+__all__ = ["ExactH2Score", "iterate_scorer", "score_cost"]
 
 
 class ExactH2Score:

@@ -217,7 +217,7 @@ class SOH2(Reducer):
                              "(" + ", ".join(f"{k}: {v.get('dropped')}" for k, v in cands.items()) + ")")
         if self._surrogates is None:
             self._surrogates = Surrogates(bt)
-        full = self._full_target(adi)
+        self._full_target(adi)  # the full model as target (made once; later steps and LU counts use it)
         sur, srec = self._surrogates.choose(r, roms, o["surrogate_tol"], o["surrogate_states"])
         unresolved = False
         for label, rom in roms.items():
@@ -232,7 +232,7 @@ class SOH2(Reducer):
         exact = {}
 
         def evaluate(label):
-            exact[label] = e, floor, trusted = decision_h2(fom, roms[label], full=full, counter=self._decision_lus)
+            exact[label] = e, floor, trusted = decision_h2(fom, roms[label], counter=self._decision_lus)
             cands[label].update(h2_error=e, h2_error_floor=floor, h2_error_trusted=trusted)
 
         for label in roms:
