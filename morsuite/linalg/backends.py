@@ -52,7 +52,7 @@ from scipy.sparse.csgraph import reverse_cuthill_mckee
 from ..errors import InputError, SingularShiftError
 
 __all__ = ["BACKENDS", "BAND_RULE", "BandedBorderLU", "analyse", "banded_structure", "choose",
-           "permuted_pattern", "resolve_backend", "superlu_ordering"]
+           "factor_nnz", "permuted_pattern", "resolve_backend", "superlu_ordering"]
 
 #: the backends a solver accepts (``"auto"``: :func:`choose`)
 BACKENDS = ("auto", "superlu", "banded")
@@ -60,6 +60,16 @@ BACKENDS = ("auto", "superlu", "banded")
 #: the structural rule of ``"auto"``: banded LU when the RCM half-bandwidths satisfy
 #: ``kl + ku <= max_band`` and ``n2 <= max_border`` (docs/design/backends.md, 2026-11-25)
 BAND_RULE = {"max_band": 64, "max_border": 8}
+
+
+def factor_nnz(lu) -> int:
+    """Stored entries of a factorization made by any backend (the memory of its values).
+
+    SuperLU: ``nnz(L) + nnz(U)``; banded: :attr:`BandedBorderLU.nnz`. Cost O(1).
+    """
+    if isinstance(lu, BandedBorderLU):
+        return lu.nnz
+    return int(lu.L.nnz + lu.U.nnz)
 
 
 def resolve_backend(backend: str) -> str:
@@ -286,6 +296,11 @@ class BandedBorderLU:
             self._schur = sla.lu_factor(C, check_finite=False)
             if not np.all(np.abs(np.diag(self._schur[0])) > 0):
                 raise SingularShiftError("banded LU: the Schur complement of the border is exactly singular")
+
+    @property
+    def nnz(self) -> int:
+        """Stored factor entries: the band LU (n1 (2 kl + ku + 1)), W = A11^{-1} B12 (n1 n2), the Schur LU (n2^2)."""
+        return int(self._lu.size + (self.W.size + self.n2 * self.n2 if self.n2 else 0))
 
     def u_diagonal(self) -> np.ndarray:
         """The pivots of U (banded part and Schur complement), for the pivot-ratio check."""
