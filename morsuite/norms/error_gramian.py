@@ -77,39 +77,47 @@ def rom_adi(shifts, E, A, B, C) -> RomADI:
 
     Returns only :math:`C_rZ_r` (the factor itself is never needed) and :math:`U`.
     """
-    n = A.shape[0]
+    n, p_out = A.shape[0], C.shape[0]
     As = np.linalg.solve(E, A)
     T, Q = sla.schur(As.astype(complex), output="complex")
     QH = np.ascontiguousarray(Q.conj().T)
     schur_cond = float(np.linalg.norm(Q @ T @ QH - As) / max(np.linalg.norm(As), 1e-300))
     U = np.linalg.solve(E, B).astype(float)
     u0 = float(np.linalg.norm(U))
-    CQ = C @ Q
-    Tp = T.copy()
-    diag = np.diag_indices(n)
+    m = U.shape[1]
+    QC = np.vstack([Q, C @ Q])  # one product a step gives V = Q Vt and C V
+    # LAPACK's triangular solve called directly: scipy's wrapper (validation, lookup) cost 8x the solve at
+    # these sizes, and the recurrence makes one per step (docs/design/norms.md, "Cost", 2026-11-26)
+    trtrs = sla.get_lapack_funcs("trtrs", (T,))
+    Tp = np.asfortranarray(T)
+    dview = Tp.T.reshape(-1)[:: n + 1]  # the diagonal of Tp, as a view (Tp.T is C-contiguous)
     Td = np.diag(T).copy()
     sh = np.asarray(shifts, dtype=complex)
-    cols = []
-    i = 0
+    CZ = np.empty((p_out, sh.size * m))
+    i = j = 0
     while i < sh.size:
         p = sh[i]
-        Tp[diag] = Td + p
-        Vt = sla.solve_triangular(Tp, QH @ U, check_finite=False)
+        np.add(Td, p, out=dview)
+        Vt, info = trtrs(Tp, QH @ U)
+        VC = QC @ Vt
         if p.imag != 0:
             g = 2.0 * np.sqrt(-p.real)
             d = p.real / p.imag
-            V = Q @ Vt
-            R = V.real + d * V.imag
-            cols += [g * (C @ R), (g * np.sqrt(d * d + 1.0)) * (CQ @ Vt).imag]
-            U = U + (g * g) * R
+            # [Re, Im] of V and C V, mixed at once: columns g (Re + d Im) = g R and c Im (C is real)
+            K = np.array([[g, 0.0], [g * d, g * np.sqrt(d * d + 1.0)]])
+            G = VC.view(float).reshape(n + p_out, m, 2) @ K
+            CZ[:, j:j + m] = G[n:, :, 0]
+            CZ[:, j + m:j + 2 * m] = G[n:, :, 1]
+            U += g * G[:n, :, 0]  # g^2 R
             i += 2
+            j += 2 * m
         else:
-            V = (Q @ Vt).real
             w = -2.0 * p.real
-            cols.append(np.sqrt(w) * (C @ V))
-            U = U + w * V
+            CZ[:, j:j + m] = np.sqrt(w) * VC[n:].real
+            U += w * VC[:n].real
             i += 1
-    CZ = np.hstack(cols) if cols else np.zeros((C.shape[0], 0))
+            j += m
+    CZ = CZ[:, :j]
     return RomADI(CZ, U, schur_cond, As, Td, u0 / max(float(np.linalg.norm(U)), 1e-300 * max(u0, 1e-300)))
 
 
