@@ -11,11 +11,12 @@ own tail terms (t1 - 2 t2 + t3, shared) is the value with the columns' rounding 
 is what the floor's dominant term bounds (docs/design/norms.md, "Sharpness of the floor", 2026-11-26). The tail
 terms' own errors are checked against independent references in tests/test_h2_certified.py.
 
-Measured (2026-11-26, OpenBLAS, one thread): floor / error from 20 to 9,600, median about 200 over these
-eleven reduced models; every floor above its error. Issue 25's "at most 10x pessimistic at the median" is NOT
+Measured (2026-11-26, OpenBLAS, one thread): floor / error from 34 to 190,000, median 560 over these
+eleven reduced models (dsms(60), BT at 12 states, error 5e-21 against a floor of 9e-16, is the extreme);
+every floor above its error. Issue 25's "at most 10x pessimistic at the median" is NOT
 met: the floor bounds the inner product of the columns' difference with their rounding by Cauchy-Schwarz, and
-the rounding is nearly orthogonal to the difference (docs/design/norms.md). The bound below (2,000, ten times
-the measured median) guards against the floor getting looser; it is not the issue's target.
+the rounding is nearly orthogonal to the difference (docs/design/norms.md). The bound below (5,000, about ten
+times the measured median) guards against the floor getting looser; it is not the issue's target.
 """
 
 from __future__ import annotations
@@ -94,4 +95,4 @@ def test_error_gramian_floor_bounds_its_error_and_its_pessimism_is_measured():
             assert err <= d["floor"], (spec, method, r, err, d["floor"])
             ratios.append(d["floor"] / max(err, 1e-300))
     assert min(ratios) >= 1.0
-    assert np.median(ratios) <= 2000.0, sorted(ratios)
+    assert np.median(ratios) <= 5000.0, sorted(ratios)
