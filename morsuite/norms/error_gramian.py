@@ -28,9 +28,13 @@ too loose, :func:`tail_cross_terms` computes it by the pole-residue formula of
 the LUs the pole-residue route of the error makes anyway).
 
 Cost: the product :math:`LZ_p` once per model (cached with the factors); per reduced
-model a complex Schur form (:math:`O(n_r^3)`) and one triangular solve with
-:math:`T + pI` per ADI step (:math:`O(n_r^2)`), and a dense Lyapunov equation
-(:math:`O(n_r^3)`). The measurements behind the floor: ``docs/design/norms.md``.
+model an eigendecomposition (:math:`O(n_r^3)`) and one vectorized product of order
+:math:`k\,n_r\,pm` for all ADI steps (or, for an ill-conditioned eigenbasis, a complex
+Schur form and one triangular solve per step, :math:`O(kn_r^2)`), and a dense Lyapunov
+equation (:math:`O(n_r^3)`). The measurements behind the floor and its sharpness (the
+floor is 34 to 190,000 times the error, median 560, issue 25's 10x not met):
+``docs/design/norms.md``, "Sharpness of the floor" and "Cost of the error-Gramian route"
+(2026-11-26).
 """
 
 from __future__ import annotations
@@ -48,6 +52,8 @@ EPS = np.finfo(float).eps
 #: rounding of the ADI columns, in units of eps * sqrt(columns) * ||columns||_F: the W-update's rounding
 #: (the residual factor is a difference of terms of the size of B) re-enters every later column
 COLUMN_ROUNDING = 4.0
+#: eigenvector condition number up to which the reduced recurrence runs in closed form (rom_adi)
+KAPPA_MODAL = 1e2
 
 
 @dataclass
@@ -56,10 +62,44 @@ class RomADI:
 
     CZ: np.ndarray      # (p, k): C_r Z_r, the output columns of its factor
     U: np.ndarray       # (n_r, m): E_r^{-1} W_r, its final residual factor in standard form
-    schur_cond: float   # norm of the Schur basis' reconstruction error, relative (rounding check)
+    schur_cond: float   # the Schur basis' reconstruction error, relative; eps kappa(X) in closed form
     As: np.ndarray      # E_r^{-1} A_r (the standard form the recurrence ran on)
-    poles: np.ndarray   # its eigenvalues, the Schur form's diagonal
+    poles: np.ndarray   # its eigenvalues
     u_ratio: float      # ||U_0||_F / ||U||_F: how much the residual factor shrank (its rounding grows as this)
+
+
+def _modal_adi(shifts, As, U0, C):
+    """The recurrence of :func:`rom_adi` in closed form in the eigenbasis of ``As`` (None when its
+    eigenvector matrix is worse conditioned than KAPPA_MODAL); ``schur_cond`` then carries eps kappa."""
+    lam, X = np.linalg.eig(As)
+    X = X / np.linalg.norm(X, axis=0)
+    with np.errstate(all="ignore"):
+        kappa = float(np.linalg.cond(X))
+    if not (np.all(np.isfinite(lam)) and kappa <= KAPPA_MODAL):
+        return None
+    b = np.linalg.solve(X, U0)  # (n, m)
+    sh = np.asarray(shifts, dtype=complex)
+    steps, i = [], 0
+    while i < sh.size:  # a complex pair (p, conj p) is one step, as in rom_adi
+        steps.append(i)
+        i += 2 if sh[i].imag != 0 else 1
+    P = sh[steps]
+    pair = P.imag != 0
+    L = lam[:, None]
+    phi = (L - P.conj()) / (L + P)
+    phi = np.where(pair, phi * (L - P) / (L + P.conj()), phi)  # (n, steps)
+    before = np.cumprod(np.hstack([np.ones((lam.size, 1)), phi[:, :-1]]), axis=1)
+    CV = np.einsum("pi,is,im->psm", C @ X, before / (L + P), b)  # C V_j, (p, steps, m)
+    g = np.where(pair, 2.0 * np.sqrt(-P.real), np.sqrt(-2.0 * P.real))
+    d = np.where(pair, P.real / np.where(pair, P.imag, 1.0), 0.0)
+    cols = np.stack([g[:, None] * (CV.real + d[:, None] * CV.imag),
+                     (g * np.sqrt(d * d + 1.0))[:, None] * CV.imag], axis=2)  # (p, steps, 2, m)
+    keep = np.ones(cols.shape[1:], dtype=bool)
+    keep[~pair, 1, :] = False
+    CZ = cols.reshape(C.shape[0], -1)[:, keep.ravel()]
+    U = (X @ (np.prod(phi, axis=1)[:, None] * b)).real
+    u0 = float(np.linalg.norm(U0))
+    return RomADI(CZ, U, EPS * kappa, As, lam, u0 / max(float(np.linalg.norm(U)), 1e-300 * max(u0, 1e-300)))
 
 
 def rom_adi(shifts, E, A, B, C) -> RomADI:
@@ -73,43 +113,61 @@ def rom_adi(shifts, E, A, B, C) -> RomADI:
     :math:`W \mathrel{+}= g^2ER`), so that column :math:`j` of the result pairs with
     column :math:`j` of the model's factor. Works in standard form
     :math:`U = E_r^{-1}W`, :math:`V = (E_r^{-1}A_r + pI)^{-1}U`, through the complex
-    Schur form :math:`E_r^{-1}A_r = QTQ^H` (one triangular solve a step).
+    Schur form :math:`E_r^{-1}A_r = QTQ^H` (one triangular solve a step), or, when the
+    eigenvector matrix :math:`X` (unit columns) of :math:`E_r^{-1}A_r` has
+    :math:`\kappa(X) \le` :data:`KAPPA_MODAL`, in closed form in its eigenbasis: the ADI
+    residual after the steps before :math:`j` is :math:`\prod_i \phi_i(\lambda)` times
+    :math:`X^{-1}U_0` (:math:`\phi_i(\lambda) = (\lambda - \bar p_i)/(\lambda + p_i)`, the
+    product of both for a pair), so every :math:`C_rV_j` is one vectorized product
+    (:func:`_modal_adi`; 15 to 20 times faster at 1,200 shifts, and 1.5 to 3 times more
+    accurate against a long-double recurrence: ``docs/design/norms.md``, 2026-11-26).
 
     Returns only :math:`C_rZ_r` (the factor itself is never needed) and :math:`U`.
     """
-    n = A.shape[0]
+    n, p_out = A.shape[0], C.shape[0]
     As = np.linalg.solve(E, A)
+    modal = _modal_adi(shifts, As, np.linalg.solve(E, B), C)
+    if modal is not None:
+        return modal
     T, Q = sla.schur(As.astype(complex), output="complex")
     QH = np.ascontiguousarray(Q.conj().T)
     schur_cond = float(np.linalg.norm(Q @ T @ QH - As) / max(np.linalg.norm(As), 1e-300))
     U = np.linalg.solve(E, B).astype(float)
     u0 = float(np.linalg.norm(U))
-    CQ = C @ Q
-    Tp = T.copy()
-    diag = np.diag_indices(n)
+    m = U.shape[1]
+    QC = np.vstack([Q, C @ Q])  # one product a step gives V = Q Vt and C V
+    # LAPACK's triangular solve called directly: scipy's wrapper (validation, lookup) cost 8x the solve at
+    # these sizes, and the recurrence makes one per step (docs/design/norms.md, "Cost", 2026-11-26)
+    trtrs = sla.get_lapack_funcs("trtrs", (T,))
+    Tp = np.asfortranarray(T)
+    dview = Tp.T.reshape(-1)[:: n + 1]  # the diagonal of Tp, as a view (Tp.T is C-contiguous)
     Td = np.diag(T).copy()
     sh = np.asarray(shifts, dtype=complex)
-    cols = []
-    i = 0
+    CZ = np.empty((p_out, sh.size * m))
+    i = j = 0
     while i < sh.size:
         p = sh[i]
-        Tp[diag] = Td + p
-        Vt = sla.solve_triangular(Tp, QH @ U, check_finite=False)
+        np.add(Td, p, out=dview)
+        Vt, info = trtrs(Tp, QH @ U)
+        VC = QC @ Vt
         if p.imag != 0:
             g = 2.0 * np.sqrt(-p.real)
             d = p.real / p.imag
-            V = Q @ Vt
-            R = V.real + d * V.imag
-            cols += [g * (C @ R), (g * np.sqrt(d * d + 1.0)) * (CQ @ Vt).imag]
-            U = U + (g * g) * R
+            # [Re, Im] of V and C V, mixed at once: columns g (Re + d Im) = g R and c Im (C is real)
+            K = np.array([[g, 0.0], [g * d, g * np.sqrt(d * d + 1.0)]])
+            G = VC.view(float).reshape(n + p_out, m, 2) @ K
+            CZ[:, j:j + m] = G[n:, :, 0]
+            CZ[:, j + m:j + 2 * m] = G[n:, :, 1]
+            U += g * G[:n, :, 0]  # g^2 R
             i += 2
+            j += 2 * m
         else:
-            V = (Q @ Vt).real
             w = -2.0 * p.real
-            cols.append(np.sqrt(w) * (C @ V))
-            U = U + w * V
+            CZ[:, j:j + m] = np.sqrt(w) * VC[n:].real
+            U += w * VC[:n].real
             i += 1
-    CZ = np.hstack(cols) if cols else np.zeros((C.shape[0], 0))
+            j += m
+    CZ = CZ[:, :j]
     return RomADI(CZ, U, schur_cond, As, Td, u0 / max(float(np.linalg.norm(U)), 1e-300 * max(u0, 1e-300)))
 
 

@@ -94,10 +94,11 @@ import numpy as np
 
 from ..errors import AccuracyWarning, OptionError, StabilityWarning
 from ..linalg.gramians import cached_gramian_factors
-from ..linalg.h2 import UNREFINED_UNIT, modal_form, norm_squared as _norm_squared, pole_residue_squared
+from ..linalg.h2 import UNREFINED_UNIT, norm_squared as _norm_squared
 from ..utils import blas_threads
 from ._common import adi_options, check_fom, infinite, validate_rom
-from .error_gramian import error_gramian, residual_factor
+from .error_gramian import error_gramian
+from ._mirrored import mirrored_solves
 from ._fom import FomResponse
 from ._quad import integrate_half_axis
 from ._rom import RomResponse
@@ -160,65 +161,6 @@ def h2_norm(fom, *, adi=None, details: bool = False):
         return value
     return value, {**rec, "lu_count": rec["gramian_lu_count"], "floor": rel * value, "rel_floor": rel,
                    "trusted": trusted}
-
-
-def _mirrored_solves(fom, arrays, rom, norm2, floor2, refine, eg=None, factors=None):
-    """Solves at the mirrored poles -lambda_k (one LU per real pole or conjugate pair): the pole-residue
-    value of ||T - Tr||^2 with its floor, and, given the error-Gramian parts ``eg``, the tail cross term t2
-    with its error (the same LUs serve both: ``docs/design/norms.md``)."""
-    E, A, B, C, D = arrays
-    m = B.shape[1]
-    Wr = None
-    if eg is not None:
-        W1, W2 = residual_factor(fom, factors)
-        Wr = E @ eg.rom_adi.U
-        Bx = np.hstack([B, Wr])
-    else:
-        Bx = B
-    modal = modal_form(E, A, Bx, C, D, rom=rom)
-    if not np.isfinite(modal.kappa):
-        return None, np.inf, {"kappa": np.inf, "lu_count": 0, "reason": "defective reduced model"}, None
-    Bw = modal.B[:, m:]
-    modal.B = modal.B[:, :m]
-    idx, weight, paired = modal.pairs()
-    # refined: an unrefined solve next to a slow or lightly damped pole of the model is off by about
-    # kappa eps, 1e-12 of T(-lambda_k) on the TCOM, which the cancellation of the three terms amplifies
-    ev = FomResponse(fom, refine=refine)
-    L = np.asarray(fom.L, dtype=LD)
-    cross = t2 = 0.0 + 0.0j
-    cross_abs = cross_err = t2_abs = t2_err = 0.0
-    for k, wk in zip(idx, weight):
-        s = -modal.poles[k]
-        rhs = [fom.F @ modal.B[k]]
-        if Wr is not None:
-            w1, w2 = W1 @ Bw[k], W2 @ Bw[k]
-            rhs.append(w2 + s * (fom.M @ w1) + fom.D @ w1)
-        X = ev.solve(s, np.column_stack(rhs))
-        LX = (L @ X.real) + 1j * (L @ X.imag).astype(CLD)
-        unit = ev.last_unit if refine else UNREFINED_UNIT
-        t = complex(np.sum(modal.C[:, k] * LX[:, 0]))  # in long double, then rounded
-        cross += wk * (t.real if paired else t)
-        cross_abs += wk * abs(t)
-        cross_err += wk * abs(t) * unit
-        if Wr is not None:
-            tau = complex(np.sum(modal.C[:, k] * LX[:, 1]))
-            t2 += wk * (tau.real if paired else tau)
-            t2_abs += wk * abs(tau)
-            t2_err += wk * abs(tau) * (unit + 4.0 * EPS)
-    cross = complex(cross)
-    e2, floor, parts = pole_residue_squared(norm2, floor2, cross, cross_abs, modal, cross_err)
-    e_est, tr = np.sqrt(max(e2, 0.0)), parts["rom_norm"]
-    rec = {"value": float(e_est), "squared": float(e2), "cross": cross.real, "cross_imag": cross.imag,
-           "rom_norm": float(tr), "kappa": modal.kappa, "poles": int(modal.poles.size),
-           "solves": int(idx.size), "lu_count": ev.lu_count, "lu_shifts": list(ev.shifts),
-           "floor_squared": float(floor), "cross_error": float(cross_err)}
-    tail = None
-    if Wr is not None:
-        # the modal form's rounding perturbs G_Wr by about eps kappa relative
-        t2_err += 2.0 * EPS * modal.kappa * np.sqrt(max(eg.t1, 0.0) * eg.t3) + 2.0 * EPS * t2_abs
-        t2_err += eg.t2_rounding(t2_abs)
-        tail = (float(complex(t2).real), float(t2_err))
-    return e2, floor, rec, tail
 
 
 def breakpoints(lam) -> np.ndarray:
@@ -349,7 +291,9 @@ def h2_error(fom, rom, *, method: str = "auto", rtol: float = 1e-8, max_nodes: i
         Extended-precision refinement steps of each response (0: plain solves),
         of the quadrature's nodes and of the solves at the mirrored poles alike
         (default 1; no extra LU: a long-double product and a pair of triangular
-        solves per step).
+        solves per step). With the error-Gramian route, a solve at a mirrored
+        pole is refined only where its unrefined error could show in the tail
+        cross term at ``rtol`` (:mod:`morsuite.norms._mirrored`).
     adi : dict, optional
         LR-ADI options of the Gramian factor (as in :func:`h2_norm`).
     details : bool
@@ -381,11 +325,13 @@ def h2_error(fom, rom, *, method: str = "auto", rtol: float = 1e-8, max_nodes: i
     Notes
     -----
     Cost: the Gramian factors once per model (shared with ``bt``), then per
-    reduced model dense work of order :math:`k n_r^2` (:math:`k` the factor's
-    columns, :math:`n_r` the reduced model's states) and no LU when the first
+    reduced model dense work of order :math:`n_r^3 + k n_r pm` (:math:`k` the
+    factor's columns, :math:`n_r` the reduced model's states) and no LU when the first
     route suffices; one LU per real pole or conjugate pair of the reduced model
     when the second runs; one LU per node (typically 100-1000) in the rare case
-    the quadrature runs. Measured costs and floors: ``docs/design/norms.md``.
+    the quadrature runs. Measured costs and floors: ``docs/design/norms.md``
+    (1.4 to 1.5 times the bare LUs it makes on tcom(2000) at 10 to 30 states,
+    2026-11-26).
     """
     if method not in METHODS:
         raise OptionError(f"method must be one of {', '.join(map(repr, METHODS))}; got {method!r}")
@@ -426,7 +372,9 @@ def h2_error(fom, rom, *, method: str = "auto", rtol: float = 1e-8, max_nodes: i
         need_solves = (method == "pole-residue" or
                        (method in ("auto", "error-gramian") and _rel(*cands["error-gramian"]) > rtol))
         if need_solves:
-            e2, fl2, prec, tail = _mirrored_solves(fom, arrays, rom, norm2, floor_n2, refine, eg, gf)
+            # t2 needs refined solves only where an unrefined one's error would show at rtol
+            budget = 0.01 * rtol * max(cands["error-gramian"][0], 0.0) if eg is not None else None
+            e2, fl2, prec, tail = mirrored_solves(fom, arrays, rom, norm2, floor_n2, refine, eg, gf, budget)
             lus += prec["lu_count"]
             out["pole_residue"] = prec
             if e2 is not None:
