@@ -37,6 +37,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from .h2 import modal_form, pole_residue_squared
+from .h2_orthonormal import TMRecursion, realization_tm_values, tm_realization, tm_rho
 from .refine import SaddleOperator, refined_solve
 
 __all__ = ["relative_gradient_rank_one", "full_stationarity", "saddle_solver_refined"]
@@ -95,6 +96,14 @@ def saddle_solver_refined(full, steps: int):
             return lu.solve(rhs_right).reshape(-1), lu.solve(rhs_left, trans=True).reshape(-1)
         return (refined_solve(lu, rhs_right, False, s, op, steps=steps, ext=True),
                 refined_solve(lu, rhs_left, True, s, op, steps=steps, ext=True))
+
+    def right(s):
+        """rhs -> P(s)^-1 rhs (refined), with the LU at s (the solver keeps the last ones)."""
+        lu = full.solver.factor(s)
+        if not steps:
+            return lambda rhs: lu.solve(rhs).reshape(-1)
+        return lambda rhs: refined_solve(lu, rhs, False, s, op, steps=steps, ext=True)
+    solves.right = right
     return solves
 
 
@@ -119,11 +128,25 @@ def full_stationarity(full, A, B, C, *, refine: int = 2) -> dict:
     lu0 = full.lu_count
     solves = saddle_solver_refined(full, refine)
     done = np.zeros(n, bool)
+    siso = p == 1 and m == 1
+    if siso:    # the orthonormal basis of the tangent space, poles in the loop's order (h2_orthonormal)
+        seq = _tm_sequence(lam)
+        A_tm, beta = tm_realization(seq)
+        tm, v_tm, pos = TMRecursion(sysm), np.empty(seq.size, dtype=complex), 0
     for k in np.argsort(-lam.imag, kind="stable"):      # upper members first, their partners by conjugation
         if done[k]:
             continue
         s = -lam[k]
         x, w = solves(s, sysm.F @ Bm[k], sysm.L.T @ Cm[:, k])
+        if siso:
+            right = solves.right(s)
+            for _ in range(2):
+                v_tm[pos] = tm.step(right, s, beta[pos])
+                pos += 1
+            if lam[k].imag != 0:    # P(conj s)^-1 r = conj(P(s)^-1 conj(r)): the same LU
+                for _ in range(2):
+                    v_tm[pos] = tm.step(lambda r: np.conj(right(np.conj(r))), np.conj(s), beta[pos])
+                    pos += 1
         Tb[:, k], cT[k], dT[k] = sysm.L @ x, w @ sysm.F, -(w @ (2.0 * s * (sysm.M @ x) + sysm.D @ x))
         done[k] = True
         if lam[k].imag != 0:
@@ -145,9 +168,24 @@ def full_stationarity(full, A, B, C, *, refine: int = 2) -> dict:
     terms = np.array([Cm[:, k] @ Tb[:, k] for k in range(n)])
     e2, floor, _ = pole_residue_squared(full.norm2, full.norm2_floor, complex(np.sum(terms)),
                                         float(np.sum(np.abs(terms))), md)
-    rho = relative_gradient_rank_one(lam, Cm, Bm, Tb - TrB, cT - cTr, dT - dTr, e2)
-    return {"value": float(e2), "floor": float(floor), "rho": rho, "lu_count": full.lu_count - lu0,
-            "kappa": float(md.kappa)}
+    rho_pr = relative_gradient_rank_one(lam, Cm, Bm, Tb - TrB, cT - cTr, dT - dTr, e2)
+    rho = rho_pr
+    if siso:
+        rho = tm_rho(v_tm - realization_tm_values(A_tm, beta, A, B, C), beta, e2)
+    return {"value": float(e2), "floor": float(floor), "rho": rho, "rho_pole_residue": rho_pr,
+            "lu_count": full.lu_count - lu0, "kappa": float(md.kappa)}
+
+
+def _tm_sequence(lam):
+    """The poles in the order of :func:`full_stationarity`'s loop (upper members of the pairs by
+    decreasing imaginary part, then the real ones), each pair followed by its conjugate, every pole
+    twice."""
+    out = []
+    for k in np.argsort(-lam.imag, kind="stable"):
+        if lam[k].imag < 0:
+            continue
+        out += [lam[k], lam[k]] + ([np.conj(lam[k])] * 2 if lam[k].imag > 0 else [])
+    return np.array(out, dtype=complex)
 
 
 def _scale(a, b) -> complex:
