@@ -82,3 +82,32 @@ def test_rho_equals_the_pole_residue_form_where_that_is_well_conditioned(iterati
 
 def test_rho_bad_input():
     assert tm_rho(np.ones(2), np.ones(2), 0.0) == np.inf
+
+
+def test_full_model_rho_in_the_orthonormal_form_against_the_dense_reference(monkeypatch):
+    """The index-3 recursion (saddle-point solves, TMRecursion) against the dense reference of
+    test_so_h2_certified (derivative systems in (K, D, F, L), one Lyapunov/Sylvester solve), at
+    second-order BT on tcom(20), r = 3; the orthonormal form forced."""
+    import warnings
+
+    import morsuite as ms
+    from morsuite.linalg import h2_stationarity
+    from morsuite.linalg.h2 import norm_squared
+    from morsuite.linalg.h2_gradient import FullTarget, second_order_realization
+    from test_so_h2_certified import dense_rho
+
+    fom = ms.models.tcom(nc=20)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rom = ms.reducers.make("bt", fom, form="vv").reduce(3).rom
+    Mi = np.linalg.inv(rom.M)
+    K, D, F, L = Mi @ rom.K, Mi @ rom.D, Mi @ rom.F, rom.L
+    rho_ref, J_ref = dense_rho(fom, K, D, F, L)
+    n2, f2, _, _ = norm_squared(fom, {})
+    monkeypatch.setattr(h2_stationarity, "TM_CONDITION", 1.0)
+    st = h2_stationarity.full_stationarity(FullTarget(fom, n2, f2), *second_order_realization(K, D, F, L))
+    assert st["rho_form"] == "orthonormal"
+    assert 0.01 < rho_ref < 1.0
+    assert st["rho"] == pytest.approx(rho_ref, rel=1e-5)
+    assert st["rho_pole_residue"] == pytest.approx(rho_ref, rel=1e-5)
+    assert st["value"] == pytest.approx(J_ref, rel=1e-8)
