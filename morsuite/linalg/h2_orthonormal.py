@@ -63,7 +63,7 @@ def tm_rho(v, beta, J) -> float:
         return np.inf
     bh = beta / np.linalg.norm(beta)
     w = v - bh * (bh @ v)
-    return float(min(np.linalg.norm(w) / np.sqrt(J), np.inf))
+    return float(np.linalg.norm(w) / np.sqrt(J))
 
 
 def realization_tm_values(A_tm, beta, A, B, C):
