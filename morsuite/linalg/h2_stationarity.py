@@ -37,9 +37,15 @@ import numpy as np
 import scipy.linalg as sla
 
 from .h2 import modal_form, pole_residue_squared
+from .h2_orthonormal import TMRecursion, realization_tm_values, tm_realization, tm_rho
 from .refine import SaddleOperator, refined_solve
 
-__all__ = ["relative_gradient_rank_one", "full_stationarity", "saddle_solver_refined"]
+__all__ = ["relative_gradient_rank_one", "full_stationarity", "saddle_solver_refined", "TM_CONDITION"]
+
+#: the orthonormal form of rho is computed (SISO) when the scaled Gram matrix of the partial-fraction
+#: tangent vectors has a smallest-to-largest eigenvalue ratio below this (the partial-fraction form
+#: drops eigenvalues below 1e-12 of the largest); above it the two agreed to 1e-4 or better (docs/design/so_h2.md)
+TM_CONDITION = 1e-9
 
 
 def relative_gradient_rank_one(poles, C, B, Eb, cE, dE, J) -> float:
@@ -47,8 +53,9 @@ def relative_gradient_rank_one(poles, C, B, Eb, cE, dE, J) -> float:
     c_k) and ``B`` (n x m, rows b_k), and the error's values at the mirrored poles: ``Eb`` (p x n,
     :math:`E(-\\lambda_k)b_k`), ``cE`` (n x m, :math:`c_k^TE(-\\lambda_k)`), ``dE`` (n,
     :math:`c_k^TE'(-\\lambda_k)b_k`); ``J`` = :math:`\\|E\\|^2`. The poles must be closed under
-    conjugation with conjugate data. Returns ``inf`` for J <= 0. Cost: an eigen-decomposition of
-    order n(1 + m + p)."""
+    conjugation with conjugate data. Returns ``inf`` for J <= 0. Eigenvalues of the scaled Gram
+    matrix below 1e-12 of the largest are dropped: where poles cluster, rho can be underestimated
+    (:mod:`morsuite.linalg.h2_orthonormal`). Cost: an eigen-decomposition of order n(1 + m + p)."""
     if not J > 0:
         return np.inf
     lam = np.asarray(poles)
@@ -95,10 +102,18 @@ def saddle_solver_refined(full, steps: int):
             return lu.solve(rhs_right).reshape(-1), lu.solve(rhs_left, trans=True).reshape(-1)
         return (refined_solve(lu, rhs_right, False, s, op, steps=steps, ext=True),
                 refined_solve(lu, rhs_left, True, s, op, steps=steps, ext=True))
+
+    def right(s):
+        """rhs -> P(s)^-1 rhs (refined), with the LU at s (the solver keeps the last ones)."""
+        lu = full.solver.factor(s)
+        if not steps:
+            return lambda rhs: lu.solve(rhs).reshape(-1)
+        return lambda rhs: refined_solve(lu, rhs, False, s, op, steps=steps, ext=True)
+    solves.right = right
     return solves
 
 
-def full_stationarity(full, A, B, C, *, refine: int = 2) -> dict:
+def full_stationarity(full, A, B, C, *, refine: int = 2, orthonormal: bool = True) -> dict:
     r"""J, its floor and ρ of the real first-order model (A, B, C) (E = I) against the index-3 model
     ``full`` (a :class:`~morsuite.linalg.h2_gradient.FullTarget`): one LU per real pole or conjugate
     pair, right solves with :math:`Fb_k` and transposed solves with :math:`L^Tc_k`, each refined
@@ -106,7 +121,16 @@ def full_stationarity(full, A, B, C, *, refine: int = 2) -> dict:
     unrefined solves' errors dominate E: on tcom(2000) at r = 22 they gave 12.76 for an error of
     17.94); J by the pole-residue formula of :mod:`morsuite.linalg.h2` from the same solves.
 
-    Returns a dict: ``value`` (J), ``floor``, ``rho``, ``lu_count``, ``kappa`` (of the reduced
+    SISO with ``orthonormal`` (default) where the partial-fraction Gram matrix is ill-conditioned
+    (``gram_condition``, the smallest over the largest eigenvalue of the scaled Gram matrix of
+    :math:`1/(s - \lambda_k)`, :math:`\varphi_k/(s - \lambda_k)^2`, at most :data:`TM_CONDITION`):
+    ``rho`` in the orthonormal Takenaka-Malmquist basis of the tangent space
+    (:mod:`morsuite.linalg.h2_orthonormal`; two more refined right solves per pole with the same LU,
+    which triples the certificate's solves), accurate where poles cluster; ``rho_form`` says which.
+    The partial-fraction form (:func:`relative_gradient_rank_one`) is ``rho_pole_residue``.
+
+    Returns a dict: ``value`` (J), ``floor``, ``rho``, ``rho_pole_residue``, ``rho_form``,
+    ``gram_condition``, ``lu_count``, ``kappa`` (of the reduced
     model's eigenvectors)."""
     sysm = full.system
     md = modal_form(np.eye(A.shape[0]), A, B, C, np.zeros((C.shape[0], B.shape[1])))
@@ -119,11 +143,26 @@ def full_stationarity(full, A, B, C, *, refine: int = 2) -> dict:
     lu0 = full.lu_count
     solves = saddle_solver_refined(full, refine)
     done = np.zeros(n, bool)
+    cond = _partial_fraction_condition(lam, Cm[0] * Bm[:, 0]) if p == 1 and m == 1 else np.nan
+    siso = p == 1 and m == 1 and orthonormal and not cond > TM_CONDITION
+    if siso:    # the orthonormal basis of the tangent space, poles in the loop's order (h2_orthonormal)
+        seq = _tm_sequence(lam)
+        A_tm, beta = tm_realization(seq)
+        tm, v_tm, pos = TMRecursion(sysm), np.empty(seq.size, dtype=complex), 0
     for k in np.argsort(-lam.imag, kind="stable"):      # upper members first, their partners by conjugation
         if done[k]:
             continue
         s = -lam[k]
         x, w = solves(s, sysm.F @ Bm[k], sysm.L.T @ Cm[:, k])
+        if siso and lam[k].imag >= 0:     # the pair's conjugate is taken with it (_tm_sequence)
+            right = solves.right(s)
+            for _ in range(2):
+                v_tm[pos] = tm.step(right, s, beta[pos])
+                pos += 1
+            if lam[k].imag != 0:    # P(conj s)^-1 r = conj(P(s)^-1 conj(r)): the same LU
+                for _ in range(2):
+                    v_tm[pos] = tm.step(lambda r: np.conj(right(np.conj(r))), np.conj(s), beta[pos])
+                    pos += 1
         Tb[:, k], cT[k], dT[k] = sysm.L @ x, w @ sysm.F, -(w @ (2.0 * s * (sysm.M @ x) + sysm.D @ x))
         done[k] = True
         if lam[k].imag != 0:
@@ -145,9 +184,37 @@ def full_stationarity(full, A, B, C, *, refine: int = 2) -> dict:
     terms = np.array([Cm[:, k] @ Tb[:, k] for k in range(n)])
     e2, floor, _ = pole_residue_squared(full.norm2, full.norm2_floor, complex(np.sum(terms)),
                                         float(np.sum(np.abs(terms))), md)
-    rho = relative_gradient_rank_one(lam, Cm, Bm, Tb - TrB, cT - cTr, dT - dTr, e2)
-    return {"value": float(e2), "floor": float(floor), "rho": rho, "lu_count": full.lu_count - lu0,
-            "kappa": float(md.kappa)}
+    rho_pr = relative_gradient_rank_one(lam, Cm, Bm, Tb - TrB, cT - cTr, dT - dTr, e2)
+    rho = rho_pr
+    if siso:
+        rho = tm_rho(v_tm - realization_tm_values(A_tm, beta, A, B, C), beta, e2)
+    return {"value": float(e2), "floor": float(floor), "rho": rho, "rho_pole_residue": rho_pr,
+            "rho_form": "orthonormal" if siso else "pole-residue", "gram_condition": cond,
+            "lu_count": full.lu_count - lu0, "kappa": float(md.kappa)}
+
+
+def _partial_fraction_condition(lam, phi) -> float:
+    r"""Smallest over largest eigenvalue of the diagonally scaled Gram matrix of the SISO tangent
+    vectors :math:`1/(s - \lambda_k)`, :math:`\varphi_k/(s - \lambda_k)^2` (the inner products of
+    :func:`relative_gradient_rank_one`)."""
+    S = np.conj(lam)[:, None] + lam[None, :]
+    G = np.block([[-1.0 / S, phi[None, :] / S ** 2], [np.conj(phi)[:, None] / S ** 2,
+                                                       -2.0 * np.outer(np.conj(phi), phi) / S ** 3]])
+    d = np.sqrt(np.maximum(np.real(np.diag(G)), np.finfo(float).tiny))
+    w = np.linalg.eigvalsh(0.5 * (G + G.conj().T) / d[:, None] / d[None, :])
+    return float(max(w[0], 0.0) / w[-1])
+
+
+def _tm_sequence(lam):
+    """The poles in the order of :func:`full_stationarity`'s loop (upper members of the pairs by
+    decreasing imaginary part, then the real ones), each pair followed by its conjugate, every pole
+    twice."""
+    out = []
+    for k in np.argsort(-lam.imag, kind="stable"):
+        if lam[k].imag < 0:
+            continue
+        out += [lam[k], lam[k]] + ([np.conj(lam[k])] * 2 if lam[k].imag > 0 else [])
+    return np.array(out, dtype=complex)
 
 
 def _scale(a, b) -> complex:

@@ -34,7 +34,10 @@ Sato, arXiv 1803.04097; Schwerdtner and Voigt's SOBMOR, arXiv 2011.07567).
 The result is never worse than the start in exact H2 error (:func:`.h2_decision.decision_h2`).
 
 ``info``: ``start``, ``start_h2_error`` (+ ``_floor``), ``candidates``, ``descent``,
-``h2_error`` (exact, of the result) and ``h2_error_floor``, ``relative_gradient`` and ``gtol``,
+``h2_error`` (exact, of the result) and ``h2_error_floor``, ``relative_gradient`` and ``gtol``
+(SISO, where the partial-fraction form is ill-conditioned: in an orthonormal basis,
+:mod:`morsuite.linalg.h2_orthonormal`; ``relative_gradient_form``, ``gram_condition``; the partial-fraction
+form beside it as ``relative_gradient_pole_residue``),
 ``status``, ``returned_start``, ``iterations`` (``iterations_surrogate`` + ``iterations_full``),
 ``history`` and ``history_full``, ``stop_reason`` and ``stop_reason_full``; varpro: ``starts``
 (per start: surrogate errors, iterations, reason), ``descended_from``,
@@ -358,6 +361,8 @@ class SOH2(Reducer):
             "returned_start": bool(returned_start),
             "iterations": rec["iterations_surrogate"] + rec["iterations_full"],
             "converged": converged, "status": status, "relative_gradient": rho, "gtol": o["gtol"],
+            "relative_gradient_pole_residue": st.get("rho_pole_residue"), "relative_gradient_form": st.get("rho_form"),
+            "gram_condition": st.get("gram_condition"),
             "gradient_norm": gnorm, "max_pole_real": float(np.max(rom.poles().real)),
             "lu_count": lu_gram + lu_irka + lu_exact,
             "lu_breakdown": {"gramians": lu_gram, "irka": lu_irka, "exact": lu_exact},
