@@ -143,6 +143,9 @@ class IRKAFO(IRKA):
         "newton_starts": Option(3, "int", "surrogate iterates of smallest H2 error from which Newton's method "
                                 "is tried when the surrogate iteration does not come within newton_switch", low=1),
         "newton_maxit": Option(40, "int", "Newton steps per start", low=1),
+        "newton_early": Option(1e-4, "float", "the surrogate iteration hands over to Newton's method once its "
+                               "relative shift change is below this and has decreased over three steps (0: "
+                               "never; the iteration resumes if Newton fails)", low=0, high=1),
         "track_h2": Option(True, "bool", "exact H2 error of every iterate from the next iteration's solves "
                            "(needs the Gramian factors: computed once per model if not cached; the "
                            "certificate is computed either way)"),
@@ -252,7 +255,7 @@ class IRKAFO(IRKA):
             data = shifts_from_poles(modal.poles.copy(), modal.B, modal.C.T, self.fom.band)[:3]
             tb = info["time_breakdown"]
             self._start.update({"states": int(bt.states), "lu_count": int(info["lu_count"]),
-                                "lu_count_gramians": int(info.get("lu_count_gramians", info["lu_count"])),
+                                "lu_count_gramians": int(info.get("lu_count_shared", info["lu_count"])),
                                 "gramians_reused": bool(info["setup_reused"]), "time_s": time.perf_counter() - t0,
                                 "hsv": info["hsv"], "setup_cost": dict(info["setup_cost"]),
                                 "setup_paid": {k: float(tb.get(k, 0.0)) for k in info["setup_cost"]},
@@ -294,30 +297,38 @@ class IRKAFO(IRKA):
         o = self.options
         t0 = time.perf_counter()
         n = self._surrogate_states(r)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            sur = ModalSurrogate(self._bt_reducer().reduce(n).rom)
+        sur = self._modal_surrogate(n)
         smap = SurrogateMap(sur, self.fom.band)
         tol = min(o["tol"], 1e-8)
-        run = iterate(smap, *data, maxit=o["surrogate_maxit"], tol=tol, plain=o["surrogate_plain"],
-                      relaxation=o["surrogate_relaxation"], keep=o["newton_starts"])
+        kw = dict(maxit=o["surrogate_maxit"], tol=tol, plain=o["surrogate_plain"],
+                  relaxation=o["surrogate_relaxation"], keep=o["newton_starts"])
+        run = iterate(smap, *data, stop_below=o["newton_early"], **kw)
+        rec = {"states": sur.states, "kappa": sur.kappa, "newton": [], "newton_early": None}
+        found = []
+        if run["stopped_early"]:
+            # a contracting iteration near a fixed point: Newton's method (closed-form Jacobian) finishes it;
+            # if it does not converge, the iteration goes on where it stopped
+            nr = newton_fixed_point(smap, *run["last"], tol=1e-10, maxit=o["newton_maxit"])
+            rec["newton_early"] = {"at_iteration": run["iterations"], "measure": run["measure"]}
+            rec["newton"].append(_newton_record(nr, run["iterations"]))
+            if nr.converged and np.isfinite(nr.e2) and nr.jacobian is not None:
+                found.append(nr)
+            else:
+                run = iterate(smap, *run["last"], start=run["iterations"], best=run["best"], **kw)
         best = run["best"]
-        rec = {"states": sur.states, "kappa": sur.kappa, "converged": run["converged"],
-               "iterations": run["iterations"], "relaxed_from": run["relaxed_from"], "measure": run["measure"],
-               "best_h2": [float(np.sqrt(max(b[0], 0.0))) for b in best], "newton": []}
+        rec.update({"converged": run["converged"], "iterations": run["iterations"],
+                    "relaxed_from": run["relaxed_from"], "measure": run["measure"],
+                    "best_h2": [float(np.sqrt(max(b[0], 0.0))) for b in best]})
         data = run["last"] if run["converged"] else (best[0][2] if best else run["last"])
-        if run["converged"] and run["relaxed_from"] is None:
-            starts = []  # the plain iteration converges: so will the full model's
+        if found or (run["converged"] and run["relaxed_from"] is None):
+            starts = []  # Newton converged already, or the plain iteration converges: so will the full model's
         elif run["converged"] or run["measure"] < o["newton_switch"]:
             starts = [(np.nan, run["iterations"], run["last"])]  # polish, and the Jacobian for the chord
         else:
             starts = best[:o["newton_starts"]]
-        found = []
         for e2, it, start in starts:
             nr = newton_fixed_point(smap, *start, tol=1e-10, maxit=o["newton_maxit"])
-            rec["newton"].append({"start_iteration": it, "converged": nr.converged, "steps": nr.steps,
-                                  "residual": nr.residual,
-                                  "h2": float(np.sqrt(max(nr.e2, 0.0))) if np.isfinite(nr.e2) else None})
+            rec["newton"].append(_newton_record(nr, it))
             if nr.converged and np.isfinite(nr.e2) and nr.jacobian is not None:
                 found.append(nr)
         chart = jac = None
@@ -337,10 +348,25 @@ class IRKAFO(IRKA):
         if run["relaxed_from"] is not None:
             # the plain iteration did not converge against the surrogate: nor will it against the model
             self._fallback_relaxation = o["surrogate_relaxation"]
-        rec.update(evaluations=smap.evaluations, time_s=time.perf_counter() - t0,
+        rec.update(evaluations=smap.evaluations, analytic_jacobians=smap.analytic_jacobians,
+                   build_s=self._surrogate_build_s, time_s=time.perf_counter() - t0,
                    h2_of_start_data=rec["best_h2"][0] if rec["best_h2"] else None)
         self._surrogate = rec
         return data
+
+    def _modal_surrogate(self, n):
+        """The first-order BT with n states from the start's SVD, in modal form (no stability check:
+        balanced truncation of a stable model is stable); its time in ``_surrogate_build_s``."""
+        t0 = time.perf_counter()
+        bt = self._bt_reducer()
+        bt._gramians()
+        U, hsv, Vt = bt._svd("fo")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            rom, _ = bt._first_order(n, U, hsv, Vt)
+        sur = ModalSurrogate(rom)
+        self._surrogate_build_s = time.perf_counter() - t0
+        return sur
 
     # -- exact H2 error and certificate of the previous iterate -----------------
     def _track(self, alpha, bdir, cdir):
@@ -447,6 +473,7 @@ class IRKAFO(IRKA):
         h2 = {x["iteration"]: x for x in scored}
         info["time_breakdown"].update({"start": self._start.get("time_s", 0.0),
                                        "surrogate": (self._surrogate or {}).get("time_s", 0.0),
+                                       "surrogate_build": self._surrogate_build_s,
                                        **self._start.get("setup_paid", {})})
         if "setup_cost" in self._start:
             # the start's r-independent work (Gramian factors, SVD), as bt reports it: a reused reducer
@@ -473,6 +500,7 @@ class IRKAFO(IRKA):
         self._iterates, self._capture, self._data = [], [], None
         self._chord, self._norm2, self._fallback_relaxation = None, None, 1.0
         self._has_start, self._start, self._surrogate, self._decision_lus = False, {}, None, {"lu": 0}
+        self._surrogate_build_s = 0.0
         rom, info = super()._reduce(r)
         # the start's LR-ADI if paid now; the H2 evaluator's LUs of the best-iterate choice
         own, paid = int(info["lu_count"]) + self._decision_lus["lu"], int(self._start.get("lu_count", 0))
@@ -482,6 +510,11 @@ class IRKAFO(IRKA):
         info["status"] = ("converged" if info["converged"] else "stalled"
                           if info["engine_converged"] or info.get("cycle_detected") else "cap")
         return rom, info
+
+
+def _newton_record(nr, it):
+    return {"start_iteration": it, "converged": nr.converged, "steps": nr.steps, "residual": nr.residual,
+            "h2": float(np.sqrt(max(nr.e2, 0.0))) if np.isfinite(nr.e2) else None}
 
 
 def _sqrt(x):
