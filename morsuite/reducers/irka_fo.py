@@ -96,7 +96,7 @@ from ..rom import FirstOrderROM
 from .base import Option, make, register
 from .h2_decision import decision_h2
 from .irka import IRKA
-from .irka_surrogate import ModalSurrogate, SurrogateMap, fixed_point_jacobian, iterate, newton_fixed_point
+from .irka_fo_surrogate import SurrogatePhase
 from .shift_update import COMPLEX_TOL, shifts_from_poles
 
 __all__ = ["IRKAFO"]
@@ -105,7 +105,7 @@ __all__ = ["IRKAFO"]
 H2_TIE = 1e-6
 
 
-class IRKAFO(IRKA):
+class IRKAFO(SurrogatePhase, IRKA):
     """First-order tangential IRKA on the index-3 model's descriptor form (module docstring).
 
     ``reduce(r)`` returns a :class:`~morsuite.rom.FirstOrderROM` with r first-order states
@@ -271,103 +271,6 @@ class IRKAFO(IRKA):
                 self._surrogate = {"failed": f"{type(exc).__name__}: {exc}"}
         return data
 
-    def _surrogate_states(self, r) -> int:
-        """N: surrogate_states, or the smallest N >= 2r whose Hankel tail sum is below
-        surrogate_tol times the tail beyond r (at most surrogate_max_states and the number
-        of Hankel singular values bt keeps)."""
-        o = self.options
-        bt = self._bt_reducer()
-        hsv = np.asarray(bt._svd("fo")[1]) if bt._gram is not None else None
-        if hsv is None:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                hsv = np.asarray(bt.reduce(min(r, self.max_order())).info["hsv"])
-        n_ok = int(np.sum(hsv > bt.options["hsv_tol"] * hsv[0]))
-        if o["surrogate_states"]:
-            return min(o["surrogate_states"], n_ok)
-        tail = np.concatenate([np.cumsum(hsv[::-1])[::-1], [0.0]])  # tail[i] = sum_{j >= i} hsv_j
-        target = o["surrogate_tol"] * tail[min(r, tail.size - 1)]
-        ok = np.flatnonzero(tail <= target)
-        n = int(ok[0]) if ok.size else hsv.size
-        return int(max(min(max(n, 2 * r), o["surrogate_max_states"], n_ok), min(r, n_ok)))
-
-    def _surrogate_phase(self, r, data):
-        """Plain IRKA against the surrogate, then Newton from its best iterates if needed; the
-        data the full model starts from (module docstring)."""
-        o = self.options
-        t0 = time.perf_counter()
-        n = self._surrogate_states(r)
-        sur = self._modal_surrogate(n)
-        smap = SurrogateMap(sur, self.fom.band)
-        tol = min(o["tol"], 1e-8)
-        kw = dict(maxit=o["surrogate_maxit"], tol=tol, plain=o["surrogate_plain"],
-                  relaxation=o["surrogate_relaxation"], keep=o["newton_starts"])
-        run = iterate(smap, *data, stop_below=o["newton_early"], **kw)
-        rec = {"states": sur.states, "kappa": sur.kappa, "newton": [], "newton_early": None}
-        found = []
-        if run["stopped_early"]:
-            # a contracting iteration near a fixed point: Newton's method (closed-form Jacobian) finishes it;
-            # if it does not converge, the iteration goes on where it stopped
-            nr = newton_fixed_point(smap, *run["last"], tol=1e-10, maxit=o["newton_maxit"])
-            rec["newton_early"] = {"at_iteration": run["iterations"], "measure": run["measure"]}
-            rec["newton"].append(_newton_record(nr, run["iterations"]))
-            if nr.converged and np.isfinite(nr.e2) and nr.jacobian is not None:
-                found.append(nr)
-            else:
-                run = iterate(smap, *run["last"], start=run["iterations"], best=run["best"], **kw)
-        best = run["best"]
-        rec.update({"converged": run["converged"], "iterations": run["iterations"],
-                    "relaxed_from": run["relaxed_from"], "measure": run["measure"],
-                    "best_h2": [float(np.sqrt(max(b[0], 0.0))) for b in best]})
-        data = run["last"] if run["converged"] else (best[0][2] if best else run["last"])
-        if found or (run["converged"] and run["relaxed_from"] is None):
-            starts = []  # Newton converged already, or the plain iteration converges: so will the full model's
-        elif run["converged"] or run["measure"] < o["newton_switch"]:
-            starts = [(np.nan, run["iterations"], run["last"])]  # polish, and the Jacobian for the chord
-        else:
-            starts = best[:o["newton_starts"]]
-        for e2, it, start in starts:
-            nr = newton_fixed_point(smap, *start, tol=1e-10, maxit=o["newton_maxit"])
-            rec["newton"].append(_newton_record(nr, it))
-            if nr.converged and np.isfinite(nr.e2) and nr.jacobian is not None:
-                found.append(nr)
-        chart = jac = None
-        if found:
-            nr = min(found, key=lambda t: t.e2)
-            data, chart, jac = nr.data, nr.chart, nr.jacobian
-        elif run["converged"] and run["relaxed_from"] is not None:
-            chart, jac = fixed_point_jacobian(smap, *run["last"])  # Newton stalled: the relaxed fixed point
-        if jac is not None:
-            try:
-                step = np.linalg.inv(np.eye(jac.shape[0]) - jac)
-                self._chord = {"chart": chart, "step": step, "residual": np.inf, "steps": 0, "active": True,
-                               "dropped_at": None}
-                rec["jacobian_spectral_radius"] = float(np.max(np.abs(np.linalg.eigvals(jac))))
-            except np.linalg.LinAlgError:
-                pass
-        if run["relaxed_from"] is not None:
-            # the plain iteration did not converge against the surrogate: nor will it against the model
-            self._fallback_relaxation = o["surrogate_relaxation"]
-        rec.update(evaluations=smap.evaluations, analytic_jacobians=smap.analytic_jacobians,
-                   build_s=self._surrogate_build_s, time_s=time.perf_counter() - t0,
-                   h2_of_start_data=rec["best_h2"][0] if rec["best_h2"] else None)
-        self._surrogate = rec
-        return data
-
-    def _modal_surrogate(self, n):
-        """The first-order BT with n states from the start's SVD, in modal form (no stability check:
-        balanced truncation of a stable model is stable); its time in ``_surrogate_build_s``."""
-        t0 = time.perf_counter()
-        bt = self._bt_reducer()
-        bt._gramians()
-        U, hsv, Vt = bt._svd("fo")
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            rom, _ = bt._first_order(n, U, hsv, Vt)
-        sur = ModalSurrogate(rom)
-        self._surrogate_build_s = time.perf_counter() - t0
-        return sur
-
     # -- exact H2 error and certificate of the previous iterate -----------------
     def _track(self, alpha, bdir, cdir):
         """H2 error and interpolation residual of the iterate whose mirrored poles and residue
@@ -510,11 +413,6 @@ class IRKAFO(IRKA):
         info["status"] = ("converged" if info["converged"] else "stalled"
                           if info["engine_converged"] or info.get("cycle_detected") else "cap")
         return rom, info
-
-
-def _newton_record(nr, it):
-    return {"start_iteration": it, "converged": nr.converged, "steps": nr.steps, "residual": nr.residual,
-            "h2": float(np.sqrt(max(nr.e2, 0.0))) if np.isfinite(nr.e2) else None}
 
 
 def _sqrt(x):
