@@ -133,6 +133,8 @@ class IRKAFO(SurrogatePhase, IRKA):
                                 low=0, high=1, open_low=True, open_high=True),
         "surrogate_max_states": Option(600, "int", "largest automatic N (the dense work grows with N)", low=1),
         "surrogate_maxit": Option(600, "int", "iterations against the surrogate (plain, then relaxed)", low=1),
+        "surrogate_stall": Option(50, "int", "the surrogate iteration stops when its shift change has not halved "
+                                  "its smallest value for this many steps (0: never)", low=0),
         "surrogate_plain": Option(50, "int", "plain iterations against the surrogate before they are relaxed",
                                   low=1),
         "surrogate_relaxation": Option(0.5, "float", "step of the relaxed iterations against the surrogate",
