@@ -93,7 +93,8 @@ def sweep_rows(spec: str, orders, repeat: int = 3, echo=None) -> list:
                "surrogate_iterations": sur.get("iterations"),
                "analytic_jacobians": sur.get("analytic_jacobians"),
                "newton": [(x["converged"], x["steps"]) for x in sur.get("newton", [])],
-               "h2_tracked": info.get("h2_error"), "certificate": info["certificate"]["residual"]}
+               "h2_tracked": info.get("h2_error"), "certificate": info["certificate"]["residual"],
+               "time_breakdown_last": dict((reps[-1][0] if reps else info)["time_breakdown"])}
         rows.append(row)
         if echo is not None:
             echo(f"{spec} r={r}: own {own:.3f} s (median of {len(reps)}; first call {own1:.3f} s, of which the "

@@ -77,9 +77,12 @@ or within ``H2_TIE`` relative, go to the later one), with ``converged=False`` an
 Options: :attr:`IRKAFO.OPTIONS` (those of ``irka`` plus the ones above). Cost: the Gramian
 factors once per model (the start; ``info["lu_count_shared"]``, in ``lu_count`` when paid by this call),
 one sparse LU per real shift or conjugate pair per full-model iteration plus the certification round
-(``info["lu_count_own"]``); ``info["status"]``: converged, cap or stalled. Surrogate: :math:`O(Nr^2)` per step,
-:math:`O(N r^2 \cdot r(m+p))` per Newton step. Design notes and measurements:
-``docs/design/irka_fo.md``.
+(``info["lu_count_own"]``); ``info["status"]``: converged, cap or stalled. Surrogate: its BT projection
+(:math:`O(n_1\,\mathrm{rank}\,N)`, cached with headroom across r: ``time_breakdown["surrogate_projection"]``,
+part of ``setup_cost``), :math:`O(Nr^2 + r^3)` per step, about the same per Newton step (closed-form
+Jacobian, :mod:`.irka_jacobian`; forward differences, :math:`r(m+p)` steps' worth, where it does not apply).
+Design notes and measurements: ``docs/design/irka_fo.md`` (own time over the LU floor:
+``morsuite bench irka-fo-floor``, 2026-11-26).
 """
 
 from __future__ import annotations

@@ -37,7 +37,7 @@ derivative is the real or imaginary part of the holomorphic one.
 
 Cost: one complex QZ of the k x k pencil with both eigenvector sets, then
 :math:`O(k(1 + m + p)(Nk + k^2))` flops, against one map evaluation per real coordinate
-(:math:`2k(m + p - 1)` of them) for forward differences. Checked against central differences
+(about :math:`k(m + p - 1)` of them) for forward differences. Checked against central differences
 in ``tests/test_irka_jacobian.py``; measurements in ``docs/design/irka_fo.md`` (2026-11-26).
 """
 
