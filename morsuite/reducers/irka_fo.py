@@ -39,9 +39,11 @@ Strategy (``strategy``):
 ``"surrogate"`` (default)
     The iteration runs first against a dense surrogate, the first-order BT with N states
     (``surrogate_states``; 0 chooses N by the Hankel singular values, ``surrogate_tol``),
-    where an iteration costs dense work only (:mod:`.irka_surrogate`): plain IRKA, and if
-    that does not converge, Newton's method on the fixed-point map from its best iterates
-    (``newton_starts``). The full model then iterates from the surrogate's fixed point;
+    where an iteration costs dense work only (:mod:`.irka_surrogate`): plain IRKA, handed
+    over to Newton's method on the fixed-point map (closed-form Jacobian, :mod:`.irka_jacobian`)
+    once its shift change is below ``newton_early`` and decreasing; if it does not converge,
+    relaxed steps (``surrogate_relaxation``, stopped by ``surrogate_stall``) and Newton from its
+    best iterates (``newton_starts``). The full model then iterates from the surrogate's fixed point;
     where Newton was needed, each full-model step is a Newton step with the surrogate's
     Jacobian (a chord method: the full model's map differs from the surrogate's by far
     less than the step).
