@@ -300,24 +300,26 @@ class BT(Reducer):
         }
         return rom, info
 
-    def _projected(self, form, r, n_max, build):
+    def _projected(self, form, r, n_max, build, headroom=None):
         """Leading r x r blocks of the projected matrices, built for R >= r columns and cached.
 
         The balancing bases of order r are the first r columns of those of any
         order R >= r (the square-root scaling is per column; Householder QR of the
         first r columns gives the first r columns of Q, up to sign), so one
         projection at R serves every r <= R, and a sweep over r costs a few
-        projections (R doubles) plus slicing.
+        projections (R doubles) plus slicing. With ``headroom`` (irka-fo's surrogate,
+        whose order grows slowly with r) a new projection is built at ``headroom * r``
+        columns instead of doubling.
         """
         cache = self._gram["projected"].get(form)
         if cache is None or cache["R"] < r:
-            R = min(n_max, max(r, 2 * (cache["R"] if cache else 8)))
+            R = min(n_max, max(r, int(np.ceil(headroom * r)) if headroom else 2 * (cache["R"] if cache else 8)))
             cache = {"R": R, "mats": build(R)}
             self._gram["projected"][form] = cache
         *square, rows, cols = cache["mats"]  # build() returns the r x r ones, then W^T F, then L V
         return [X[:r, :r] for X in square] + [rows[:r], cols[:, :r]]
 
-    def _first_order(self, r, U, hsv, Vt):
+    def _first_order(self, r, U, hsv, Vt, headroom=None):
         n_ok = self._cap(len(hsv), hsv, None)
         r = self._cap(r, hsv, "Hankel singular values")
         c, ob, fom = self._gram["c"], self._gram["o"], self.fom
@@ -330,7 +332,7 @@ class BT(Reducer):
             # A T_r = [T_r2; -K T_r1 - D T_r2]; the G^T z part is annihilated by T_l2 in ker G
             return [Tl1.T @ Tr2 - Tl2.T @ (fom.K @ Tr1 + fom.D @ Tr2), Tl2.T @ fom.F, fom.L @ Tr1]
 
-        A, B, C = self._projected("first-order", r, n_ok, build)
+        A, B, C = self._projected("first-order", r, n_ok, build, headroom)
         return FirstOrderROM(None, A, B, C), r
 
     def _second_order(self, r, form):

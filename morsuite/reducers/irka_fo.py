@@ -39,9 +39,11 @@ Strategy (``strategy``):
 ``"surrogate"`` (default)
     The iteration runs first against a dense surrogate, the first-order BT with N states
     (``surrogate_states``; 0 chooses N by the Hankel singular values, ``surrogate_tol``),
-    where an iteration costs dense work only (:mod:`.irka_surrogate`): plain IRKA, and if
-    that does not converge, Newton's method on the fixed-point map from its best iterates
-    (``newton_starts``). The full model then iterates from the surrogate's fixed point;
+    where an iteration costs dense work only (:mod:`.irka_surrogate`): plain IRKA, handed
+    over to Newton's method on the fixed-point map (closed-form Jacobian, :mod:`.irka_jacobian`)
+    once its shift change is below ``newton_early`` and decreasing; if it does not converge,
+    relaxed steps (``surrogate_relaxation``, stopped by ``surrogate_stall``) and Newton from its
+    best iterates (``newton_starts``). The full model then iterates from the surrogate's fixed point;
     where Newton was needed, each full-model step is a Newton step with the surrogate's
     Jacobian (a chord method: the full model's map differs from the surrogate's by far
     less than the step).
@@ -77,9 +79,12 @@ or within ``H2_TIE`` relative, go to the later one), with ``converged=False`` an
 Options: :attr:`IRKAFO.OPTIONS` (those of ``irka`` plus the ones above). Cost: the Gramian
 factors once per model (the start; ``info["lu_count_shared"]``, in ``lu_count`` when paid by this call),
 one sparse LU per real shift or conjugate pair per full-model iteration plus the certification round
-(``info["lu_count_own"]``); ``info["status"]``: converged, cap or stalled. Surrogate: :math:`O(Nr^2)` per step,
-:math:`O(N r^2 \cdot r(m+p))` per Newton step. Design notes and measurements:
-``docs/design/irka_fo.md``.
+(``info["lu_count_own"]``); ``info["status"]``: converged, cap or stalled. Surrogate: its BT projection
+(:math:`O(n_1\,\mathrm{rank}\,N)`, cached with headroom across r: ``time_breakdown["surrogate_projection"]``,
+part of ``setup_cost``), :math:`O(Nr^2 + r^3)` per step, about the same per Newton step (closed-form
+Jacobian, :mod:`.irka_jacobian`; forward differences, :math:`r(m+p)` steps' worth, where it does not apply).
+Design notes and measurements: ``docs/design/irka_fo.md`` (own time over the LU floor:
+``morsuite bench irka-fo-floor``, 2026-11-26).
 """
 
 from __future__ import annotations
@@ -96,7 +101,7 @@ from ..rom import FirstOrderROM
 from .base import Option, make, register
 from .h2_decision import decision_h2
 from .irka import IRKA
-from .irka_surrogate import ModalSurrogate, SurrogateMap, fixed_point_jacobian, iterate, newton_fixed_point
+from .irka_fo_surrogate import SurrogatePhase
 from .shift_update import COMPLEX_TOL, shifts_from_poles
 
 __all__ = ["IRKAFO"]
@@ -105,7 +110,7 @@ __all__ = ["IRKAFO"]
 H2_TIE = 1e-6
 
 
-class IRKAFO(IRKA):
+class IRKAFO(SurrogatePhase, IRKA):
     """First-order tangential IRKA on the index-3 model's descriptor form (module docstring).
 
     ``reduce(r)`` returns a :class:`~morsuite.rom.FirstOrderROM` with r first-order states
@@ -133,6 +138,8 @@ class IRKAFO(IRKA):
                                 low=0, high=1, open_low=True, open_high=True),
         "surrogate_max_states": Option(600, "int", "largest automatic N (the dense work grows with N)", low=1),
         "surrogate_maxit": Option(600, "int", "iterations against the surrogate (plain, then relaxed)", low=1),
+        "surrogate_stall": Option(50, "int", "the surrogate iteration stops when its shift change has not halved "
+                                  "its smallest value for this many steps (0: never)", low=0),
         "surrogate_plain": Option(50, "int", "plain iterations against the surrogate before they are relaxed",
                                   low=1),
         "surrogate_relaxation": Option(0.5, "float", "step of the relaxed iterations against the surrogate",
@@ -143,6 +150,9 @@ class IRKAFO(IRKA):
         "newton_starts": Option(3, "int", "surrogate iterates of smallest H2 error from which Newton's method "
                                 "is tried when the surrogate iteration does not come within newton_switch", low=1),
         "newton_maxit": Option(40, "int", "Newton steps per start", low=1),
+        "newton_early": Option(1e-4, "float", "the surrogate iteration hands over to Newton's method once its "
+                               "relative shift change is below this and has decreased over three steps (0: "
+                               "never; the iteration resumes if Newton fails)", low=0, high=1),
         "track_h2": Option(True, "bool", "exact H2 error of every iterate from the next iteration's solves "
                            "(needs the Gramian factors: computed once per model if not cached; the "
                            "certificate is computed either way)"),
@@ -154,6 +164,7 @@ class IRKAFO(IRKA):
     def __init__(self, fom, **options):
         super().__init__(fom, **options)
         self._bt = None  # the start's BT reducer: its SVD serves every r and the surrogate
+        self._projection_cost = None  # seconds of the surrogate's cached BT projection, once built
 
     # -- orders ------------------------------------------------------------
     def max_order(self) -> int:
@@ -252,7 +263,7 @@ class IRKAFO(IRKA):
             data = shifts_from_poles(modal.poles.copy(), modal.B, modal.C.T, self.fom.band)[:3]
             tb = info["time_breakdown"]
             self._start.update({"states": int(bt.states), "lu_count": int(info["lu_count"]),
-                                "lu_count_gramians": int(info.get("lu_count_gramians", info["lu_count"])),
+                                "lu_count_gramians": int(info.get("lu_count_shared", info["lu_count"])),
                                 "gramians_reused": bool(info["setup_reused"]), "time_s": time.perf_counter() - t0,
                                 "hsv": info["hsv"], "setup_cost": dict(info["setup_cost"]),
                                 "setup_paid": {k: float(tb.get(k, 0.0)) for k in info["setup_cost"]},
@@ -266,80 +277,6 @@ class IRKAFO(IRKA):
                 # e.g. more shifts than the model's numerical order: the full model's iteration,
                 # which caps the order, starts from the start's data instead
                 self._surrogate = {"failed": f"{type(exc).__name__}: {exc}"}
-        return data
-
-    def _surrogate_states(self, r) -> int:
-        """N: surrogate_states, or the smallest N >= 2r whose Hankel tail sum is below
-        surrogate_tol times the tail beyond r (at most surrogate_max_states and the number
-        of Hankel singular values bt keeps)."""
-        o = self.options
-        bt = self._bt_reducer()
-        hsv = np.asarray(bt._svd("fo")[1]) if bt._gram is not None else None
-        if hsv is None:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                hsv = np.asarray(bt.reduce(min(r, self.max_order())).info["hsv"])
-        n_ok = int(np.sum(hsv > bt.options["hsv_tol"] * hsv[0]))
-        if o["surrogate_states"]:
-            return min(o["surrogate_states"], n_ok)
-        tail = np.concatenate([np.cumsum(hsv[::-1])[::-1], [0.0]])  # tail[i] = sum_{j >= i} hsv_j
-        target = o["surrogate_tol"] * tail[min(r, tail.size - 1)]
-        ok = np.flatnonzero(tail <= target)
-        n = int(ok[0]) if ok.size else hsv.size
-        return int(max(min(max(n, 2 * r), o["surrogate_max_states"], n_ok), min(r, n_ok)))
-
-    def _surrogate_phase(self, r, data):
-        """Plain IRKA against the surrogate, then Newton from its best iterates if needed; the
-        data the full model starts from (module docstring)."""
-        o = self.options
-        t0 = time.perf_counter()
-        n = self._surrogate_states(r)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            sur = ModalSurrogate(self._bt_reducer().reduce(n).rom)
-        smap = SurrogateMap(sur, self.fom.band)
-        tol = min(o["tol"], 1e-8)
-        run = iterate(smap, *data, maxit=o["surrogate_maxit"], tol=tol, plain=o["surrogate_plain"],
-                      relaxation=o["surrogate_relaxation"], keep=o["newton_starts"])
-        best = run["best"]
-        rec = {"states": sur.states, "kappa": sur.kappa, "converged": run["converged"],
-               "iterations": run["iterations"], "relaxed_from": run["relaxed_from"], "measure": run["measure"],
-               "best_h2": [float(np.sqrt(max(b[0], 0.0))) for b in best], "newton": []}
-        data = run["last"] if run["converged"] else (best[0][2] if best else run["last"])
-        if run["converged"] and run["relaxed_from"] is None:
-            starts = []  # the plain iteration converges: so will the full model's
-        elif run["converged"] or run["measure"] < o["newton_switch"]:
-            starts = [(np.nan, run["iterations"], run["last"])]  # polish, and the Jacobian for the chord
-        else:
-            starts = best[:o["newton_starts"]]
-        found = []
-        for e2, it, start in starts:
-            nr = newton_fixed_point(smap, *start, tol=1e-10, maxit=o["newton_maxit"])
-            rec["newton"].append({"start_iteration": it, "converged": nr.converged, "steps": nr.steps,
-                                  "residual": nr.residual,
-                                  "h2": float(np.sqrt(max(nr.e2, 0.0))) if np.isfinite(nr.e2) else None})
-            if nr.converged and np.isfinite(nr.e2) and nr.jacobian is not None:
-                found.append(nr)
-        chart = jac = None
-        if found:
-            nr = min(found, key=lambda t: t.e2)
-            data, chart, jac = nr.data, nr.chart, nr.jacobian
-        elif run["converged"] and run["relaxed_from"] is not None:
-            chart, jac = fixed_point_jacobian(smap, *run["last"])  # Newton stalled: the relaxed fixed point
-        if jac is not None:
-            try:
-                step = np.linalg.inv(np.eye(jac.shape[0]) - jac)
-                self._chord = {"chart": chart, "step": step, "residual": np.inf, "steps": 0, "active": True,
-                               "dropped_at": None}
-                rec["jacobian_spectral_radius"] = float(np.max(np.abs(np.linalg.eigvals(jac))))
-            except np.linalg.LinAlgError:
-                pass
-        if run["relaxed_from"] is not None:
-            # the plain iteration did not converge against the surrogate: nor will it against the model
-            self._fallback_relaxation = o["surrogate_relaxation"]
-        rec.update(evaluations=smap.evaluations, time_s=time.perf_counter() - t0,
-                   h2_of_start_data=rec["best_h2"][0] if rec["best_h2"] else None)
-        self._surrogate = rec
         return data
 
     # -- exact H2 error and certificate of the previous iterate -----------------
@@ -447,12 +384,16 @@ class IRKAFO(IRKA):
         h2 = {x["iteration"]: x for x in scored}
         info["time_breakdown"].update({"start": self._start.get("time_s", 0.0),
                                        "surrogate": (self._surrogate or {}).get("time_s", 0.0),
+                                       "surrogate_projection": self._surrogate_build_s,
                                        **self._start.get("setup_paid", {})})
         if "setup_cost" in self._start:
             # the start's r-independent work (Gramian factors, SVD), as bt reports it: a reused reducer
             # did not pay it in this call (benchmarks add it back for standalone times)
             info["setup_reused"] = bool(self._start["gramians_reused"])
-            info["setup_cost"] = self._start["setup_cost"]
+            info["setup_cost"] = dict(self._start["setup_cost"])
+            if self._projection_cost is not None:
+                # the surrogate's BT projection, cached with headroom and shared by later orders
+                info["setup_cost"]["surrogate_projection"] = self._projection_cost
         info.update({
             "converged": ok, "engine_converged": bool(converged), "returned_iteration": pick["iteration"],
             "returned_is_last": pick is last, "best_iteration": pick["iteration"],
@@ -473,6 +414,7 @@ class IRKAFO(IRKA):
         self._iterates, self._capture, self._data = [], [], None
         self._chord, self._norm2, self._fallback_relaxation = None, None, 1.0
         self._has_start, self._start, self._surrogate, self._decision_lus = False, {}, None, {"lu": 0}
+        self._surrogate_build_s = 0.0
         rom, info = super()._reduce(r)
         # the start's LR-ADI if paid now; the H2 evaluator's LUs of the best-iterate choice
         own, paid = int(info["lu_count"]) + self._decision_lus["lu"], int(self._start.get("lu_count", 0))
