@@ -217,7 +217,7 @@ def _add_run_parser(sub):
         from pathlib import Path
 
         from .studies import build_plan, load_spec, run
-        from .studies.batch import run_studies, shared_compute, usable_cores
+        from .studies.batch import shared_compute, usable_cores
         from .studies.cache import Cache
         from .studies.memo import SpecMemo
 
@@ -225,23 +225,20 @@ def _add_run_parser(sub):
         memo = SpecMemo(cache)  # validated models/methods: a cached study builds no model
         studies = [load_spec(path, memo=memo) for path in args.specs]  # every spec is valid before anything runs
         jobs = args.jobs if args.jobs is not None else 1 if args.scheduler else min(2, len(usable_cores()))
-        shared = None
         if not args.dry_run and jobs > 1 and args.scheduler is None and not args.no_cache:
-            # what any of the studies lacks, computed once and side by side on pinned workers
+            # what any of the studies lacks computed once, then each study's report, on pinned workers
             memo.flush()
-            shared = shared_compute(studies, cache, jobs, out=args.out, quiet=args.quiet)
-        if shared is not None and len(studies) > 1:  # their reports (and what is left) side by side too
-            run_studies(studies, shared, jobs, out=args.out, cache_dir=args.cache, quiet=args.quiet,
-                        rerender=args.rerender)
+            shared_compute(studies, cache, jobs, out=args.out, quiet=args.quiet,
+                           run_kwargs={"out": args.out, "cache_dir": args.cache, "quiet": args.quiet,
+                                       "rerender": args.rerender})
             return 0
         for study in studies:
             if args.dry_run:
                 print(f"{study.name} ({study.path}): {len(study.scenes)} scenes; would compute")
                 print("  " + "\n  ".join(build_plan(study).describe()))
                 continue
-            run(study, out=args.out, cache_dir=args.cache, use_cache=not args.no_cache,
-                jobs=1 if shared is not None else jobs, scheduler=args.scheduler, quiet=args.quiet,
-                rerender=args.rerender, shared=shared)
+            run(study, out=args.out, cache_dir=args.cache, use_cache=not args.no_cache, jobs=jobs,
+                scheduler=args.scheduler, quiet=args.quiet, rerender=args.rerender)
         return 0
 
     p = sub.add_parser("run", help="run study specs (TOML): figures, tables, manifest in OUT/NAME/")

@@ -15,15 +15,18 @@ cores) first computes what any of the studies lacks, all at once, with :func:`sh
   own graph, except for reducers with no r-independent work (``irka``) or a small one
   (``irka-projected``: its projector), whose orders are split into chunks
   (:data:`SPLIT`) that run side by side;
-- a model's norm tasks start when all of its reductions have finished (as in a study's own
-  graph: a ``bt`` reduction pays, and reports, the Gramian factors it computed);
+- a model's norm units start when the model's reductions that read its Gramian factors
+  (:data:`GRAMIAN_READERS`) and their own reductions have finished (in a study's own graph
+  they wait for all of the model's reductions: a ``bt`` reduction pays, and reports, the
+  Gramian factors it computed; the other reducers do not read them);
 - the longest units start first (their times in the results folder's manifests when a
   previous run left them, unknown units before known ones), each new unit on the first
-  free worker.
+  free worker; a study's own run (figures, tables, page) is a unit too, which starts as
+  soon as the units it reads are done.
 
-Every result goes into the artifact cache. Each study then runs as usual
+Every result goes into the artifact cache. Each study runs as usual
 (:func:`~morsuite.studies.runner.run` with ``shared=``): it finds its artifacts in the
-cache, and the first study (in command-line order) that uses an artifact computed here
+cache, and the first study (in command-line order) that reads an artifact computed here
 records it as computed, the later ones as reused, as in a sequential run. Failures are not
 cached; they are handed to the studies from memory, so that no study computes them again.
 
@@ -44,13 +47,18 @@ from pathlib import Path
 
 from .plan import build_plan
 
-__all__ = ["Shared", "shared_compute", "run_studies", "split_claims", "SPLIT", "usable_cores"]
+__all__ = ["Shared", "shared_compute", "split_claims", "SPLIT", "usable_cores"]
 
 #: Reducers whose orders are split into chunks run side by side: r-independent work none
 #: (``irka``) or small (``irka-projected``: its projector, 0.3 s on dsms(1000), paid per chunk).
 SPLIT = {"irka": 1, "irka-projected": 3}
 
 RUN_BY = "processes (shared)"
+
+#: Reducers that read the model's LR-ADI Gramian factors: a model's norm units (which read them
+#: too) start after these reductions, so that a ``bt`` reduction pays and reports its own LR-ADI
+#: where it runs first (the rule of a study's own graph).
+GRAMIAN_READERS = ("bt", "so-h2", "irka-fo")
 
 
 def usable_cores() -> list:
@@ -117,6 +125,7 @@ class _Unit:
     rom_from: list = field(default_factory=list)   # (reduce unit ids or None, {r: key}) whose entries it needs
     keys: dict = field(default_factory=dict)       # r -> key (group units) or {None: key}
     label: str = ""
+    gramians: bool = False    # reads the model's Gramian factors (GRAMIAN_READERS, the norms)
 
 
 def _previous_times(out: Path) -> dict:
@@ -128,12 +137,18 @@ def _previous_times(out: Path) -> dict:
             arts = json.loads(path.read_text()).get("artifacts") or []
         except (OSError, ValueError):
             continue
+        arts = [a for a in arts if isinstance(a, dict)]
+        opts = {a.get("id"): json.dumps(a.get("options"), sort_keys=True) for a in arts if a.get("kind") == "reduction"}
         for a in arts:
-            if not isinstance(a, dict):
-                continue
             if a.get("kind") == "reduction" and a.get("reducer"):
-                k = (a.get("model"), a["reducer"], json.dumps(a.get("options"), sort_keys=True), a.get("r_requested"))
-                times[k] = max(times.get(k, 0.0), float(a.get("wall_s") or a.get("time_s") or 0.0))
+                k = (a.get("model"), a["reducer"], opts[a.get("id")], a.get("r_requested"))
+            elif a.get("kind") == "norm_error" and a.get("reduction") in opts:
+                k = ("norm", a.get("model"), a.get("reducer"), opts[a["reduction"]], a.get("r_requested"), a.get("norm"))
+            else:
+                continue
+            t = a.get("wall_s") or a.get("time_s")
+            if isinstance(t, (int, float)):
+                times[k] = max(times.get(k, 0.0), float(t))
     return times
 
 
@@ -179,7 +194,8 @@ def _units(plans, cache, prev):
                       (g.model.source, g.method.reducer, g.method.options, part, {r: keys[r] for r in part},
                        cache_root, RUN_BY), "reduction", g.model.model_id,
                       float("inf") if len(known) < len(part) else sum(known), keys={r: keys[r] for r in part},
-                      label=f"{g.method.reducer} {g.model.name} r = {part}"))
+                      label=f"{g.method.reducer} {g.model.name} r = {part}",
+                      gramians=g.method.reducer in GRAMIAN_READERS))
             for r in part:
                 reduce_unit[(gid, r)] = uid
     for plan in plans:
@@ -187,7 +203,8 @@ def _units(plans, cache, prev):
             uid = "norm-" + n.key
             if uid not in units and cache.get_json("model_norm", n.key) is None:
                 add(_Unit(uid, "morsuite.studies.norms:model_norm", (n.model.source, n.kind, n.options, n.key, RUN_BY),
-                          "model_norm", n.model.model_id, 1.0, keys={None: n.key}, label=f"{n.kind} norm {n.model.name}"))
+                          "model_norm", n.model.model_id, 1.0, keys={None: n.key}, label=f"{n.kind} norm {n.model.name}",
+                          gramians=True))
         for ng in plan.norm_groups.values():
             red = plan.reduces[ng.reduce]
             by_src = {}  # the norms of a reduce unit's orders (None: cached reductions) form one unit
@@ -195,16 +212,20 @@ def _units(plans, cache, prev):
                 if ng.keys[r] not in planned and cache.get_json("norm_error", ng.keys[r]) is None:
                     planned.add(ng.keys[r])
                     by_src.setdefault(reduce_unit.get((ng.reduce, r)), []).append(r)
+            opts = json.dumps(red.method.full_options, sort_keys=True)
             for src, part in by_src.items():
+                est = [prev.get(("norm", red.model.name, red.method.reducer, opts, r, ng.kind)) for r in part]
                 add(_Unit(f"normerr-{ng.keys[part[0]]}", "morsuite.studies.norms:error_norms",
                           (red.model.source, ng.kind, ng.options, part, {r: ng.keys[r] for r in part}, RUN_BY),
-                          "norm_error", red.model.model_id, 2.0 * len(part), keys={r: ng.keys[r] for r in part},
-                          rom_from=[(src, {r: red.keys[r] for r in part})],
-                          label=f"{ng.kind} errors {red.method.reducer} {red.model.name} r = {part}"))
-    # the norm units of a model wait for all of its reduction units
+                          "norm_error", red.model.model_id, float("inf") if None in est else sum(est),
+                          keys={r: ng.keys[r] for r in part}, rom_from=[(src, {r: red.keys[r] for r in part})],
+                          label=f"{ng.kind} errors {red.method.reducer} {red.model.name} r = {part}",
+                          gramians=True))
+    # a model's norm units wait for the reduction units that read its Gramian factors (and their own)
     for u in units.values():
         if u.kind in ("model_norm", "norm_error"):
-            u.deps = {v.id for v in units.values() if v.kind == "reduction" and v.model == u.model}
+            u.deps = {v.id for v in units.values() if v.kind == "reduction" and v.model == u.model
+                      and (v.gramians or any(src == v.id for src, _ in u.rom_from))}
     return units
 
 
@@ -260,7 +281,7 @@ def _store(cache, shared, u, value):
         shared.fresh.add((u.kind, key))
 
 
-def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True) -> Shared:
+def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, run_kwargs=None) -> Shared:
     """Compute what ``studies`` lack, all at once, on ``jobs`` pinned worker processes (module docstring).
 
     Parameters
@@ -271,6 +292,11 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True) 
     out : results root whose ``*/manifest.json`` give the previous run's times (the longest units
         start first); None: no estimates
     quiet : no log lines
+    run_kwargs : None (default): compute only. A dict of keyword arguments of
+        :func:`~morsuite.studies.runner.run` (``out`` required): each study (from a spec file,
+        ``study.path``) is also run, on the same workers, as soon as what it reads is computed
+        (figures and tables while other units still compute), with its share of what was
+        computed (:func:`split_claims`); the results folder's index is written at the end.
 
     Returns
     -------
@@ -281,22 +307,43 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True) 
     t0 = time.perf_counter()
     plans = [build_plan(s) for s in studies]
     units = _units(plans, cache, _previous_times(out) if out is not None else {})
+    n_units = len(units)
     shared = Shared(jobs)
     cores = usable_cores()
-    log = []
+    shared.record = {"jobs": jobs, "cores": cores, "pinned": True, "units": n_units, "run_by": RUN_BY}
+    log, owners = [], {}
+    if run_kwargs is not None and not units:  # all cached: the reports in this process, as without workers
+        from .runner import run
+        for study in studies:
+            run(study, **run_kwargs)
+        return shared
+    if run_kwargs is not None:
+        planned = {(u.kind, k) for u in units.values() for k in u.keys.values()}
+        for study, plan in zip(studies, plans):
+            mine = {c for c in _claims(plan) if c in planned}
+            own, planned = mine & planned, planned - mine
+            uid = f"study-{study.name}"
+            units[uid] = _Unit(uid, "morsuite.studies.batch:_run_study", (str(study.path), dict(run_kwargs)),
+                               "study", "", _report_estimate(run_kwargs["out"], study.name),
+                               deps={u.id for u in units.values() if u.kind != "study"
+                                     and any((u.kind, k) in mine for k in u.keys.values())},
+                               label=f"study {study.name}")
+            owners[uid] = own
     if units:
-        _schedule(units, cache, shared, jobs, cores, log, quiet)
-    busy = sum(e["wall_s"] for e in log)
+        _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0)
+    busy = sum(e["wall_s"] for e in log if e["kind"] != "study")
     wall = time.perf_counter() - t0
-    shared.record = {"jobs": jobs, "cores": cores, "pinned": True, "units": len(units), "wall_s": wall,
-                     "busy_s": busy, "run_by": RUN_BY, "log": log}
+    shared.record = {**shared.record, "wall_s": wall, "busy_s": busy, "log": log}
+    if run_kwargs is not None:
+        from .pages import write_index
+        write_index(run_kwargs["out"])
     if not quiet:
-        print(f"morsuite run: {len(units)} units of work shared by {len(studies)} studies on {jobs} worker "
+        print(f"morsuite run: {n_units} units of work shared by {len(studies)} studies on {jobs} worker "
               f"processes: {wall:.1f} s ({busy:.1f} s busy)", file=sys.stderr)
     return shared
 
 
-def _schedule(units, cache, shared, jobs, cores, log, quiet):
+def _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0):
     """List scheduling: the longest ready unit goes to the first free worker."""
     ctx = multiprocessing.get_context("spawn")
     counter = ctx.Value("i", 0)
@@ -306,7 +353,12 @@ def _schedule(units, cache, shared, jobs, cores, log, quiet):
         while pending or running:
             ready = sorted((u for u in pending.values() if u.deps <= done), key=lambda u: -u.estimate)
             for u in ready[: max(0, jobs - len(running))]:
-                args = u.args + ((_rom_entries(cache, u.rom_from, results),) if u.kind == "norm_error" else ())
+                if u.kind == "study":  # its share: what it claims of what was computed, the failures it may meet
+                    part = Shared(shared.jobs, owners[u.id] & shared.fresh, dict(shared.failed),
+                                  {**shared.record, "started_after_s": time.perf_counter() - t0})
+                    args = u.args + (part,)
+                else:
+                    args = u.args + ((_rom_entries(cache, u.rom_from, results),) if u.kind == "norm_error" else ())
                 running[pool.submit(_run_unit, u.fn, args, {})] = u
                 del pending[u.id]
             if not running:  # nothing ready and nothing running: a dependency never ran
@@ -315,15 +367,16 @@ def _schedule(units, cache, shared, jobs, cores, log, quiet):
             for fut in finished:
                 u = running.pop(fut)
                 value, rec = fut.result()
-                results[u.id] = value
                 done.add(u.id)
-                _store(cache, shared, u, value)
+                if u.kind != "study":
+                    results[u.id] = value
+                    _store(cache, shared, u, value)
                 log.append({"unit": u.label, "kind": u.kind, **rec})
                 if not quiet:
                     print(f"  {rec['wall_s']:7.1f} s  core {rec['cores']}  {u.label}", file=sys.stderr)
 
 
-# -- the studies' own runs, side by side ----------------------------------------
+# -- the studies' own runs ---------------------------------------------------------
 def _claims(plan) -> list:
     """``(kind, key)`` of every computed artifact ``plan`` reads, in the order a study claims them."""
     out = [("fom", f.key) for f in plan.foms.values()]
@@ -346,7 +399,7 @@ def split_claims(studies, shared: Shared) -> list:
 
 
 def _run_study(path, kwargs, shared):
-    """Worker: load the spec (validation memo from the cache) and run it; its manifest's timing and notes."""
+    """Worker: load the spec (validation memo from the cache) and run it; its manifest's timing."""
     from .cache import Cache
     from .memo import SpecMemo
     from .runner import run
@@ -359,31 +412,8 @@ def _run_study(path, kwargs, shared):
 
 
 def _report_estimate(out, name) -> float:
+    """The last run's ``report_s`` of study ``name`` under ``out`` (inf when unknown)."""
     try:
         return float(json.loads((Path(out) / name / "manifest.json").read_text())["timing"]["report_s"])
     except (OSError, ValueError, KeyError, TypeError):
         return float("inf")
-
-
-def run_studies(studies, shared: Shared, jobs: int, **kwargs) -> list:
-    """Run each study (:func:`~morsuite.studies.runner.run`, with its share of ``shared``) on
-    ``jobs`` pinned worker processes, the slowest report first (by the last run's ``report_s``);
-    then write the results folder's index. The studies must come from spec files (``study.path``).
-
-    Returns each study's name, timing and file count, in the order given. Cost: the studies'
-    own (figures, tables, what ``shared`` did not compute), a worker's start-up (imports) per worker.
-    """
-    from .pages import write_index
-
-    parts = split_claims(studies, shared)
-    order = sorted(range(len(studies)), key=lambda i: -_report_estimate(kwargs["out"], studies[i].name))
-    ctx = multiprocessing.get_context("spawn")
-    counter = ctx.Value("i", 0)
-    results = [None] * len(studies)
-    with ProcessPoolExecutor(max_workers=min(jobs, len(studies)), mp_context=ctx, initializer=_pin,
-                             initargs=(counter, usable_cores())) as pool:
-        futures = {pool.submit(_run_study, str(studies[i].path), kwargs, parts[i]): i for i in order}
-        for fut, i in futures.items():
-            results[i] = fut.result()
-    write_index(kwargs["out"])
-    return results

@@ -222,7 +222,8 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
                                        "report_s": t_report, "total_s": time.perf_counter() - t_start}, rerender)
     if shared is not None:  # what the studies of this command computed together, before this one ran
         manifest["shared_compute"] = {k: v for k, v in shared.record.items() if k != "log"}
-        manifest["timing"]["shared_compute_s"] = shared.record.get("wall_s")
+        # the shared phase's time before this study's own run started (all of it when run after it)
+        manifest["timing"]["shared_compute_s"] = shared.record.get("started_after_s", shared.record.get("wall_s"))
     _page(study, shown, summary, manifest, outdir, old, files, rerender)
     keep = {str(p.relative_to(outdir)) for p in files} | {"manifest.json"}
     _remove_stale(outdir, old, keep)
