@@ -164,3 +164,25 @@ def test_claims_go_to_the_first_study_that_reads_them(tmp_path):
     one, two = split_claims([sa, sb], Shared(2, fresh))
     assert one.fresh == {("reduction", ga.keys[4])} and two.fresh == {("reduction", gb.keys[8])}
     assert one.claim("reduction", ga.keys[4]) and not one.claim("reduction", ga.keys[4])
+
+
+def test_each_unit_runs_on_one_pinned_core(tmp_path):
+    """shared_compute alone: every unit's worker had one core (its own, in turn), IRKA's
+    automatic solver threads resolved to 1 there, and the results are in the cache."""
+    from morsuite.studies import load_spec
+    from morsuite.studies.batch import shared_compute, usable_cores
+    from morsuite.studies.cache import Cache
+    from morsuite.studies.plan import build_plan
+
+    (tmp_path / "a.toml").write_text(A)
+    study = load_spec(tmp_path / "a.toml")
+    cache = Cache(tmp_path / "cache")
+    shared = shared_compute([study], cache, jobs=2)
+    log = shared.record["log"]
+    assert log and all(len(e["cores"]) == 1 for e in log)
+    if len(usable_cores()) >= 2:
+        assert {e["cores"][0] for e in log} <= set(usable_cores()) and len({e["pid"] for e in log}) <= 2
+    g = next(g for g in build_plan(study).reduces.values() if g.method.reducer == "irka")
+    for r in g.rs:
+        arrays, meta = cache.get("reduction", g.keys[r])
+        assert meta["info"]["solver_threads"] == 1 and ("reduction", g.keys[r]) in shared.fresh
