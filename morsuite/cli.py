@@ -217,26 +217,37 @@ def _add_run_parser(sub):
         from pathlib import Path
 
         from .studies import build_plan, load_spec, run
+        from .studies.batch import shared_compute, usable_cores
         from .studies.cache import Cache
         from .studies.memo import SpecMemo
 
         cache = Cache(args.cache or Path(args.out) / ".cache", read=not args.no_cache)
         memo = SpecMemo(cache)  # validated models/methods: a cached study builds no model
         studies = [load_spec(path, memo=memo) for path in args.specs]  # every spec is valid before anything runs
+        jobs = args.jobs if args.jobs is not None else 1 if args.scheduler else min(2, len(usable_cores()))
+        if not args.dry_run and jobs > 1 and args.scheduler is None and not args.no_cache:
+            # what any of the studies lacks computed once, then each study's report, on pinned workers
+            memo.flush()
+            shared_compute(studies, cache, jobs, out=args.out, quiet=args.quiet,
+                           run_kwargs={"out": args.out, "cache_dir": args.cache, "quiet": args.quiet,
+                                       "rerender": args.rerender})
+            return 0
         for study in studies:
             if args.dry_run:
                 print(f"{study.name} ({study.path}): {len(study.scenes)} scenes; would compute")
                 print("  " + "\n  ".join(build_plan(study).describe()))
                 continue
-            run(study, out=args.out, cache_dir=args.cache, use_cache=not args.no_cache, jobs=args.jobs,
+            run(study, out=args.out, cache_dir=args.cache, use_cache=not args.no_cache, jobs=jobs,
                 scheduler=args.scheduler, quiet=args.quiet, rerender=args.rerender)
         return 0
 
     p = sub.add_parser("run", help="run study specs (TOML): figures, tables, manifest in OUT/NAME/")
     p.add_argument("specs", nargs="+", metavar="SPEC", help="study spec files, e.g. studies/paper_*.toml")
     p.add_argument("--out", default="results", metavar="DIR", help="results root (default: results)")
-    p.add_argument("--jobs", type=int, default=1, metavar="N",
-                   help="local worker processes (default 1: Dask's synchronous scheduler, cleanest timings)")
+    p.add_argument("--jobs", type=int, default=None, metavar="N",
+                   help="worker processes, each pinned to a core (default: the usable cores, at most 2); "
+                        "with N > 1 what the studies lack is computed once, side by side, before their reports "
+                        "(morsuite.studies.batch); 1: one study after the other on Dask's synchronous scheduler")
     p.add_argument("--scheduler", metavar="ADDRESS", help="dask.distributed scheduler, e.g. tcp://HOST:8786")
     p.add_argument("--cache", metavar="DIR", help="artifact cache (default: OUT/.cache)")
     p.add_argument("--no-cache", action="store_true", help="recompute everything (fresh entries replace the cache)")

@@ -230,7 +230,7 @@ def test_the_study_modules_flow_one_way():
     downstream of it (validators sit below what they validate)."""
     order = ["checks", "norm_options", "time_options", "kinds", "spec", "cache", "memo", "plan", "task_common",
              "tasks", "norms", "timedomain", "execute", "time_figures", "scenes", "results", "outputs",
-             "manifest", "pages", "runner", "compare"]
+             "manifest", "pages", "runner", "batch", "compare"]
     rank = {f"morsuite.studies.{m}": i for i, m in enumerate(order)}
     back = [(i, t) for i, t, _ in edges() if i in rank and t in rank and rank[t] > rank[i]]
     assert not back, f"study modules importing downstream: {back}"

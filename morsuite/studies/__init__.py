@@ -19,8 +19,10 @@ Modules, in the order data flows through them (each imports only modules before 
   :mod:`.results` (lookups, the summary), :mod:`.outputs` (figures and tables keyed by
   content, reused when unchanged), :mod:`.manifest`, :mod:`.environment`, :mod:`.pages`
   (the study's ``index.html`` and the results folder's);
-- :mod:`.runner` (the whole run); :mod:`.compare` (``morsuite compare``: a comparison
-  study of one model, built in memory, written and run).
+- :mod:`.runner` (the whole run); :mod:`.batch` (several studies at once: what any of them
+  lacks computed once on worker processes pinned to the cores, then each study's run; the
+  command line's default); :mod:`.compare` (``morsuite compare``: a comparison study of one
+  model, built in memory, written and run).
 
 A re-run does nothing twice: results come from the cache, and figures and tables
 whose data, style and software did not change are left as they are (``run(...,

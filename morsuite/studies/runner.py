@@ -85,7 +85,7 @@ def _remove_stale(outdir: Path, old: dict, keep: set):
 
 
 def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: int = 1, scheduler=None,
-        quiet: bool = False, formats=("png", "pdf"), rerender: bool = False) -> RunResult:
+        quiet: bool = False, formats=("png", "pdf"), rerender: bool = False, shared=None) -> RunResult:
     """Run a study.
 
     Parameters
@@ -101,6 +101,11 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
     rerender : draw every figure and write every table again, even those whose data, style and
         software did not change since the last run (default False: those are reused, their
         files left untouched). Files whose bytes come out the same are not rewritten either way.
+    shared : a :class:`~morsuite.studies.batch.Shared` from
+        :func:`~morsuite.studies.batch.shared_compute` over several studies (this one among
+        them): its artifacts are taken from the cache, recorded as computed by the first study
+        that uses them, and its failures are taken as they are; the manifest records it as
+        ``shared_compute``. Default None.
 
     Cost: one sparse LU per frequency of each full-order response, the reducers' own
     LUs, the norms' (:mod:`morsuite.studies.norms`) and one LU per full-model simulation
@@ -144,6 +149,8 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
             if (hit := cache.get("simulation", sim.key)) is not None}
     sim_errors, missing_sims = _lookup(cache, "sim_error", plan.sim_groups,
                                        lambda arrays, meta: {**meta, **arrays, "cached": True})
+    if shared is not None:
+        _take_shared(shared, plan, foms, (reductions, missing), norms, (norm_errors, missing_norms), sims)
 
     # -- the graph: only what is missing (nothing at all, and no dask, for a cached study)
     t0 = time.perf_counter()
@@ -213,6 +220,10 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
 
     manifest = make_manifest(study, plan, choice, cache, res, records, files, outdir, notes, started, {"validate_s": t_validated - t_start, "compute_s": t_compute,
                                        "report_s": t_report, "total_s": time.perf_counter() - t_start}, rerender)
+    if shared is not None:  # what the studies of this command computed together, before this one ran
+        manifest["shared_compute"] = {k: v for k, v in shared.record.items() if k != "log"}
+        # the shared phase's time before this study's own run started (all of it when run after it)
+        manifest["timing"]["shared_compute_s"] = shared.record.get("started_after_s", shared.record.get("wall_s"))
     _page(study, shown, summary, manifest, outdir, old, files, rerender)
     keep = {str(p.relative_to(outdir)) for p in files} | {"manifest.json"}
     _remove_stale(outdir, old, keep)
@@ -236,6 +247,36 @@ def _page(study, shown, summary, manifest, outdir, old, files, rerender):
     manifest["reused" if rec["reused"] else "computed"].append(rec["id"])
     manifest["files"] = sorted(manifest["files"] + [PAGE])
     files.append(outdir / PAGE)
+
+
+def _take_shared(shared, plan, foms, reductions, norms, norm_errors, sims):
+    """Mark what ``shared`` computed as computed (first study to use it), and add its failures."""
+    for fid, f in plan.foms.items():
+        if fid in foms and shared.claim("fom", f.key):
+            foms[fid]["cached"] = False
+    for nid, n in plan.norms.items():
+        if nid in norms and shared.claim("model_norm", n.key):
+            norms[nid]["cached"] = False
+        elif nid not in norms and ("model_norm", n.key) in shared.failed:
+            norms[nid] = dict(shared.failed[("model_norm", n.key)])
+    for sid, sim in plan.sims.items():
+        if sid in sims and shared.claim("simulation", sim.key):
+            sims[sid]["cached"] = False
+        elif sid not in sims and ("simulation", sim.key) in shared.failed:
+            sims[sid] = dict(shared.failed[("simulation", sim.key)])
+    for kind, (found, missing), groups in (("reduction", reductions, plan.reduces),
+                                           ("norm_error", norm_errors, plan.norm_groups)):
+        for gid, g in groups.items():
+            for r in g.rs:
+                key = g.keys[r]
+                if r in found.get(gid, {}):
+                    if shared.claim(kind, key):
+                        found[gid][r]["cached"] = False
+                elif (kind, key) in shared.failed:
+                    found.setdefault(gid, {})[r] = dict(shared.failed[(kind, key)])
+                    missing[gid].remove(r)
+                    if not missing[gid]:
+                        del missing[gid]
 
 
 def _lookup(cache, kind, groups, entry, json_only=False):

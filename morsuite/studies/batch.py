@@ -1,0 +1,419 @@
+"""Several studies computed together on worker processes, one core each, before their reports.
+
+``morsuite run A.toml B.toml ... --jobs 2`` (the command line's default on two or more
+cores) first computes what any of the studies lacks, all at once, with :func:`shared_compute`:
+
+- every artifact is planned per study (:func:`~morsuite.studies.plan.build_plan`) and keyed by
+  content, so what several studies or scenes share (a reduced model of the same model,
+  method, options and r, its exact norms, the model's norms, a full-order response, a
+  full-model simulation) is one unit of work, done once;
+- units run on ``jobs`` worker processes, each pinned to a core of its own (so the
+  reducers' automatic thread counts, e.g. IRKA's ``solver_threads``, resolve to 1: every
+  timing of such a run is a single-threaded run on a core of its own, the other core
+  running another single-threaded unit; the manifest records this as ``shared_compute``);
+- a reducer group's orders run in increasing order on one reducer instance, as in a study's
+  own graph, except for reducers with no r-independent work (``irka``) or a small one
+  (``irka-projected``: its projector), whose orders are split into chunks
+  (:data:`SPLIT`) that run side by side;
+- a model's norm units start when the model's reductions that read its Gramian factors
+  (:data:`GRAMIAN_READERS`) and their own reductions have finished (in a study's own graph
+  they wait for all of the model's reductions: a ``bt`` reduction pays, and reports, the
+  Gramian factors it computed; the other reducers do not read them);
+- the longest units start first (their times in the results folder's manifests when a
+  previous run left them, unknown units before known ones), each new unit on the first
+  free worker; a study's own run (figures, tables, page) is a unit too, which starts as
+  soon as the units it reads are done.
+
+Every result goes into the artifact cache. Each study runs as usual
+(:func:`~morsuite.studies.runner.run` with ``shared=``): it finds its artifacts in the
+cache, and the first study (in command-line order) that reads an artifact computed here
+records it as computed, the later ones as reused, as in a sequential run. Failures are not
+cached; they are handed to the studies from memory, so that no study computes them again.
+
+Cost: the units' own; each worker process builds the models it meets (once) and computes
+their Gramian factors when a unit needs them (once per worker and model).
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+import sys
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .plan import build_plan
+
+__all__ = ["Shared", "shared_compute", "split_claims", "SPLIT", "usable_cores"]
+
+#: Reducers whose orders are split into chunks run side by side: r-independent work none
+#: (``irka``) or small (``irka-projected``: its projector, 0.3 s on dsms(1000), paid per chunk).
+SPLIT = {"irka": 1, "irka-projected": 3}
+
+RUN_BY = "processes (shared)"
+
+#: Reducers that read the model's LR-ADI Gramian factors: a model's norm units (which read them
+#: too) start after these reductions, so that a ``bt`` reduction pays and reports its own LR-ADI
+#: where it runs first (the rule of a study's own graph).
+GRAMIAN_READERS = ("bt", "so-h2", "irka-fo")
+
+
+def usable_cores() -> list:
+    """The cores this process may run on (``os.sched_getaffinity``), sorted."""
+    try:
+        return sorted(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return list(range(os.cpu_count() or 1))
+
+
+@dataclass
+class Shared:
+    """What :func:`shared_compute` did: the keys it computed, failures, and its record.
+
+    ``fresh``: ``(kind, key)`` of the entries computed here and not yet claimed by a study;
+    ``failed``: ``(kind, key)`` -> the failure entry (kept in memory, never cached).
+    """
+
+    jobs: int
+    fresh: set = field(default_factory=set)
+    failed: dict = field(default_factory=dict)
+    record: dict = field(default_factory=dict)
+
+    def claim(self, kind: str, key: str) -> bool:
+        """True (and forgotten) the first time a study asks for an entry computed here."""
+        if (kind, key) in self.fresh:
+            self.fresh.discard((kind, key))
+            return True
+        return False
+
+
+# -- workers -----------------------------------------------------------------
+def _pin(counter, cores):
+    """Worker initializer: pin this process to the next core of ``cores``."""
+    with counter.get_lock():
+        i = counter.value
+        counter.value += 1
+    try:
+        os.sched_setaffinity(0, {cores[i % len(cores)]})
+    except (AttributeError, OSError):
+        pass
+
+
+def _run_unit(fn_name, args, kwargs):
+    """Run one unit in a worker: the task function ``fn_name`` (module:function) and its wall time."""
+    import importlib
+
+    mod, _, fn = fn_name.partition(":")
+    t0 = time.perf_counter()
+    out = getattr(importlib.import_module(mod), fn)(*args, **kwargs)
+    cores = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
+    return out, {"wall_s": time.perf_counter() - t0, "pid": os.getpid(), "cores": cores}
+
+
+@dataclass
+class _Unit:
+    id: str
+    fn: str
+    args: tuple
+    kind: str                 # what it stores: fom, reduction, model_norm, norm_error, simulation
+    model: str                # model_id: norm units wait for the model's reductions
+    estimate: float
+    deps: set = field(default_factory=set)
+    rom_from: list = field(default_factory=list)   # (reduce unit ids or None, {r: key}) whose entries it needs
+    keys: dict = field(default_factory=dict)       # r -> key (group units) or {None: key}
+    label: str = ""
+    gramians: bool = False    # reads the model's Gramian factors (GRAMIAN_READERS, the norms)
+
+
+def _previous_times(out: Path) -> dict:
+    """(model name, reducer, options JSON, r) -> time (s) of the reductions, and
+    ("norm", model, reducer, options, r, kind) of the error norms, in the manifests under ``out``."""
+    times = {}
+    for path in sorted(Path(out).glob("*/manifest.json")):
+        try:
+            arts = json.loads(path.read_text()).get("artifacts") or []
+        except (OSError, ValueError):
+            continue
+        arts = [a for a in arts if isinstance(a, dict)]
+        opts = {a.get("id"): json.dumps(a.get("options"), sort_keys=True) for a in arts if a.get("kind") == "reduction"}
+        for a in arts:
+            if a.get("kind") == "reduction" and a.get("reducer"):
+                k = (a.get("model"), a["reducer"], opts[a.get("id")], a.get("r_requested"))
+            elif a.get("kind") == "norm_error" and a.get("reduction") in opts:
+                k = ("norm", a.get("model"), a.get("reducer"), opts[a["reduction"]], a.get("r_requested"), a.get("norm"))
+            else:
+                continue
+            t = a.get("wall_s") or a.get("time_s")
+            if isinstance(t, (int, float)):
+                times[k] = max(times.get(k, 0.0), float(t))
+    return times
+
+
+def _units(plans, cache, prev):
+    """The units of work the plans lack, deduplicated by content, with their dependencies."""
+    cache_root = str(cache.root)
+
+    def have(kind, key):
+        return cache.read and cache.has(kind, key)
+    units, todo, reduce_unit, planned = {}, {}, {}, set()
+
+    def add(u):
+        units[u.id] = u
+
+    for plan in plans:
+        for f in plan.foms.values():
+            uid = "fom-" + f.key
+            if uid not in units and not have("fom", f.key):
+                lo, hi, n = f.bounds
+                add(_Unit(uid, "morsuite.studies.tasks:fom_response",
+                          (f.model.source, lo, hi, n, f.key, cache_root, False, RUN_BY), "fom", f.model.model_id,
+                          float(n) * 0.01, keys={None: f.key}, label=f"response {f.model.name}"))
+        for sim in plan.sims.values():
+            uid = "sim-" + sim.key
+            if uid not in units and not have("simulation", sim.key):
+                add(_Unit(uid, "morsuite.studies.timedomain:full_simulation",
+                          (sim.model.source, sim.settings, sim.key, RUN_BY), "simulation", sim.model.model_id, 10.0,
+                          keys={None: sim.key}, label=f"simulation {sim.model.name}"))
+        for gid, g in plan.reduces.items():
+            for r in g.rs:
+                if not have("reduction", g.keys[r]):
+                    todo.setdefault(gid, (g, {}))[1][r] = g.keys[r]
+    for gid, (g, keys) in todo.items():
+        rs = sorted(keys)
+        opts = json.dumps(g.method.full_options, sort_keys=True)
+        est = {r: prev.get((g.model.name, g.method.reducer, opts, r)) for r in rs}
+        chunks = SPLIT.get(g.method.reducer)
+        parts = [rs] if chunks is None else _chunks(rs, est, chunks if chunks > 1 else len(rs))
+        for part in parts:
+            uid = f"{gid}/r{part[0]}-r{part[-1]}"
+            known = [est[r] for r in part if est[r] is not None]
+            add(_Unit(uid, "morsuite.studies.tasks:reduce_sweep",
+                      (g.model.source, g.method.reducer, g.method.options, part, {r: keys[r] for r in part},
+                       cache_root, RUN_BY), "reduction", g.model.model_id,
+                      float("inf") if len(known) < len(part) else sum(known), keys={r: keys[r] for r in part},
+                      label=f"{g.method.reducer} {g.model.name} r = {part}",
+                      gramians=g.method.reducer in GRAMIAN_READERS))
+            for r in part:
+                reduce_unit[(gid, r)] = uid
+    for plan in plans:
+        for n in plan.norms.values():
+            uid = "norm-" + n.key
+            if uid not in units and cache.get_json("model_norm", n.key) is None:
+                add(_Unit(uid, "morsuite.studies.norms:model_norm", (n.model.source, n.kind, n.options, n.key, RUN_BY),
+                          "model_norm", n.model.model_id, 1.0, keys={None: n.key}, label=f"{n.kind} norm {n.model.name}",
+                          gramians=True))
+        for ng in plan.norm_groups.values():
+            red = plan.reduces[ng.reduce]
+            by_src = {}  # the norms of a reduce unit's orders (None: cached reductions) form one unit
+            for r in ng.rs:
+                if ng.keys[r] not in planned and cache.get_json("norm_error", ng.keys[r]) is None:
+                    planned.add(ng.keys[r])
+                    by_src.setdefault(reduce_unit.get((ng.reduce, r)), []).append(r)
+            opts = json.dumps(red.method.full_options, sort_keys=True)
+            for src, part in by_src.items():
+                est = [prev.get(("norm", red.model.name, red.method.reducer, opts, r, ng.kind)) for r in part]
+                add(_Unit(f"normerr-{ng.keys[part[0]]}", "morsuite.studies.norms:error_norms",
+                          (red.model.source, ng.kind, ng.options, part, {r: ng.keys[r] for r in part}, RUN_BY),
+                          "norm_error", red.model.model_id, float("inf") if None in est else sum(est),
+                          keys={r: ng.keys[r] for r in part}, rom_from=[(src, {r: red.keys[r] for r in part})],
+                          label=f"{ng.kind} errors {red.method.reducer} {red.model.name} r = {part}",
+                          gramians=True))
+    # a model's norm units wait for the reduction units that read its Gramian factors (and their own)
+    for u in units.values():
+        if u.kind in ("model_norm", "norm_error"):
+            u.deps = {v.id for v in units.values() if v.kind == "reduction" and v.model == u.model
+                      and (v.gramians or any(src == v.id for src, _ in u.rom_from))}
+    return units
+
+
+def _chunks(rs, est, n):
+    """``rs`` (increasing) in at most ``n`` consecutive chunks of about equal estimated time."""
+    n = max(1, min(n, len(rs)))
+    w = [est[r] if est[r] is not None else 1.0 for r in rs]
+    total, out, cur, acc = sum(w), [], [], 0.0
+    for r, wi in zip(rs, w):
+        cur.append(r)
+        acc += wi
+        if len(out) < n - 1 and acc >= total * (len(out) + 1) / n:
+            out.append(cur)
+            cur = []
+    if cur:
+        out.append(cur)
+    return out
+
+
+def _rom_entries(cache, rom_from, results):
+    """{r: reduction entry} for a norm unit: from the reduce units' results, else from the cache."""
+    out = {}
+    for src, keys in rom_from:
+        done = results.get(src) or {}
+        for r, key in keys.items():
+            if r in done:
+                out[r] = done[r]
+                continue
+            hit = cache.get("reduction", key)
+            if hit is not None:
+                arrays, meta = hit
+                out[r] = {**meta, "rom": {"kind": meta["rom_kind"], "arrays": arrays}, "cached": True}
+    return out
+
+
+def _store(cache, shared, u, value):
+    """Put a unit's result into the cache (the reducers and responses stored themselves) and note its keys."""
+    from .timedomain import SIM_ARRAYS
+
+    entries = value if u.kind in ("reduction", "norm_error") else {None: value}
+    for r, e in entries.items():
+        key = u.keys[r]
+        if "error" in e:
+            shared.failed[(u.kind, key)] = e
+            continue
+        if u.kind == "model_norm":
+            cache.put_json("model_norm", key, {k: v for k, v in e.items() if k != "cached"})
+        elif u.kind == "norm_error":
+            cache.put_json("norm_error", key, {k: v for k, v in e.items() if k != "cached"})
+        elif u.kind == "simulation":
+            cache.put("simulation", key, {k: e[k] for k in SIM_ARRAYS},
+                      {k: v for k, v in e.items() if k not in SIM_ARRAYS + ("cached",)})
+        shared.fresh.add((u.kind, key))
+
+
+def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, run_kwargs=None) -> Shared:
+    """Compute what ``studies`` lack, all at once, on ``jobs`` pinned worker processes (module docstring).
+
+    Parameters
+    ----------
+    studies : list of :class:`~morsuite.studies.spec.Study`
+    cache : :class:`~morsuite.studies.cache.Cache` (entries are written there)
+    jobs : worker processes (at least 1), each pinned to one of the usable cores in turn
+    out : results root whose ``*/manifest.json`` give the previous run's times (the longest units
+        start first); None: no estimates
+    quiet : no log lines
+    run_kwargs : None (default): compute only. A dict of keyword arguments of
+        :func:`~morsuite.studies.runner.run` (``out`` required): each study (from a spec file,
+        ``study.path``) is also run, on the same workers, as soon as what it reads is computed
+        (figures and tables while other units still compute), with its share of what was
+        computed (:func:`split_claims`); the results folder's index is written at the end.
+
+    Returns
+    -------
+    Shared
+        the keys computed (for the studies' manifests), failures, and ``record``: jobs, cores,
+        units, wall time, the workers' summed busy time, and each unit's label, worker and time.
+    """
+    t0 = time.perf_counter()
+    plans = [build_plan(s) for s in studies]
+    units = _units(plans, cache, _previous_times(out) if out is not None else {})
+    n_units = len(units)
+    shared = Shared(jobs)
+    cores = usable_cores()
+    shared.record = {"jobs": jobs, "cores": cores, "pinned": True, "units": n_units, "run_by": RUN_BY}
+    log, owners = [], {}
+    if run_kwargs is not None and not units:  # all cached: the reports in this process, as without workers
+        from .runner import run
+        for study in studies:
+            run(study, **run_kwargs)
+        return shared
+    if run_kwargs is not None:
+        planned = {(u.kind, k) for u in units.values() for k in u.keys.values()}
+        for study, plan in zip(studies, plans):
+            mine = {c for c in _claims(plan) if c in planned}
+            own, planned = mine & planned, planned - mine
+            uid = f"study-{study.name}"
+            units[uid] = _Unit(uid, "morsuite.studies.batch:_run_study", (str(study.path), dict(run_kwargs)),
+                               "study", "", _report_estimate(run_kwargs["out"], study.name),
+                               deps={u.id for u in units.values() if u.kind != "study"
+                                     and any((u.kind, k) in mine for k in u.keys.values())},
+                               label=f"study {study.name}")
+            owners[uid] = own
+    if units:
+        _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0)
+    busy = sum(e["wall_s"] for e in log if e["kind"] != "study")
+    wall = time.perf_counter() - t0
+    shared.record = {**shared.record, "wall_s": wall, "busy_s": busy, "log": log}
+    if run_kwargs is not None:
+        from .pages import write_index
+        write_index(run_kwargs["out"])
+    if not quiet:
+        print(f"morsuite run: {n_units} units of work shared by {len(studies)} studies on {jobs} worker "
+              f"processes: {wall:.1f} s ({busy:.1f} s busy)", file=sys.stderr)
+    return shared
+
+
+def _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0):
+    """List scheduling: the longest ready unit goes to the first free worker."""
+    ctx = multiprocessing.get_context("spawn")
+    counter = ctx.Value("i", 0)
+    results, done, running = {}, set(), {}
+    pending = dict(units)
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_pin, initargs=(counter, cores)) as pool:
+        while pending or running:
+            ready = sorted((u for u in pending.values() if u.deps <= done), key=lambda u: -u.estimate)
+            for u in ready[: max(0, jobs - len(running))]:
+                if u.kind == "study":  # its share: what it claims of what was computed, the failures it may meet
+                    part = Shared(shared.jobs, owners[u.id] & shared.fresh, dict(shared.failed),
+                                  {**shared.record, "started_after_s": time.perf_counter() - t0})
+                    args = u.args + (part,)
+                else:
+                    args = u.args + ((_rom_entries(cache, u.rom_from, results),) if u.kind == "norm_error" else ())
+                running[pool.submit(_run_unit, u.fn, args, {})] = u
+                del pending[u.id]
+            if not running:  # nothing ready and nothing running: a dependency never ran
+                raise RuntimeError(f"shared_compute: units wait for units that do not exist: {sorted(pending)}")
+            finished, _ = wait(list(running), return_when=FIRST_COMPLETED)
+            for fut in finished:
+                u = running.pop(fut)
+                value, rec = fut.result()
+                done.add(u.id)
+                if u.kind != "study":
+                    results[u.id] = value
+                    _store(cache, shared, u, value)
+                log.append({"unit": u.label, "kind": u.kind, **rec})
+                if not quiet:
+                    print(f"  {rec['wall_s']:7.1f} s  core {rec['cores']}  {u.label}", file=sys.stderr)
+
+
+# -- the studies' own runs ---------------------------------------------------------
+def _claims(plan) -> list:
+    """``(kind, key)`` of every computed artifact ``plan`` reads, in the order a study claims them."""
+    out = [("fom", f.key) for f in plan.foms.values()]
+    out += [("reduction", g.keys[r]) for g in plan.reduces.values() for r in g.rs]
+    out += [("model_norm", n.key) for n in plan.norms.values()]
+    out += [("norm_error", g.keys[r]) for g in plan.norm_groups.values() for r in g.rs]
+    out += [("simulation", s.key) for s in plan.sims.values()]
+    return out
+
+
+def split_claims(studies, shared: Shared) -> list:
+    """One :class:`Shared` per study: each artifact computed by :func:`shared_compute` is
+    fresh for the first study (in the given order) that reads it, reused for the others."""
+    left, out = set(shared.fresh), []
+    for study in studies:
+        own = {c for c in _claims(build_plan(study)) if c in left}
+        left -= own
+        out.append(Shared(shared.jobs, own, shared.failed, shared.record))
+    return out
+
+
+def _run_study(path, kwargs, shared):
+    """Worker: load the spec (validation memo from the cache) and run it; its manifest's timing."""
+    from .cache import Cache
+    from .memo import SpecMemo
+    from .runner import run
+    from .spec import load_spec
+
+    cache_dir = kwargs.get("cache_dir") or Path(kwargs["out"]) / ".cache"
+    study = load_spec(path, memo=SpecMemo(Cache(cache_dir)))
+    res = run(study, shared=shared, **kwargs)
+    return {"name": study.name, "timing": res.manifest["timing"], "files": len(res.files)}
+
+
+def _report_estimate(out, name) -> float:
+    """The last run's ``report_s`` of study ``name`` under ``out`` (inf when unknown)."""
+    try:
+        return float(json.loads((Path(out) / name / "manifest.json").read_text())["timing"]["report_s"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return float("inf")

@@ -1,0 +1,188 @@
+"""Several studies computed together on pinned worker processes (morsuite.studies.batch).
+
+The reference is the sequential run (``--jobs 1``: one study after the other on Dask's
+synchronous scheduler): the same numbers, the same files, and the artifacts two studies
+share computed once and recorded as computed by the first study only.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from morsuite.cli import main
+from morsuite.studies import tasks as T
+from morsuite.studies.batch import Shared, _chunks, split_claims
+
+A = """
+name = "sa"
+title = "small a"
+norms = ["h2"]
+[models]
+tcom = "tcom:nc=20"
+[grids]
+g = { band = [1e-3, 1.0], n = 30 }
+[methods.irka]
+reducer = "irka"
+[methods.bt]
+reducer = "bt"
+options = { form = "vv" }
+[[scenes]]
+name = "a_err"
+kind = "error_vs_r"
+model = "tcom"
+grid = "g"
+methods = ["irka", "bt"]
+r = [2, 4, 6]
+"""
+
+B = """
+name = "sb"
+title = "small b"
+[models]
+tcom = "tcom:nc=20"
+[grids]
+g = { band = [1e-3, 1.0], n = 30 }
+[methods.irka]
+reducer = "irka"
+[methods.bt]
+reducer = "bt"
+options = { form = "vv" }
+[[scenes]]
+name = "b_h2"
+kind = "error_vs_r"
+model = "tcom"
+methods = ["irka", "bt"]
+r = [4, 6, 8]
+measure = "h2"
+[[scenes]]
+name = "b_band"
+kind = "error_vs_r"
+model = "tcom"
+grid = "g"
+methods = ["irka"]
+r = [4, 8]
+"""
+
+NUMBERS = ["max_abs_error", "max_rel_error", "h2_error", "h2_rel_error"]
+
+
+@pytest.fixture(scope="module")
+def two_runs(tmp_path_factory):
+    d = tmp_path_factory.mktemp("batch")
+    a, b = d / "a.toml", d / "b.toml"
+    a.write_text(A)
+    b.write_text(B)
+    assert main(["run", str(a), str(b), "--out", str(d / "seq"), "--jobs", "1", "--quiet"]) == 0
+    assert main(["run", str(a), str(b), "--out", str(d / "par"), "--jobs", "2", "--quiet"]) == 0
+    return d
+
+
+def _manifest(root, name):
+    return json.loads((root / name / "manifest.json").read_text())
+
+
+def test_shared_run_gives_the_sequential_numbers(two_runs):
+    """Summaries of the shared (2 pinned workers) and the sequential run agree to 1e-12."""
+    for name in ("sa", "sb"):
+        seq = pd.read_csv(two_runs / "seq" / name / "summary.csv")
+        par = pd.read_csv(two_runs / "par" / name / "summary.csv")
+        keys = ["method", "r_requested"]
+        seq, par = seq.sort_values(keys).reset_index(drop=True), par.sort_values(keys).reset_index(drop=True)
+        assert list(seq.method) == list(par.method) and list(seq.r_requested) == list(par.r_requested)
+        for col in [c for c in NUMBERS if c in seq]:
+            np.testing.assert_allclose(par[col].to_numpy(float), seq[col].to_numpy(float), rtol=1e-12, atol=0,
+                                       err_msg=f"{name}: {col}")
+        assert sorted(p.name for p in (two_runs / "par" / name).iterdir()) == \
+            sorted(p.name for p in (two_runs / "seq" / name).iterdir())
+
+
+def test_shared_artifacts_are_computed_once_and_claimed_by_the_first_study(two_runs):
+    """irka r = 4, 6 and bt r = 4, 6 are in both studies: computed in sa, reused in sb, as in
+    the sequential run; each unit ran on one core; the record is in both manifests."""
+    for root in ("seq", "par"):
+        red = {}
+        for name in ("sa", "sb"):
+            for a in _manifest(two_runs / root, name)["artifacts"]:
+                if a["kind"] == "reduction":
+                    red.setdefault((a["reducer"], a["r_requested"]), []).append((name, a["cached"]))
+        assert red[("irka", 4)] == [("sa", False), ("sb", True)], root
+        assert red[("bt", 6)] == [("sa", False), ("sb", True)], root
+        assert red[("irka", 8)] == [("sb", False)], root
+    m = _manifest(two_runs / "par", "sb")
+    rec = m["shared_compute"]
+    assert rec["jobs"] == 2 and rec["units"] >= 4 and rec["pinned"] and 0 < m["timing"]["shared_compute_s"]
+    assert all(a["scheduler"] == "processes (shared)" for a in m["artifacts"] if a["kind"] == "reduction")
+    assert "shared_compute" not in _manifest(two_runs / "seq", "sb")
+
+
+def test_a_cached_shared_run_computes_nothing(two_runs):
+    """The same command again: no unit of work, every computed artifact taken from the cache."""
+    assert main(["run", str(two_runs / "a.toml"), str(two_runs / "b.toml"), "--out", str(two_runs / "par"),
+                 "--jobs", "2", "--quiet"]) == 0
+    m = _manifest(two_runs / "par", "sa")
+    assert "shared_compute" not in m  # nothing to share: the studies ran in this process
+    computed = [a for a in m["artifacts"] if a["kind"] not in ("figure", "table", "page")]
+    assert computed and all(a["reused"] and a["cached"] for a in computed)
+
+
+def test_split_orders_give_the_same_reduced_models():
+    """irka has no r-independent work: r = 6 on its own instance is the ROM of a sweep 2, 4, 6."""
+    T._model.cache_clear()
+    keys = {r: f"k{r}" for r in (2, 4, 6)}
+    sweep = T.reduce_sweep("tcom:nc=20", "irka", {}, [2, 4, 6], keys)
+    alone = T.reduce_sweep("tcom:nc=20", "irka", {}, [6], keys)
+    for name, x in sweep[6]["rom"]["arrays"].items():
+        np.testing.assert_allclose(alone[6]["rom"]["arrays"][name], x, rtol=1e-13, atol=0)
+    assert alone[6]["info"]["iterations"] == sweep[6]["info"]["iterations"]
+
+
+def test_chunks_are_consecutive_and_balanced():
+    rs = [2, 4, 6, 8, 10, 12]
+    est = dict(zip(rs, [1.0, 1.0, 1.0, 1.0, 4.0, 4.0]))
+    parts = _chunks(rs, est, 3)
+    assert [r for p in parts for r in p] == rs and len(parts) == 3
+    assert parts[-1] == [12] and parts[-2] == [10]
+    assert _chunks(rs, {r: None for r in rs}, 2) == [[2, 4, 6], [8, 10, 12]]
+    assert _chunks([4], {4: 1.0}, 3) == [[4]]
+
+
+def test_claims_go_to_the_first_study_that_reads_them(tmp_path):
+    from morsuite.studies import load_spec
+
+    (tmp_path / "a.toml").write_text(A)
+    (tmp_path / "b.toml").write_text(B)
+    sa, sb = load_spec(tmp_path / "a.toml"), load_spec(tmp_path / "b.toml")
+    from morsuite.studies.plan import build_plan
+    pa, pb = build_plan(sa), build_plan(sb)
+    ga = next(g for g in pa.reduces.values() if g.method.reducer == "irka")
+    gb = next(g for g in pb.reduces.values() if g.method.reducer == "irka")
+    fresh = {("reduction", ga.keys[4]), ("reduction", gb.keys[8]), ("reduction", "not-read")}
+    one, two = split_claims([sa, sb], Shared(2, fresh))
+    assert one.fresh == {("reduction", ga.keys[4])} and two.fresh == {("reduction", gb.keys[8])}
+    assert one.claim("reduction", ga.keys[4]) and not one.claim("reduction", ga.keys[4])
+
+
+def test_each_unit_runs_on_one_pinned_core(tmp_path):
+    """shared_compute alone: every unit's worker had one core (its own, in turn), IRKA's
+    automatic solver threads resolved to 1 there, and the results are in the cache."""
+    from morsuite.studies import load_spec
+    from morsuite.studies.batch import shared_compute, usable_cores
+    from morsuite.studies.cache import Cache
+    from morsuite.studies.plan import build_plan
+
+    (tmp_path / "a.toml").write_text(A)
+    study = load_spec(tmp_path / "a.toml")
+    cache = Cache(tmp_path / "cache")
+    shared = shared_compute([study], cache, jobs=2)
+    log = shared.record["log"]
+    assert log and all(len(e["cores"]) == 1 for e in log)
+    if len(usable_cores()) >= 2:
+        assert {e["cores"][0] for e in log} <= set(usable_cores()) and len({e["pid"] for e in log}) <= 2
+    g = next(g for g in build_plan(study).reduces.values() if g.method.reducer == "irka")
+    for r in g.rs:
+        arrays, meta = cache.get("reduction", g.keys[r])
+        assert meta["info"]["solver_threads"] == 1 and ("reduction", g.keys[r]) in shared.fresh
