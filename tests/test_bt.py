@@ -190,7 +190,6 @@ def test_sweep_reuses_gramians(dsms6000):
         assert info["setup_reused"] and info["lu_count"] == 0 and info["time_breakdown"]["adi"] == 0.0
         assert info["hsv"] == first.info["hsv"]
         assert info["setup_cost"]["adi"] == first.info["setup_cost"]["adi"]
-        assert info["time_s"] < 0.5 * first.info["time_s"]
 
 
 def test_orders_and_rank_cap():
