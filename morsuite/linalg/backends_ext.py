@@ -13,14 +13,15 @@ and falls back to SuperLU as for the other backends.
     from the pattern alone; per shift one numeric factorization. Fast on chains
     (no supernodes, low per-column overhead), slow on 3D solids.
 ``"pardiso"``
-    MKL PARDISO through ctypes (``libmkl_rt``), unsymmetric matrix types (11 real,
-    13 complex), nested-dissection (METIS) ordering computed once per pattern from a
+    MKL PARDISO through ctypes (``libmkl_rt``): complex symmetric (matrix type 6;
+    -2 for a real shift) when M, D, K are exactly symmetric, the upper triangle with
+    Bunch-Kaufman pivoting, else unsymmetric (13 complex, 11 real); nested-dissection (METIS) ordering computed once per pattern from a
     matrix of the pattern's magnitudes and given to every factorization
     (``iparm[4] = 1``); per shift a fresh handle: analysis with that ordering and
     this shift's weighted matching and scaling (``iparm[10] = iparm[12] = 1``),
     numeric factorization, released when the factorization is dropped (one handle
-    per live factorization). Pivot perturbation 1e-13 (``iparm[9]``), at most two
-    refinement steps (``iparm[7]``); PARDISO's defaults give NaN on saddle
+    per live factorization). Pivot perturbation 1e-13 (1e-8 symmetric; ``iparm[9]``),
+    at most two refinement steps (``iparm[7]``); PARDISO's defaults give NaN on saddle
     matrices. One MKL thread per call (``mkl_set_num_threads_local``), so the
     factors are the same bits whatever the machine load or the solver threads.
 
@@ -38,6 +39,7 @@ import sys
 import threading
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..errors import InputError, SingularShiftError
 
@@ -147,12 +149,12 @@ class KLULU:
 
 
 # -- PARDISO ----------------------------------------------------------------------------------
-def _iparm() -> np.ndarray:
+def _iparm(symmetric: bool = False) -> np.ndarray:
     ip = np.zeros(64, dtype=np.int32)
     ip[0] = 1    # iparm given (not defaults)
     ip[1] = 2    # nested dissection (METIS)
     ip[7] = 2    # at most two iterative refinement steps
-    ip[9] = 13   # pivot perturbation 1e-13
+    ip[9] = 8 if symmetric else 13   # pivot perturbation 1e-8 (symmetric, PARDISO's default) / 1e-13
     ip[10] = 1   # scaling
     ip[12] = 1   # weighted matching (saddle matrices: the defaults give NaN)
     ip[34] = 1   # zero-based indices
@@ -179,27 +181,73 @@ def _pardiso(pt, phase, mtype, n, data, ptr, ind, perm, iparm, b=None, x=None):
     return err.value
 
 
-def pardiso_ordering(pattern) -> np.ndarray:
+def _symmetric_blocks(pattern) -> bool:
+    """Whether M, D and K are exactly symmetric (then S(s) is complex symmetric)."""
+    ind, ptr = pattern["_indices"], pattern["_indptr"]
+    N = ptr.size - 1
+    for key in ("_m", "_d", "_k"):
+        A = sp.csc_matrix((pattern[key], ind, ptr), shape=(N, N))
+        if (A - A.T).count_nonzero():
+            return False
+    return True
+
+
+def _upper_structure(pattern):
+    """CSR of the upper triangle with every diagonal entry stored (PARDISO's symmetric input).
+
+    For a symmetric matrix, the entries of CSC column c with row >= c are the upper
+    row c in CSR order. Returns (sel: the pattern entries taken, pos: where they go,
+    size, ptr, ind), zero diagonals added where the pattern has none (the multipliers).
+    """
+    ind, ptr = pattern["_indices"].astype(np.int64), pattern["_indptr"].astype(np.int64)
+    N = ptr.size - 1
+    cols = np.repeat(np.arange(N), np.diff(ptr))
+    sel = np.flatnonzero(ind >= cols)
+    has_diag = np.zeros(N, dtype=bool)
+    has_diag[cols[sel][ind[sel] == cols[sel]]] = True
+    r = np.concatenate([cols[sel], np.flatnonzero(~has_diag)])  # CSR rows of the upper entries
+    c = np.concatenate([ind[sel], np.flatnonzero(~has_diag)])
+    order = np.lexsort((c, r))
+    where = np.empty(order.size, dtype=np.int64)
+    where[order] = np.arange(order.size)
+    rowptr = np.concatenate([[0], np.cumsum(np.bincount(r, minlength=N))]).astype(np.int32)
+    return sel, where[:sel.size], int(order.size), rowptr, c[order].astype(np.int32)
+
+
+def pardiso_ordering(pattern) -> dict:
     """PARDISO's fill-reducing ordering (METIS) of the pattern, found once from its magnitudes.
 
-    The pattern's CSC arrays are passed as CSR (PARDISO then analyses the transpose,
-    whose pattern is the same for a saddle matrix). Stored in ``pattern`` as int32.
+    Complex symmetric input (matrix type 6, upper triangle, Bunch-Kaufman pivoting)
+    where M, D and K are exactly symmetric, else unsymmetric (types 13/11; the
+    pattern's CSC arrays passed as CSR, so PARDISO analyses the transpose, whose
+    pattern is the same). Stored in ``pattern``: ``perm`` (int32), ``symmetric`` and
+    the structure passed to PARDISO.
     """
     with _LOCK:
         if ("pardiso", "perm") not in pattern:
             data, ind, ptr = _magnitudes(pattern)
             N = ptr.size - 1
-            ip = _iparm()
+            sym = _symmetric_blocks(pattern)
+            if sym:
+                sel, pos, size, ptr32, ind32 = _upper_structure(pattern)
+                vals = np.zeros(size)
+                vals[pos] = data[sel]
+            else:
+                sel = pos = None
+                ptr32, ind32, vals = ptr.astype(np.int32), ind.astype(np.int32), np.asarray(data, dtype=float)
+            ip = _iparm(sym)
             ip[4] = 2  # return the ordering
             pt = np.zeros(64, dtype=np.int64)
             perm = np.zeros(N, dtype=np.int32)
-            ptr32, ind32 = ptr.astype(np.int32), ind.astype(np.int32)
-            err = _pardiso(pt, 11, 11, N, np.ascontiguousarray(data, dtype=float), ptr32, ind32, perm, ip)
-            _pardiso(pt, -1, 11, N, np.ascontiguousarray(data, dtype=float), ptr32, ind32, perm, ip)
+            mtype = -2 if sym else 11  # real symmetric indefinite / unsymmetric: the pattern's analysis
+            err = _pardiso(pt, 11, mtype, N, vals, ptr32, ind32, perm, ip)
+            _pardiso(pt, -1, mtype, N, vals, ptr32, ind32, perm, ip)
             if err:
                 raise SingularShiftError(f"PARDISO analysis of the pattern failed (error {err})")
-            perm.flags.writeable = False
-            pattern[("pardiso", "perm")] = (perm, ptr32, ind32)
+            for a in (perm, ptr32, ind32):
+                a.flags.writeable = False
+            pattern[("pardiso", "perm")] = {"perm": perm, "symmetric": sym, "ptr": ptr32, "ind": ind32,
+                                            "sel": sel, "pos": pos, "size": int(vals.size)}
     return pattern[("pardiso", "perm")]
 
 
@@ -212,13 +260,19 @@ class PardisoLU:
     """
 
     def __init__(self, As, pattern):
-        self._perm, self._ptr, self._ind = pardiso_ordering(pattern)
+        o = pardiso_ordering(pattern)
+        self._perm, self._ptr, self._ind, self.symmetric = o["perm"], o["ptr"], o["ind"], o["symmetric"]
         self.dtype = np.complex128 if np.iscomplexobj(As.data) else np.float64
-        self.mtype = 13 if self.dtype == np.complex128 else 11
+        cplx = self.dtype == np.complex128
+        self.mtype = (6 if cplx else -2) if self.symmetric else (13 if cplx else 11)
         self.shape = As.shape
-        self._data = np.ascontiguousarray(As.data, dtype=self.dtype)
+        if self.symmetric:
+            self._data = np.zeros(o["size"], dtype=self.dtype)
+            self._data[o["pos"]] = As.data[o["sel"]]
+        else:
+            self._data = np.ascontiguousarray(As.data, dtype=self.dtype)
         self._pt = np.zeros(64, dtype=np.int64)
-        self._iparm = _iparm()
+        self._iparm = _iparm(self.symmetric)
         self._iparm[4] = 1  # the stored ordering
         self._lock = threading.Lock()
         err = _pardiso(self._pt, 12, self.mtype, self.shape[0], self._data, self._ptr, self._ind,
@@ -248,7 +302,7 @@ class PardisoLU:
         B = np.array(b.reshape(b.shape[0], -1), dtype=self.dtype, order="F")
         X = np.empty_like(B)
         with self._lock:  # iparm and the handle's work arrays are per factorization
-            self._iparm[11] = 2 if trans == "N" else 0
+            self._iparm[11] = 2 if trans == "N" and not self.symmetric else 0
             err = _pardiso(self._pt, 33, self.mtype, self.shape[0], self._data, self._ptr, self._ind,
                            np.array(self._perm), self._iparm, B, X)
         if err:
