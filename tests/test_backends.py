@@ -174,12 +174,14 @@ def _need(backend):
 
 
 @pytest.mark.parametrize("backend", EXTRAS)
-@pytest.mark.parametrize("which", ["dsms", "tcom", "random", "grid3d"])
+@pytest.mark.parametrize("which", ["dsms", "tcom", "random", "grid3d", "fem"])
 def test_optional_backends_agree_with_dense_solves(backend, which, dsms50, tcom20, small_random):
     """KLU and PARDISO: solve and transposed solve against dense ones, real and complex shifts,
-    two factorizations alive at once (KLU shares its symbolic analysis, PARDISO one handle each)."""
+    two factorizations alive at once (KLU shares its symbolic analysis, PARDISO one handle each;
+    PARDISO complex symmetric for the symmetric models, unsymmetric for the random one)."""
     _need(backend)
-    fom = {"dsms": dsms50, "tcom": tcom20, "random": small_random, "grid3d": grid3d_model(5)}[which]
+    fom = ms.models.fem_block(300) if which == "fem" else \
+        {"dsms": dsms50, "tcom": tcom20, "random": small_random, "grid3d": grid3d_model(5)}[which]
     rng = np.random.default_rng(0)
     N = fom.n1 + fom.n2
     B = rng.standard_normal((N, 2)) + 1j * rng.standard_normal((N, 2))
@@ -191,6 +193,8 @@ def test_optional_backends_agree_with_dense_solves(backend, which, dsms50, tcom2
     x = other.solve(B, full=True)
     assert np.linalg.norm(x - np.linalg.solve(_dense(fom, 0.7 + 0.2j), B)) <= 1e-11 * np.linalg.norm(x)
     assert solver.stats.refactorizations == 0
+    if backend == "pardiso":
+        assert other.lu.mtype == (13 if which == "random" else 6)
 
 
 def test_auto_rule_with_the_extras():
