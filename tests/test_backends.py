@@ -243,3 +243,20 @@ def test_optional_backends_roms_agree_and_are_deterministic(backend):
     assert again.info["iterations"] == roms[backend].info["iterations"]
     for k in ("M", "D", "K", "F", "L"):
         assert np.array_equal(getattr(again.rom, k), getattr(roms[backend].rom, k)), k
+
+
+@pytest.mark.parametrize("backend", EXTRAS)
+def test_optional_backends_pickle_without_their_handles(backend, tcom20):
+    """A solver goes to Dask workers pickled: its cached KLU/PARDISO factorizations stay behind
+    (process handles), KLU's symbolic analysis is redone there; the copy solves the same.
+    KLU holds the GIL (kvxopt), so IRKA's automatic solver threads are 1 with it."""
+    import pickle
+
+    from morsuite.reducers.shift_solves import default_threads
+    _need(backend)
+    solver = tcom20.new_solver(backend=backend)
+    x = solver.factor(0.3j).solve(tcom20.F)
+    copy = pickle.loads(pickle.dumps(solver))
+    assert len(copy._cache) == 0
+    assert np.allclose(copy.factor(0.3j).solve(tcom20.F), x, rtol=1e-12, atol=0)
+    assert default_threads("klu") == 1

@@ -96,6 +96,20 @@ def _magnitudes(pattern):
 
 
 # -- KLU --------------------------------------------------------------------------------------
+class _Local:
+    """A value kept with the pattern but not pickled (kvxopt's objects are not picklable; a Dask
+    worker's copy of the pattern recomputes it)."""
+
+    def __init__(self, value=None):
+        self.value = value
+
+    def __getstate__(self):
+        return {}
+
+    def __setstate__(self, state):
+        self.value = None
+
+
 def klu_symbolic(pattern, complex_: bool):
     """KLU's symbolic analysis of the pattern for real or complex values (once per pattern and type).
 
@@ -105,7 +119,7 @@ def klu_symbolic(pattern, complex_: bool):
     """
     key = ("klu", bool(complex_))
     with _LOCK:
-        if key not in pattern:
+        if key not in pattern or pattern[key].value is None:
             kvxopt, klu = _klu()
             data, ind, ptr = _magnitudes(pattern)
             N = ptr.size - 1
@@ -113,8 +127,8 @@ def klu_symbolic(pattern, complex_: bool):
             tc = "z" if complex_ else "d"
             A = kvxopt.spmatrix(data.astype(complex if complex_ else float).tolist(), ind.tolist(), cols.tolist(),
                                 (N, N), tc)
-            pattern[key] = (A, klu.symbolic(A))
-    return pattern[key]
+            pattern[key] = _Local((A, klu.symbolic(A)))
+    return pattern[key].value
 
 
 class KLULU:
@@ -282,6 +296,9 @@ class PardisoLU:
             raise SingularShiftError(f"PARDISO factorization failed (error {err})")
         self.nnz = int(self._iparm[17])  # entries of the factors (reported by PARDISO)
         self.perturbed_pivots = int(self._iparm[13])
+
+    def __reduce__(self):
+        raise TypeError("a PARDISO factorization is a handle of this process; it cannot be pickled")
 
     def _release(self):
         if getattr(self, "_pt", None) is not None and self._pt.any() and _mkl_lib() is not None:

@@ -169,6 +169,13 @@ class SaddlePointSolver:
                                  reason="scaling='ruiz' or pivot_tol > 0 need SuperLU's factors")
         self.backend = self.analysis["backend"]
 
+    def __getstate__(self):
+        """Pickled (e.g. to Dask workers) without the cached factorizations: KLU's and PARDISO's
+        are handles of this process."""
+        state = dict(self.__dict__)
+        state["_cache"] = OrderedDict()
+        return state
+
     # -- pattern ---------------------------------------------------------
     def _build_pattern(self, M, D, K, G) -> dict:
         n1, n2 = self.n1, self.n2
