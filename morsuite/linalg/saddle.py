@@ -381,8 +381,10 @@ class SaddlePointSolver:
             return None, None, self._csc(data, P)
         d = self._diagonal_scaling(a, b, c)
         w, w2 = self._scratch()
-        np.take(d, P["_rows"], out=w)
-        np.take(d, P["_cols"], out=w2)
+        # mode="clip": the indices are valid by construction, and take's default mode "raise"
+        # buffers ``out`` (measured 2026-11-26: 19 ms against 2 ms for 6e5 entries)
+        np.take(d, P["_rows"], out=w, mode="clip")
+        np.take(d, P["_cols"], out=w2, mode="clip")
         w *= w2
         data *= w
         return d, d, self._csc(data, P)
