@@ -134,7 +134,8 @@ def choose(kl: int, ku: int, n2: int, n: int = 0, available: dict | None = None)
             return "klu", f"RCM bandwidth kl + ku = {kl + ku} <= {B['max_band']}, n2 = {n2} > {limit}: KLU"
         return "superlu", f"n2 = {n2} above the banded border limit {limit}"
     if av.get("pardiso") and n >= B["pardiso_min_n"]:
-        return "pardiso", f"RCM bandwidth kl + ku = {kl + ku} > {B['max_band']}, n = {n} >= {B['pardiso_min_n']}: PARDISO"
+        return "pardiso", (f"RCM bandwidth kl + ku = {kl + ku} > {B['max_band']}, "
+                           f"n = {n} >= {B['pardiso_min_n']}: PARDISO")
     return "superlu", f"RCM bandwidth kl + ku = {kl + ku} above the banded rule {B['max_band']}"
 
 

@@ -1,6 +1,7 @@
-r"""Optional sparse LU backends: KLU (``kvxopt``, GPL-3) and MKL PARDISO (``mkl``, Intel Simplified Software License).
+r"""Optional sparse LU backends: KLU (``kvxopt``, GPL-3) and MKL PARDISO (``mkl``, Intel's ISSL).
 
-Neither is in the default install; each is an extra (``pip install morsuite[klu]``,
+Neither is in the default install (``mkl`` is under the Intel Simplified Software
+License, not GPL; ``kvxopt`` is GPL-3, so never a default dependency); each is an extra (``pip install morsuite[klu]``,
 ``pip install morsuite[pardiso]``), imported only when used, and
 :func:`available` says which are there. Both factor the equilibrated saddle matrix
 :math:`A_e = D S(s) D` (natural numbering; the backend orders it) and solve with
@@ -15,10 +16,10 @@ and falls back to SuperLU as for the other backends.
 ``"pardiso"``
     MKL PARDISO through ctypes (``libmkl_rt``): complex symmetric (matrix type 6;
     -2 for a real shift) when M, D, K are exactly symmetric, the upper triangle with
-    Bunch-Kaufman pivoting, else unsymmetric (13 complex, 11 real); nested-dissection (METIS) ordering computed once per pattern from a
-    matrix of the pattern's magnitudes and given to every factorization
-    (``iparm[4] = 1``); per shift a fresh handle: analysis with that ordering and
-    this shift's weighted matching and scaling (``iparm[10] = iparm[12] = 1``),
+    Bunch-Kaufman pivoting, else unsymmetric (13 complex, 11 real); nested-dissection
+    (METIS) ordering computed once per pattern from a matrix of the pattern's
+    magnitudes and given to every factorization (``iparm[4] = 1``); per shift a
+    fresh handle: analysis with that ordering and this shift's weighted matching and scaling (``iparm[10] = iparm[12] = 1``),
     numeric factorization, released when the factorization is dropped (one handle
     per live factorization). Pivot perturbation 1e-13 (1e-8 symmetric; ``iparm[9]``),
     at most two refinement steps (``iparm[7]``); PARDISO's defaults give NaN on saddle
