@@ -70,15 +70,18 @@ def _check_solves(fom, solver, B):
 
 
 def test_auto_choice_is_structural_and_recorded(dsms50, tcom20):
-    """Chains get the banded LU, a 3D grid SuperLU; the analysis is plain data on the model."""
-    for fom, kl_ku in ((dsms50, (1, 1)), (tcom20, (2, 2))):
+    """Chains get the banded LU (the TCOM's border of 6 rows KLU where installed), a small 3D grid
+    SuperLU; the analysis is plain data on the model."""
+    from morsuite.linalg.backends_ext import available
+    for fom, kl_ku, want in ((dsms50, (1, 1), "banded"),
+                             (tcom20, (2, 2), "klu" if available()["klu"] else "banded")):
         a = fom.lu_analysis()
-        assert a["backend"] == "banded" and (a["kl"], a["ku"]) == kl_ku and a["requested"] == "auto"
+        assert a["backend"] == want and (a["kl"], a["ku"]) == kl_ku and a["requested"] == "auto"
     g = grid3d_model(7)
     a = g.lu_analysis()
     assert a["backend"] == "superlu" and a["kl"] + a["ku"] > BAND_RULE["max_band"]
     assert choose(a["kl"], a["ku"], 0)[0] == "superlu"
-    assert choose(1, 1, BAND_RULE["max_border"] + 1)[0] == "superlu"
+    assert choose(1, 1, BAND_RULE["max_border"] + 1, available={"klu": False, "pardiso": False})[0] == "superlu"
 
 
 def test_forced_backend_and_bad_name(dsms50, monkeypatch):
@@ -158,3 +161,102 @@ def test_dask_executor_on_a_local_cluster():
         res = ms.reducers.make("irka", fom, executor="dask").reduce(4)
     assert res.info["executor"] == "dask" and res.info["lu_count"] == ref.info["lu_count"]
     assert _tf_rel_diff(res.rom, ref.rom, np.logspace(-2, 0, 40)) < 1e-12
+
+
+# -- optional extras: KLU (kvxopt, GPL-3) and MKL PARDISO; skipped where not installed -----------------
+EXTRAS = ("klu", "pardiso")
+
+
+def _need(backend):
+    from morsuite.linalg.backends_ext import available
+    if not available()[backend]:
+        pytest.skip(f"optional backend {backend} not installed (pip install morsuite[{backend}])")
+
+
+@pytest.mark.parametrize("backend", EXTRAS)
+@pytest.mark.parametrize("which", ["dsms", "tcom", "random", "grid3d", "fem"])
+def test_optional_backends_agree_with_dense_solves(backend, which, dsms50, tcom20, small_random):
+    """KLU and PARDISO: solve and transposed solve against dense ones, real and complex shifts,
+    two factorizations alive at once (KLU shares its symbolic analysis, PARDISO one handle each;
+    PARDISO complex symmetric for the symmetric models, unsymmetric for the random one)."""
+    _need(backend)
+    fom = ms.models.fem_block(300) if which == "fem" else \
+        {"dsms": dsms50, "tcom": tcom20, "random": small_random, "grid3d": grid3d_model(5)}[which]
+    rng = np.random.default_rng(0)
+    N = fom.n1 + fom.n2
+    B = rng.standard_normal((N, 2)) + 1j * rng.standard_normal((N, 2))
+    solver = fom.new_solver(backend=backend, cache_size=4)
+    assert solver.backend == backend
+    other = solver.factor(0.7 + 0.2j)  # alive while the others are made and used
+    with blas_threads(1):
+        _check_solves(fom, solver, B)
+    x = other.solve(B, full=True)
+    assert np.linalg.norm(x - np.linalg.solve(_dense(fom, 0.7 + 0.2j), B)) <= 1e-11 * np.linalg.norm(x)
+    assert solver.stats.refactorizations == 0
+    if backend == "pardiso":
+        assert other.lu.mtype == (13 if which == "random" else 6)
+
+
+def test_auto_rule_with_the_extras():
+    """The rule from the structure and what is installed: KLU for narrow bands with a border
+    (the TCOM), PARDISO for wide bands from pardiso_min_n rows, SuperLU without the extras."""
+    none, both = {"klu": False, "pardiso": False}, {"klu": True, "pardiso": True}
+    assert choose(2, 2, 6, 200000, none)[0] == "banded"
+    assert choose(2, 2, 6, 200000, both)[0] == "klu"
+    assert choose(1, 1, 1, 200000, both)[0] == "banded"
+    assert choose(1, 1, BAND_RULE["max_border"] + 1, 10 ** 5, none)[0] == "superlu"
+    assert choose(900, 900, 600, 10 ** 4, both)[0] == "pardiso"
+    assert choose(900, 900, 600, 10 ** 4, none)[0] == "superlu"
+    assert choose(900, 900, 600, BAND_RULE["pardiso_min_n"] - 1, both)[0] == "superlu"
+
+
+def test_forcing_a_missing_extra_names_it(dsms50, monkeypatch):
+    from morsuite.linalg import backends_ext
+    monkeypatch.setattr(backends_ext, "available", lambda: {"klu": False, "pardiso": False})
+    for name in EXTRAS:
+        with pytest.raises(ms.MorsuiteError, match=rf"morsuite\[{name}\]"):
+            dsms50.lu_backend = name
+    assert ms.models.tcom(nc=20).lu_analysis()["backend"] == "banded"  # auto without the extras
+
+
+@pytest.mark.parametrize("backend", EXTRAS)
+def test_optional_backends_roms_agree_and_are_deterministic(backend):
+    """Converged IRKA ROMs with KLU or PARDISO against SuperLU's: transfer functions to 1e-8;
+    and the same ROM, bit for bit, from a fresh model and after other runs on it, on 1 or 2 solver threads."""
+    _need(backend)
+    omega = np.logspace(-2, 1, 60)
+    roms = {}
+    for b in ("superlu", backend):
+        fom = ms.models.tcom(nc=200)
+        fom.lu_backend = b
+        res = ms.reducers.make("irka", fom).reduce(6)
+        assert res.info["converged"] and res.info["lu_backend"]["backend"] == b
+        roms[b] = res
+    assert _tf_rel_diff(roms[backend].rom, roms["superlu"].rom, omega) < 1e-8
+    used = ms.models.tcom(nc=200)
+    used.lu_backend = backend
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ms.reducers.make("irka", used, maxit=3).reduce(4)
+        used.transfer(0.7j)
+    again = ms.reducers.make("irka", used, solver_threads=2).reduce(6)
+    assert again.info["iterations"] == roms[backend].info["iterations"]
+    for k in ("M", "D", "K", "F", "L"):
+        assert np.array_equal(getattr(again.rom, k), getattr(roms[backend].rom, k)), k
+
+
+@pytest.mark.parametrize("backend", EXTRAS)
+def test_optional_backends_pickle_without_their_handles(backend, tcom20):
+    """A solver goes to Dask workers pickled: its cached KLU/PARDISO factorizations stay behind
+    (process handles), KLU's symbolic analysis is redone there; the copy solves the same.
+    KLU holds the GIL (kvxopt), so IRKA's automatic solver threads are 1 with it."""
+    import pickle
+
+    from morsuite.reducers.shift_solves import default_threads
+    _need(backend)
+    solver = tcom20.new_solver(backend=backend)
+    x = solver.factor(0.3j).solve(tcom20.F)
+    copy = pickle.loads(pickle.dumps(solver))
+    assert len(copy._cache) == 0
+    assert np.allclose(copy.factor(0.3j).solve(tcom20.F), x, rtol=1e-12, atol=0)
+    assert default_threads("klu") == 1

@@ -30,11 +30,16 @@ Backends (``backend=`` of the solver; ``"auto"`` applies :func:`choose`):
     Pivoting is confined to :math:`A_{11}`: where :math:`A_{11}` is (nearly)
     singular and S is not, the solve's backward error check fails and the solver
     refactors with SuperLU (``stats.refactorizations``).
+``"klu"``, ``"pardiso"``
+    Optional extras (KLU through ``kvxopt``, GPL-3; MKL PARDISO through ``mkl``):
+    :mod:`morsuite.linalg.backends_ext`.
 
 :func:`choose` takes ``"banded"`` when the RCM bandwidth of :math:`A_{11}` and n2
 are small (:data:`BAND_RULE`; the measurements behind it are in
-``docs/design/backends.md``), else ``"superlu"``. ``MORSUITE_LU_BACKEND`` in the
-environment overrides ``"auto"``.
+``docs/design/backends.md``); where KLU is installed, narrow bands with a border
+of more than ``max_border_klu`` rows go to KLU; wide bands go to PARDISO where it
+is installed and the matrix has at least ``pardiso_min_n`` rows, else to
+``"superlu"``. ``MORSUITE_LU_BACKEND`` in the environment overrides ``"auto"``.
 """
 
 from __future__ import annotations
@@ -50,16 +55,20 @@ import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from ..errors import InputError, SingularShiftError
+from . import backends_ext
 
 __all__ = ["BACKENDS", "BAND_RULE", "BandedBorderLU", "analyse", "banded_structure", "choose",
            "factor_nnz", "permuted_pattern", "resolve_backend", "superlu_ordering"]
 
 #: the backends a solver accepts (``"auto"``: :func:`choose`)
-BACKENDS = ("auto", "superlu", "banded")
+BACKENDS = ("auto", "superlu", "banded", "klu", "pardiso")
 
 #: the structural rule of ``"auto"``: banded LU when the RCM half-bandwidths satisfy
-#: ``kl + ku <= max_band`` and ``n2 <= max_border`` (docs/design/backends.md, 2026-11-25)
-BAND_RULE = {"max_band": 64, "max_border": 8}
+#: ``kl + ku <= max_band`` and ``n2 <= max_border`` (``max_border_klu`` where KLU is
+#: installed, which takes the narrow bands with a larger border); PARDISO, where
+#: installed, for the wide bands from ``pardiso_min_n`` rows of S on
+#: (docs/design/backends.md, 2026-11-25 and 2026-11-26)
+BAND_RULE = {"max_band": 64, "max_border": 8, "max_border_klu": 1, "pardiso_min_n": 2000}
 
 
 def factor_nnz(lu) -> int:
@@ -67,7 +76,7 @@ def factor_nnz(lu) -> int:
 
     SuperLU: ``nnz(L) + nnz(U)``; banded: :attr:`BandedBorderLU.nnz`. Cost O(1).
     """
-    if isinstance(lu, BandedBorderLU):
+    if isinstance(lu, (BandedBorderLU, backends_ext.KLULU, backends_ext.PardisoLU)):
         return lu.nnz
     return int(lu.L.nnz + lu.U.nnz)
 
@@ -78,6 +87,8 @@ def resolve_backend(backend: str) -> str:
         backend = os.environ.get("MORSUITE_LU_BACKEND", "auto") or "auto"
     if backend not in BACKENDS:
         raise InputError(f"backend must be one of {', '.join(map(repr, BACKENDS))}; got {backend!r}")
+    if backend in ("klu", "pardiso"):
+        backends_ext.require(backend)
     return backend
 
 
@@ -99,17 +110,33 @@ def _bandwidths(pattern, perm_c) -> tuple[int, int]:
     return (int(max(d.max(), 0)), int(max(-d.min(), 0))) if d.size else (0, 0)
 
 
-def choose(kl: int, ku: int, n2: int) -> tuple[str, str]:
-    """The backend of ``"auto"`` from the structure: (name, reason).
+def choose(kl: int, ku: int, n2: int, n: int = 0, available: dict | None = None) -> tuple[str, str]:
+    """The backend of ``"auto"`` from the structure and the installed extras: (name, reason).
 
-    Banded when ``kl + ku <= BAND_RULE["max_band"]`` and ``n2 <= BAND_RULE["max_border"]``
-    (band and border narrow: the banded LU costs O(n1 (kl + ku)^2) and the border n2
-    banded solves), SuperLU otherwise. Decided from the pattern alone.
+    With ``B = BAND_RULE`` and ``n`` the order of S:
+
+    - ``kl + ku <= B["max_band"]`` (a narrow band): banded if ``n2 <= B["max_border"]``
+      (``B["max_border_klu"]`` where KLU is installed), else KLU if installed, else SuperLU;
+    - a wide band: PARDISO if installed and ``n >= B["pardiso_min_n"]``, else SuperLU.
+
+    ``available``: :func:`morsuite.linalg.backends_ext.available` by default. Decided
+    from the pattern (and what is installed) alone: the banded LU costs
+    O(n1 (kl + ku)^2) plus n2 banded solves for the border; KLU has no border cost and
+    no supernodes; PARDISO's supernodes win on 3D solids.
     """
-    if kl + ku <= BAND_RULE["max_band"] and n2 <= BAND_RULE["max_border"]:
-        return "banded", f"RCM bandwidth kl + ku = {kl + ku} <= {BAND_RULE['max_band']} and n2 = {n2} " \
-                         f"<= {BAND_RULE['max_border']}"
-    return "superlu", f"RCM bandwidth kl + ku = {kl + ku} or n2 = {n2} above the banded rule {BAND_RULE}"
+    av = backends_ext.available() if available is None else available
+    B = BAND_RULE
+    if kl + ku <= B["max_band"]:
+        limit = B["max_border_klu"] if av.get("klu") else B["max_border"]
+        if n2 <= limit:
+            return "banded", f"RCM bandwidth kl + ku = {kl + ku} <= {B['max_band']} and n2 = {n2} <= {limit}"
+        if av.get("klu"):
+            return "klu", f"RCM bandwidth kl + ku = {kl + ku} <= {B['max_band']}, n2 = {n2} > {limit}: KLU"
+        return "superlu", f"n2 = {n2} above the banded border limit {limit}"
+    if av.get("pardiso") and n >= B["pardiso_min_n"]:
+        return "pardiso", (f"RCM bandwidth kl + ku = {kl + ku} > {B['max_band']}, "
+                           f"n = {n} >= {B['pardiso_min_n']}: PARDISO")
+    return "superlu", f"RCM bandwidth kl + ku = {kl + ku} above the banded rule {B['max_band']}"
 
 
 def permuted_pattern(pattern, perm_c) -> dict:
@@ -157,15 +184,18 @@ def analyse(pattern, backend: str = "auto") -> dict:
     ----------
     pattern : dict
         ``SaddlePointSolver.pattern`` (shared by the solvers of one model).
-    backend : {"auto", "superlu", "banded"}
-        ``"auto"``: :func:`choose` from the RCM bandwidth of the (1,1) block and n2.
+    backend : {"auto", "superlu", "banded", "klu", "pardiso"}
+        ``"auto"``: :func:`choose` from the RCM bandwidth of the (1,1) block, n2 and the
+        installed extras (KLU, PARDISO).
 
     Returns
     -------
     dict
         Plain data: ``backend`` (the one used), ``requested``, ``reason``, ``kl``, ``ku``
-        (RCM half-bandwidths of the (1,1) block), ``n1``, ``n2``, ``nnz``. The banded
-        renumbering is stored in ``pattern[("ordering", "banded")]``.
+        (RCM half-bandwidths of the (1,1) block), ``n1``, ``n2``, ``nnz``, ``available``
+        (the optional backends installed). The banded renumbering is stored in
+        ``pattern[("ordering", "banded")]``, PARDISO's ordering and KLU's symbolic
+        analysis in ``pattern`` too (found once, from the pattern alone).
 
     Notes
     -----
@@ -185,16 +215,19 @@ def analyse(pattern, backend: str = "auto") -> dict:
         pattern[("rcm",)] = perm_c
     perm_c = pattern[("rcm",)]
     kl, ku = _bandwidths(pattern, perm_c)
+    av = backends_ext.available()
     if backend == "auto":
-        name, reason = choose(kl, ku, n2)
+        name, reason = choose(kl, ku, n2, int(n1 + n2), av)
     else:
         name, reason = backend, "forced"
     if name == "banded" and ("ordering", "banded") not in pattern:
         perm = permuted_pattern(pattern, perm_c)
         perm["banded"] = banded_structure(perm, int(n1), kl, ku)
         pattern[("ordering", "banded")] = perm
+    if name == "pardiso":
+        backends_ext.pardiso_ordering(pattern)
     info = {"backend": name, "requested": backend, "reason": reason, "kl": kl, "ku": ku,
-            "n1": int(n1), "n2": int(n2), "nnz": int(pattern["_indices"].size)}
+            "n1": int(n1), "n2": int(n2), "nnz": int(pattern["_indices"].size), "available": av}
     pattern[key] = info
     return info
 

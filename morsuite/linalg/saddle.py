@@ -49,6 +49,7 @@ import scipy.sparse.linalg as spla
 
 from ..errors import InputError, SingularShiftError
 from .backends import BandedBorderLU, analyse, permuted_pattern, resolve_backend, superlu_ordering
+from .backends_ext import KLULU, PardisoLU
 from .saddle_lu import SaddleLU, SolverStats, rcond_estimate
 
 __all__ = ["SaddlePointSolver", "SaddleLU", "SolverStats"]
@@ -108,12 +109,14 @@ class SaddlePointSolver:
     pattern : dict, optional
         The ``pattern`` of another solver of the same M, D, K, G (shared,
         read-only, with its stored column ordering); default: built here.
-    backend : {"auto", "superlu", "banded"}
+    backend : {"auto", "superlu", "banded", "klu", "pardiso"}
         The sparse LU (:mod:`morsuite.linalg.backends`): ``"auto"`` (default)
         chooses from the pattern alone (banded LU with a Schur-complement border
-        for narrow RCM bands and few constraints, SuperLU otherwise); the
-        analysis, done once per pattern, is in ``analysis``. The banded backend
-        falls back to SuperLU wherever its solve fails the backward-error check.
+        for narrow RCM bands and few constraints, KLU for narrow bands with more
+        constraints and PARDISO for wide bands where those optional extras are
+        installed, SuperLU otherwise); the analysis, done once per pattern, is in
+        ``analysis``. The banded, KLU and PARDISO backends fall back to SuperLU
+        wherever their solve fails the backward-error check.
 
     Notes
     -----
@@ -156,9 +159,22 @@ class SaddlePointSolver:
         backend = resolve_backend(backend)
         if backend == "banded" and scaling == "ruiz":
             raise InputError("backend='banded' needs scaling 'diagonal' or 'none' (Ruiz scales per column of S)")
+        if backend in ("klu", "pardiso") and (scaling == "ruiz" or self.pivot_tol > 0):
+            raise InputError(f"backend={backend!r} needs scaling 'diagonal' or 'none' and pivot_tol = 0")
+        plain = scaling == "ruiz" or self.pivot_tol > 0  # needs SuperLU (or banded) factors
         #: the structural analysis of the pattern (plain data; ``analysis["backend"]`` is the LU used)
         self.analysis = dict(analyse(pattern, "superlu" if scaling == "ruiz" and backend == "auto" else backend))
+        if plain and self.analysis["backend"] in ("klu", "pardiso"):
+            self.analysis = dict(analyse(pattern, "superlu"), requested="auto",
+                                 reason="scaling='ruiz' or pivot_tol > 0 need SuperLU's factors")
         self.backend = self.analysis["backend"]
+
+    def __getstate__(self):
+        """Pickled (e.g. to Dask workers) without the cached factorizations: KLU's and PARDISO's
+        are handles of this process."""
+        state = dict(self.__dict__)
+        state["_cache"] = OrderedDict()
+        return state
 
     # -- pattern ---------------------------------------------------------
     def _build_pattern(self, M, D, K, G) -> dict:
@@ -250,12 +266,16 @@ class SaddlePointSolver:
         dr, dc, As = self._assemble_scaled(a, b, c, perm)
         t1 = time.perf_counter()
         banded = self.backend == "banded"
+        other = self.backend != "superlu"  # a backend with SuperLU as its first fallback
         try:
             lu = None
-            if banded:
+            if other:
                 try:
-                    lu = BandedBorderLU(As.data, self.n1, self.n2, self.analysis["kl"], self.analysis["ku"],
-                                        perm["banded"])
+                    if banded:
+                        lu = BandedBorderLU(As.data, self.n1, self.n2, self.analysis["kl"], self.analysis["ku"],
+                                            perm["banded"])
+                    else:
+                        lu = (KLULU if self.backend == "klu" else PardisoLU)(As, self.pattern)
                 except SingularShiftError:  # A11 singular where S need not be: SuperLU decides
                     self.stats.add(refactorizations=1)
             if lu is None:
@@ -297,9 +317,9 @@ class SaddlePointSolver:
 
         spec = "NATURAL" if perm and not banded else self.permc_spec
         fallback = ((
-            # the banded LU pivots within A11 only: SuperLU on the same matrix first
+            # the banded LU pivots within A11 only (KLU, PARDISO: own pivoting): SuperLU on the same matrix first
             lambda As=As: spla.splu(As, permc_spec="COLAMD", diag_pivot_thresh=self.diag_pivot_thresh),
-        ) if banded and isinstance(lu, BandedBorderLU) else ()) + (
+        ) if other and isinstance(lu, (BandedBorderLU, KLULU, PardisoLU)) else ()) + (
             # more weight on the diagonal of the equilibrated matrix, same ordering (cheap)
             lambda As=As: spla.splu(As, permc_spec=spec, diag_pivot_thresh=min(0.01, self.diag_pivot_thresh)),
             # a fresh column ordering
@@ -334,6 +354,8 @@ class SaddlePointSolver:
         """
         if self.backend == "banded":
             return self.pattern[("ordering", "banded")]
+        if self.backend in ("klu", "pardiso"):  # they order the matrix themselves (ordering kept in the pattern)
+            return None
         if not self._reusable():
             return None
         key = ("ordering", self.permc_spec)
@@ -359,8 +381,10 @@ class SaddlePointSolver:
             return None, None, self._csc(data, P)
         d = self._diagonal_scaling(a, b, c)
         w, w2 = self._scratch()
-        np.take(d, P["_rows"], out=w)
-        np.take(d, P["_cols"], out=w2)
+        # mode="clip": the indices are valid by construction, and take's default mode "raise"
+        # buffers ``out`` (measured 2026-11-26: 19 ms against 2 ms for 6e5 entries)
+        np.take(d, P["_rows"], out=w, mode="clip")
+        np.take(d, P["_cols"], out=w2, mode="clip")
         w *= w2
         data *= w
         return d, d, self._csc(data, P)

@@ -76,14 +76,19 @@ def shift_solves(red):
 
 
 def default_threads(backend: str) -> int:
-    """The automatic ``solver_threads``: 2 on two or more cores, else 1 (for either backend).
+    """The automatic ``solver_threads``: 2 on two or more cores, else 1; always 1 for ``"klu"``.
 
     Measured on a quiet moment of this 2-core machine (docs/design/backends.md): six LUs of
     dsms(2e5) or tcom(2e5) on 2 threads took 0.46-0.55 of the serial time with SuperLU and
     0.48-0.64 with the banded LU (0.70-0.79 with their solves). BLAS runs single-threaded
     inside a reduction (``reducers.base.BLAS_THREADS``), so the threads do not compete
-    with BLAS threads. More than 2 was not measured.
+    with BLAS threads. More than 2 was not measured. KLU through kvxopt holds the GIL for
+    its whole numeric factorization (measured 2026-11-26: a Python loop in another thread
+    stalled for the whole call), so threads cannot overlap its LUs. PARDISO's calls go
+    through ctypes, which releases the GIL.
     """
+    if backend == "klu":
+        return 1
     try:
         cores = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):
