@@ -217,6 +217,20 @@ def test_standalone_time_of_a_reused_bt_adds_its_gramians():
     assert added >= paid * (1 - 1e-12)
 
 
+def test_so_h2_reused_across_orders_pays_its_gramians_once():
+    """so-h2 reused across r: the second call reports the Gramians as reused setup (not paid again), its
+    LU count without them and its standalone figures with them (a batch run showed 651 LUs and no setup)."""
+    fom = ms.models.tcom(nc=20)
+    red = ms.reducers.make("so-h2", fom)  # a fresh model: its first call computes the Gramian factors
+    first = red.reduce(2).info
+    second = red.reduce(3).info
+    assert not first["setup_reused"] and first["lu_count"] >= first["lu_count_shared"] > 0
+    assert second["setup_reused"] and second["time_breakdown"]["adi"] == 0.0
+    assert second["lu_breakdown"]["gramians"] == 0
+    assert standalone_lu_count(second) == second["lu_count"] + second["lu_count_shared"]
+    assert standalone_time(second) == pytest.approx(second["time_s"] + first["time_breakdown"]["adi"], rel=1e-9)
+
+
 # -- worse than the zero model ----------------------------------------------------------------
 def test_worse_than_zero_names_the_norms():
     wz = ms.analysis.worse_than_zero
