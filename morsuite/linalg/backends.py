@@ -74,11 +74,13 @@ BAND_RULE = {"max_band": 64, "max_border": 8, "max_border_klu": 1, "pardiso_min_
 def factor_nnz(lu) -> int:
     """Stored entries of a factorization made by any backend (the memory of its values).
 
-    SuperLU: ``nnz(L) + nnz(U)``; banded: :attr:`BandedBorderLU.nnz`. Cost O(1).
+    SuperLU: ``nnz(L) + nnz(U)``; every other backend's factorization reports its own
+    ``nnz`` (banded: :attr:`BandedBorderLU.nnz`; PARDISO: the factors' entries it reports;
+    KLU: the matrix's entries only, a lower bound, since kvxopt does not report the
+    factors' size). Cost O(1).
     """
-    if isinstance(lu, (BandedBorderLU, backends_ext.KLULU, backends_ext.PardisoLU)):
-        return lu.nnz
-    return int(lu.L.nnz + lu.U.nnz)
+    nnz = getattr(lu, "nnz", None)
+    return int(lu.L.nnz + lu.U.nnz) if nnz is None else int(nnz)
 
 
 def resolve_backend(backend: str) -> str:

@@ -142,6 +142,7 @@ class SOH2(Reducer):
         super().__init__(fom, **options)
         self._surrogates = None
         self._full = None
+        self._adi_charged = set()  # ids of the Gramian records already charged to a call (reuse across r)
 
     def _check_options(self):
         o = self.options
@@ -308,9 +309,8 @@ class SOH2(Reducer):
         start_rom = roms[start]
         # paid by this call only when the factors were computed for this reducer and not charged before
         # (a reducer reused across r pays them once; later calls report them as reused setup)
-        charged = self.__dict__.setdefault("_adi_charged", set())
-        adi_fresh = bool(gram.get("adi_computed")) and id(gram) not in charged
-        charged.add(id(gram))
+        adi_fresh = bool(gram.get("adi_computed")) and id(gram) not in self._adi_charged
+        self._adi_charged.add(id(gram))
         t_ranked = time.perf_counter()
         param = param_cls(start_rom.order, fom.m, fom.p)
         theta0 = param.from_rom(start_rom)
