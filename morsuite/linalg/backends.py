@@ -55,7 +55,7 @@ import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from ..errors import InputError, SingularShiftError
-from . import backends_ext
+from . import kernels, backends_ext
 
 __all__ = ["BACKENDS", "BAND_RULE", "BandedBorderLU", "analyse", "banded_structure", "choose",
            "factor_nnz", "permuted_pattern", "resolve_backend", "superlu_ordering"]
@@ -195,7 +195,8 @@ def analyse(pattern, backend: str = "auto") -> dict:
     dict
         Plain data: ``backend`` (the one used), ``requested``, ``reason``, ``kl``, ``ku``
         (RCM half-bandwidths of the (1,1) block), ``n1``, ``n2``, ``nnz``, ``available``
-        (the optional backends installed). The banded renumbering is stored in
+        (the optional backends installed), ``kernels`` (``"numba"``: the compiled banded LU and
+        assembly of :mod:`~morsuite.linalg.kernels` are used; else ``"numpy/lapack"``). The banded renumbering is stored in
         ``pattern[("ordering", "banded")]``, PARDISO's ordering and KLU's symbolic
         analysis in ``pattern`` too (found once, from the pattern alone).
 
@@ -229,7 +230,8 @@ def analyse(pattern, backend: str = "auto") -> dict:
     if name == "pardiso":
         backends_ext.pardiso_ordering(pattern)
     info = {"backend": name, "requested": backend, "reason": reason, "kl": kl, "ku": ku,
-            "n1": int(n1), "n2": int(n2), "nnz": int(pattern["_indices"].size), "available": av}
+            "n1": int(n1), "n2": int(n2), "nnz": int(pattern["_indices"].size), "available": av,
+            "kernels": "numba" if kernels.use_kernels() else "numpy/lapack"}
     pattern[key] = info
     return info
 
@@ -262,7 +264,9 @@ def banded_structure(perm: dict, n1: int, kl: int, ku: int) -> dict:
     ``a11``: (entry numbers, flat positions in the (n1, 2 kl + ku + 1) transposed band
     array); ``b12``: (entry numbers, flat positions in the dense (n1, n2) block);
     ``b21`` and ``b12t``: (entry numbers in CSR order, indices, indptr) of the sparse
-    (n2, n1) blocks B21 and B12^T.
+    (n2, n1) blocks B21 and B12^T; ``order12``, ``starts12``: the columns of B12 sorted by
+    their first nonzero row, and those rows; ``w0``: (entry numbers, flat positions in the
+    C-ordered (n1, n2) array ``B12[:, order12]``).
     """
     N = perm["_indptr"].size - 1
     n2 = N - n1
@@ -283,6 +287,13 @@ def banded_structure(perm: dict, n1: int, kl: int, ku: int) -> dict:
            "b12": (in12, rows[in12] * n2 + cols[in12] - n1),
            "b21": csr(in21, rows[in21] - n1, cols[in21], n2),
            "b12t": csr(in12, cols[in12] - n1, rows[in12], n2)}
+    # each border column's first nonzero row, the columns sorted by it, and where B12's entries go in
+    # the (n1, n2) C-ordered B12[:, order12] (the start of W = A11^{-1} B12 in the compiled kernel)
+    first = np.full(n2, n1, dtype=np.int64)
+    np.minimum.at(first, cols[in12] - n1, rows[in12])
+    order = np.argsort(first, kind="stable")
+    out["order12"], out["starts12"] = order, np.minimum(first[order], max(n1 - 1, 0))
+    out["w0"] = (in12, rows[in12] * n2 + np.argsort(order)[cols[in12] - n1])
     return out
 
 
@@ -291,10 +302,25 @@ class BandedBorderLU:
 
     Made from the entries ``data`` of a renumbered pattern (:func:`permuted_pattern` of the
     RCM ordering) placed by ``structure`` (:func:`banded_structure`):
-    :math:`A_{11} = P L U` by ``?gbtrf`` (band storage, ``kl`` sub- and ``ku``
-    super-diagonals), :math:`W = A_{11}^{-1} B_{12}` (n2 banded solves) and the LU of
-    the Schur complement :math:`C = -B_{21} W`. :meth:`solve` has the interface of
-    SuperLU's ``solve`` (``trans="N"`` or ``"T"``, a 2-D right-hand side).
+    :math:`A_{11} = \tilde L U` with partial pivoting inside the band (``kl`` sub- and
+    ``ku`` super-diagonals; :math:`\tilde L` holds the row swaps), and the n2 border rows
+    and columns eliminated through the dense Schur complement
+    :math:`C = -B_{21} A_{11}^{-1} B_{12}` (its LU by ``?getrf``). Two kernels
+    (``kernel``, :func:`morsuite.linalg.kernels.use_kernels`):
+
+    ``"numba"`` (default)
+        :mod:`~morsuite.linalg.kernels` (compiled ``?gbtf2`` and half-sweeps):
+        :math:`W = A_{11}^{-1} B_{12}` by a forward half-sweep that starts at each
+        column's first nonzero row and a full backward one.
+    ``"lapack"``
+        ``?gbtrf``/``?gbtrs`` (n2 full banded solves for W).
+
+    Then :math:`C = -B_{21} W`. A solve is a banded solve and a product with W
+    (transposed: two banded solves). Memory n1 (2 kl + ku + 1 + n2). The two kernels
+    give the same factors (to the last bits of U's reciprocal pivots).
+
+    :meth:`solve` has the interface of SuperLU's ``solve`` (``trans="N"`` or ``"T"``, a
+    2-D right-hand side).
 
     Raises
     ------
@@ -308,42 +334,63 @@ class BandedBorderLU:
         self.dtype = np.result_type(data.dtype, np.float64)
         self.shape = (n1 + n2, n1 + n2)
         ldab = structure["ldab"]
-        ab = np.zeros((n1, ldab), dtype=self.dtype)  # the transpose of LAPACK's (ldab, n1) band array
-        sel, pos = structure["a11"]
-        ab.ravel()[pos] = data[sel]
-        pfx = "z" if self.dtype == np.complex128 else "d"
-        self._gbtrs, self._gbtrs_c = getattr(lapack, pfx + "gbtrs"), _gbtrs_nogil(pfx)
-        lu, piv, info = getattr(lapack, pfx + "gbtrf")(ab.T, kl, ku, overwrite_ab=1)
+        # the transpose of LAPACK's (ldab, n1) band array
+        ab = kernels.scatter(data, structure["a11"], np.zeros((n1, ldab), dtype=self.dtype))
+        self.kernel = "numba" if kernels.use_kernels() else "lapack"
+        if self.kernel == "numba":  # compiled ?gbtf2 and half-sweeps (kernels): measured in docs/design/backends.md
+            piv, self._dinv, info = kernels.gbtrf(ab, kl, ku)
+            lu = ab.T
+        else:
+            pfx = "z" if self.dtype == np.complex128 else "d"
+            self._gbtrs, self._gbtrs_c = getattr(lapack, pfx + "gbtrs"), _gbtrs_nogil(pfx)
+            lu, piv, info = getattr(lapack, pfx + "gbtrf")(ab.T, kl, ku, overwrite_ab=1)
+            self._piv1 = (piv + 1).astype(np.intc)  # LAPACK's 1-based pivots (SciPy's wrappers shift them)
         if info > 0:
             raise SingularShiftError(f"banded LU: the (1,1) block is exactly singular (pivot {info})")
         self._lu, self._piv = lu, piv
-        self._piv1 = (piv + 1).astype(np.intc)  # LAPACK's 1-based pivots (SciPy's wrappers shift them)
-        if n2:
-            sel, ind, ptr = structure["b21"]
-            self.B21 = sp.csr_matrix((data[sel], ind, ptr), shape=(n2, n1))
-            sel, ind, ptr = structure["b12t"]
-            self.B12T = sp.csr_matrix((data[sel], ind, ptr), shape=(n2, n1))
+        if not n2:
+            return
+        sel, ind, ptr = structure["b21"]
+        self.B21 = sp.csr_matrix((data[sel], ind, ptr), shape=(n2, n1))
+        sel, ind, ptr = structure["b12t"]
+        self.B12T = sp.csr_matrix((data[sel], ind, ptr), shape=(n2, n1))
+        if self.kernel == "numba":
+            # W's columns in the order of their first nonzero row: the forward half-sweep skips the rows above
+            self._o12 = structure["order12"]
+            W = kernels.scatter(data, structure["w0"], np.zeros((n1, n2), dtype=self.dtype))
+            self._sweep(W, kernels.L_FORWARD, structure["starts12"])
+            self.W = self._sweep(W, kernels.U_BACKWARD)  # A11^{-1} B12[:, o12]
+        else:
+            self._o12 = np.arange(n2)
             sel, pos = structure["b12"]
             B12 = np.zeros((n1, n2), dtype=self.dtype)
             B12.ravel()[pos] = data[sel]
             self.W = self._band(B12, False)
-            C = -(self.B21 @ self.W)
-            self._schur = sla.lu_factor(C, check_finite=False)
-            if not np.all(np.abs(np.diag(self._schur[0])) > 0):
-                raise SingularShiftError("banded LU: the Schur complement of the border is exactly singular")
+        C = -(self.B21 @ self.W)  # C[:, o12]
+        self._schur = sla.lu_factor(C, check_finite=False)
+        if not np.all(np.abs(np.diag(self._schur[0])) > 0):
+            raise SingularShiftError("banded LU: the Schur complement of the border is exactly singular")
 
     @property
     def nnz(self) -> int:
         """Stored factor entries: the band LU (n1 (2 kl + ku + 1)), W = A11^{-1} B12 (n1 n2), the Schur LU (n2^2)."""
-        return int(self._lu.size + (self.W.size + self.n2 * self.n2 if self.n2 else 0))
+        border = self.n1 * self.n2 + self.n2 * self.n2
+        return int(self._lu.size + (border if self.n2 else 0))
 
     def u_diagonal(self) -> np.ndarray:
         """The pivots of U (banded part and Schur complement), for the pivot-ratio check."""
         d = self._lu[self.kl + self.ku, :]
         return np.concatenate([d, np.diag(self._schur[0])]) if self.n2 else d
 
+    def _sweep(self, b, part, starts=None):
+        """A half-sweep of the compiled kernel in place on the C-ordered b of the LU's type."""
+        return kernels.sweep(self._lu.T, self.kl, self.ku, self._piv, self._dinv, b, part, starts)
+
     def _band(self, b, trans: bool):
-        """A11^{-1} b (``trans``: A11^{-T} b), b overwritten where it already is a Fortran array of the LU's type."""
+        """A11^{-1} b (``trans``: A11^{-T} b), b overwritten where it already is an array of the LU's type and layout."""
+        if self.kernel == "numba":
+            return kernels.gbtrs(self._lu.T, self.kl, self.ku, self._piv, self._dinv,
+                                      np.asarray(b, dtype=self.dtype, order="C"), trans)
         b = np.asarray(b, dtype=self.dtype, order="F")
         f = self._gbtrs_c
         if f is None:
@@ -355,6 +402,12 @@ class BandedBorderLU:
           c(self._lu.shape[0]), self._piv1.ctypes.data, b.ctypes.data, c(max(b.shape[0], 1)), ctypes.byref(info))
         return b
 
+    def _band_into(self, x, trans: bool):
+        """x <- A11^{-1} x (``trans``: A11^{-T} x) in place (through a copy where x's layout needs one)."""
+        y = self._band(x, trans)
+        if y is not x:
+            x[...] = y
+
     def solve(self, b, trans: str = "N"):
         """Solve ``A x = b`` (``trans="N"``) or ``A^T x = b`` (``"T"``); b of shape (N, k) or (N,)."""
         b = np.asarray(b)
@@ -365,18 +418,20 @@ class BandedBorderLU:
             return x[:, 0] if vec else x
         n1 = self.n1
         b1, b2 = b[:n1], b[n1:]
+        x = np.empty((n1 + self.n2, b.shape[1]), dtype=self.dtype, order="F" if self.kernel == "lapack" else "C")
+        x1 = x[:n1]
+        x1[...] = b1
         if trans == "N":
-            y1 = self._band(np.array(b1, dtype=self.dtype, order="F"), False)
+            self._band_into(x1, False)
             if self.n2:
-                x2 = sla.lu_solve(self._schur, b2 - self.B21 @ y1, check_finite=False)
-                x = np.vstack([y1 - self.W @ x2, x2])
-            else:
-                x = y1
+                x2p = sla.lu_solve(self._schur, b2 - self.B21 @ x1, check_finite=False)
+                x[n1:][self._o12] = x2p
+                x1 -= self.W @ x2p
         else:
-            y1 = self._band(np.array(b1, dtype=self.dtype, order="F"), True)
+            self._band_into(x1, True)
             if self.n2:
-                x2 = sla.lu_solve(self._schur, b2 - self.B12T @ y1, trans=1, check_finite=False)
-                x = np.vstack([self._band(b1 - self.B21.T @ x2, True), x2])
-            else:
-                x = y1
+                x2 = sla.lu_solve(self._schur, (b2 - self.B12T @ x1)[self._o12], trans=1, check_finite=False)
+                x[n1:] = x2
+                x1[...] = b1 - self.B21.T @ x2
+                self._band_into(x1, True)
         return x[:, 0] if vec else x

@@ -48,6 +48,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..errors import InputError, SingularShiftError
+from . import kernels
 from .backends import BandedBorderLU, analyse, permuted_pattern, resolve_backend, superlu_ordering
 from .backends_ext import KLULU, PardisoLU
 from .saddle_lu import SaddleLU, SolverStats, rcond_estimate
@@ -328,7 +329,8 @@ class SaddlePointSolver:
             lambda As=As: spla.splu(As, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=1.0),
         ) if checked else ()
         f = SaddleLU(key, lu, self.n1, self.n2, False, self.stats, ratio, np.iscomplexobj(As.data),
-                     As if checked else None, self.backward_tol, {}, dr, dc,
+                     As if checked else None, self.backward_tol,
+                     {"1": As.norm1} if hasattr(As, "norm1") else {}, dr, dc,
                      fallback, q=perm["q"] if perm else None)
         if self.cache_size > 0:
             self._cache[key] = f
@@ -374,6 +376,14 @@ class SaddlePointSolver:
         combined: no unscaled matrix is built.
         """
         P = perm if perm is not None else self.pattern
+        if self.scaling == "diagonal" and kernels.use_kernels():
+            # one compiled pass (combine, scale, 1-norm): docs/design/backends.md, 2026-11-26 (second session)
+            d = self._diagonal_scaling(a, b, c)
+            real = self.real and all(complex(x).imag == 0 for x in (a, b, c))
+            data, norm1 = kernels.assemble_scaled(P, d, a, b, c, real)
+            A = self._csc(data, P)
+            A.norm1 = norm1  # the check's ||A||_1 (SaddleLU._norm), computed in the same pass
+            return d, d, A
         data = self._combine(a, b, c, P)
         if self.scaling == "ruiz":
             return self._ruiz(data)

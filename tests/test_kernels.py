@@ -1,0 +1,156 @@
+"""Compiled kernels (morsuite.linalg.kernels): the banded LU against LAPACK's and dense solves, the
+half-sweeps with skipped leading rows, the bordered LU with either kernel, the one-pass assembly
+against numpy's, and the kernels on two threads."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.linalg as sla
+import scipy.linalg.lapack as lapack
+
+from morsuite.linalg import kernels
+from morsuite.linalg.backends import BandedBorderLU
+from morsuite.reducers.shift_solves import map_threads
+
+pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
+
+
+def _band(n, kl, ku, dtype, rng, dominant):
+    """A random band matrix (dense) and its transposed LAPACK band array (n, 2 kl + ku + 1)."""
+    A = np.zeros((n, n), dtype=dtype)
+    for d in range(-kl, ku + 1):
+        v = rng.standard_normal(n - abs(d))
+        if dtype == np.complex128:
+            v = v + 1j * rng.standard_normal(n - abs(d))
+        A += np.diag(v, d)
+    if dominant:
+        A += np.diag(np.full(n, 3.0 * (kl + ku + 1)))
+    ab = np.zeros((n, 2 * kl + ku + 1), dtype=dtype)
+    for j in range(n):
+        for i in range(max(0, j - ku), min(n, j + kl + 1)):
+            ab[j, kl + ku + i - j] = A[i, j]
+    return A, ab
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.complex128])
+@pytest.mark.parametrize("kl,ku", [(2, 2), (3, 1), (1, 4), (0, 2)])
+def test_gbtrf_matches_lapack_and_solves(dtype, kl, ku):
+    """Factors and pivots as LAPACK's ?gbtrf (the same algorithm); solves and transposed solves
+    of well-conditioned matrices to backward error ~eps against the dense matrix."""
+    rng = np.random.default_rng(kl * 10 + ku)
+    n = 120
+    A, ab = _band(n, kl, ku, dtype, rng, dominant=False)
+    ref, piv_ref, info_ref = getattr(lapack, ("z" if dtype == np.complex128 else "d") + "gbtrf")(
+        ab.T.copy(order="F"), kl, ku)
+    piv, dinv, info = kernels.gbtrf(ab, kl, ku)
+    assert info == info_ref == 0
+    np.testing.assert_array_equal(piv, piv_ref)  # partial pivoting: the same pivot rows
+    np.testing.assert_allclose(ab.T, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+    np.testing.assert_allclose(dinv, 1.0 / ab[:, kl + ku], rtol=1e-15)
+    # solves: a well-conditioned matrix of the same pattern
+    A, ab = _band(n, kl, ku, dtype, rng, dominant=True)
+    piv, dinv, info = kernels.gbtrf(ab, kl, ku)
+    for k in (1, 3):
+        B = rng.standard_normal((n, k)).astype(dtype)
+        for trans in (False, True):
+            X = kernels.gbtrs(ab, kl, ku, piv, dinv, B.copy(), trans)
+            Aop = A.T if trans else A
+            eta = np.abs(Aop @ X - B).max() / (np.abs(Aop).sum(axis=1).max() * np.abs(X).max())
+            assert eta < 1e-15
+            np.testing.assert_allclose(X, np.linalg.solve(Aop, B), rtol=1e-12, atol=1e-12)
+
+
+def test_gbtrf_reports_exact_singularity():
+    """A zero column gives LAPACK's info (1-based index of the first zero pivot)."""
+    rng = np.random.default_rng(3)
+    A, ab = _band(30, 2, 2, np.float64, rng, dominant=True)
+    ab[7, :] = 0.0  # column 7 of A is zero
+    _, _, info = kernels.gbtrf(ab, 2, 2)
+    assert info == 8
+
+
+def test_forward_sweeps_skip_leading_zero_rows():
+    """The forward half-sweeps with each column's first nonzero row give the sweeps over all rows."""
+    rng = np.random.default_rng(5)
+    n, kl, ku = 200, 2, 3
+    A, ab = _band(n, kl, ku, np.complex128, rng, dominant=False)
+    piv, dinv, _ = kernels.gbtrf(ab, kl, ku)
+    starts = np.array([0, 17, 17, 90, 199])
+    B = np.zeros((n, starts.size), dtype=complex)
+    for c, s0 in enumerate(starts):
+        B[s0:, c] = rng.standard_normal(n - s0) + 1j * rng.standard_normal(n - s0)
+    for part in (kernels.L_FORWARD, kernels.UT_FORWARD):
+        full = kernels.sweep(ab, kl, ku, piv, dinv, B.copy(), part)
+        skip = kernels.sweep(ab, kl, ku, piv, dinv, B.copy(), part, starts)
+        np.testing.assert_array_equal(skip, full)
+        one = kernels.sweep(ab, kl, ku, piv, dinv, B[:, 3:4].copy(), part, starts[3:4])
+        np.testing.assert_allclose(one, full[:, 3:4], rtol=1e-13, atol=1e-13 * np.abs(full).max())
+    with pytest.raises(ValueError, match="starts"):
+        kernels.sweep(ab, kl, ku, piv, dinv, B.copy(), kernels.L_FORWARD, starts[::-1])
+
+
+@pytest.mark.parametrize("which", ["dsms", "tcom"])
+def test_bordered_lu_both_kernels(which, dsms50, tcom20, monkeypatch):
+    """BandedBorderLU with the compiled kernel and with LAPACK's: the same solutions, backward error
+    ~eps against the assembled saddle matrix, one and several right-hand sides, both transposes."""
+    fom = {"dsms": dsms50, "tcom": tcom20}[which]
+    solver = fom.new_solver(backend="banded", cache_size=0)
+    perm = solver._ordering()
+    an = solver.analysis
+    rng = np.random.default_rng(2)
+    for s in (0.3 + 2.0j, 1.7, 1e-3j):
+        _, _, As = solver._assemble_scaled(*solver._coeffs(s, None), perm)
+        X = {}
+        for kernel in ("numba", "lapack"):
+            monkeypatch.setenv("MORSUITE_BAND_KERNEL", kernel)
+            lu = BandedBorderLU(As.data, solver.n1, solver.n2, an["kl"], an["ku"], perm["banded"])
+            assert lu.kernel == kernel
+            for k in (1, 3):
+                B = rng.standard_normal((solver.N, k)) + 1j * rng.standard_normal((solver.N, k))
+                for trans in ("N", "T"):
+                    x = lu.solve(B, trans)
+                    Aop = As.T if trans == "T" else As
+                    eta = np.abs(Aop @ x - B).max() / (abs(Aop).sum(axis=1).max() * np.abs(x).max())
+                    assert eta < 1e-14, (kernel, s, k, trans, eta)
+                    X[kernel, k, trans] = (B, x)
+        for key in [key for key in X if key[0] == "numba"]:
+            B, x = X[key]
+            x_l = BandedBorderLU(As.data, solver.n1, solver.n2, an["kl"], an["ku"], perm["banded"]).solve(
+                B, key[2])  # LAPACK's kernel (the environment still says so)
+            np.testing.assert_allclose(x, x_l, rtol=1e-9, atol=1e-9 * np.abs(x_l).max())
+
+
+@pytest.mark.parametrize("which", ["dsms", "tcom"])
+def test_assembly_kernel_matches_numpy(which, dsms50, tcom20, monkeypatch):
+    """The one-pass assembly gives numpy's entries and the 1-norm SaddleLU would compute."""
+    fom = {"dsms": dsms50, "tcom": tcom20}[which]
+    solver = fom.new_solver(backend="superlu", cache_size=0)
+    perm = solver._ordering()
+    for s in (0.3 + 2.0j, 1.7, 1e-3j):
+        coeffs = solver._coeffs(s, None)
+        monkeypatch.setenv("MORSUITE_BAND_KERNEL", "numba")
+        d1, _, A1 = solver._assemble_scaled(*coeffs, perm)
+        monkeypatch.setenv("MORSUITE_BAND_KERNEL", "lapack")
+        d2, _, A2 = solver._assemble_scaled(*coeffs, perm)
+        assert A1.dtype == A2.dtype
+        np.testing.assert_allclose(d1, d2, rtol=0, atol=0)
+        np.testing.assert_allclose(A1.data, A2.data, rtol=1e-15, atol=1e-15 * np.abs(A2.data).max())
+        colsum = np.add.reduceat(np.abs(A2.data), A2.indptr[:-1])
+        assert A1.norm1 == pytest.approx(colsum.max(), rel=1e-14)
+        assert not hasattr(A2, "norm1")
+
+
+def test_kernels_on_two_threads(tcom20):
+    """Factorizations and solves on two threads (the kernels release the GIL) equal the serial ones."""
+    shifts = [0.1j, 0.5 + 1j, 2.0j, 0.01 + 0.2j]
+
+    def run(s):
+        solver = tcom20.new_solver(backend="banded", cache_size=0)
+        return solver.factor(s).solve(tcom20.F)
+
+    serial = [run(s) for s in shifts]
+    threaded = map_threads(run, shifts, 2)
+    for a, b in zip(serial, threaded):
+        np.testing.assert_array_equal(a, b)
+    assert sla.norm(serial[0]) > 0
