@@ -10,7 +10,9 @@ load of a shared machine hits all alike. Parts:
    (the optional KLU and PARDISO where installed), against
    ``scipy.sparse.linalg.splu`` (COLAMD, threshold 0.1) of the assembled matrix plus
    its solve (assembly not timed): DSMS and TCOM at n1 = 2e5 (target: auto / splu
-   <= 1/3); also the choice of a default install (no extras) over splu.
+   <= 1/3); also the choice of a default install (no extras) over splu, and the banded
+   backend with LAPACK's kernels (``banded-lapack``, ``MORSUITE_BAND_KERNEL=lapack``) against
+   the compiled ones (``banded_kernel_gain``).
 2. ``scaling``: the same automatic LU + solve, and one IRKA iteration (r = 10),
    at n1 = 2e4 and 2e5 on the DSMS, the two sizes interleaved: exponent
    log(t2 / t1) / log(10) (target 1.10).
@@ -32,7 +34,9 @@ load of a shared machine hits all alike. Parts:
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
 import time
 import warnings
 
@@ -105,16 +109,34 @@ def _lu_solve_variants(fom, s, backends):
         return time.perf_counter() - t0
 
     out = {"splu": splu}
-    for b in backends:
+    for name in backends:
+        b, lapack_kernel = (name[:-len("-lapack")], True) if name.endswith("-lapack") else (name, False)
         solver = fom.new_solver(cache_size=0, backend=b)
         solver.factor(s)  # the analysis and orderings: once per model, not timed
 
-        def run(solver=solver):
-            t0 = time.perf_counter()
-            solver.factor(s).solve(fom.F)
-            return time.perf_counter() - t0
-        out[b] = run
+        def run(solver=solver, lapack_kernel=lapack_kernel):
+            with _band_kernel("lapack" if lapack_kernel else None):
+                t0 = time.perf_counter()
+                solver.factor(s).solve(fom.F)
+                return time.perf_counter() - t0
+        out[name] = run
     return out
+
+
+@contextlib.contextmanager
+def _band_kernel(value):
+    """``MORSUITE_BAND_KERNEL`` set to ``value`` inside the block (unchanged for None)."""
+    old = os.environ.get("MORSUITE_BAND_KERNEL")
+    if value is not None:
+        os.environ["MORSUITE_BAND_KERNEL"] = value
+    try:
+        yield
+    finally:
+        if value is not None:
+            if old is None:
+                os.environ.pop("MORSUITE_BAND_KERNEL")
+            else:
+                os.environ["MORSUITE_BAND_KERNEL"] = old
 
 
 def _interleaved(variants: dict, rounds: int) -> dict:
@@ -155,7 +177,8 @@ def bench_lu_backends(quick: bool) -> dict:
         for spec in (f"dsms:g={big}", f"tcom:nc={2 * round(big / 6)}"):
             fom = models.parse(spec)
             s = 1j * math.sqrt(fom.band[0] * fom.band[1])
-            med = _interleaved(_lu_solve_variants(fom, s, ("auto", "superlu", "banded", *extras)), rounds)
+            med = _interleaved(_lu_solve_variants(fom, s, ("auto", "superlu", "banded", "banded-lapack", *extras)),
+                               rounds)
             a = fom.lu_analysis()
             plain = choose(a["kl"], a["ku"], a["n2"], a["n1"] + a["n2"], {"klu": False, "pardiso": False})[0]
             rows.append({"part": "lu", "model": spec, "n1": fom.n1, "n2": fom.n2, "auto": a["backend"],
@@ -166,6 +189,7 @@ def bench_lu_backends(quick: bool) -> dict:
                   f"splu COLAMD + solve, median of {rounds} interleaved rounds (extras installed: {extras})")
             judge(f"lu {spec}: default install ({plain}) / splu", med[plain] / med["splu"], 1 / 3,
                   "the same with the choice of an install without the optional extras")
+            rows[-1]["banded_kernel_gain"] = med["banded-lapack"] / med["banded"]
         # 2. growth with n1 (DSMS): both sizes in every round
         foms = {g: models.parse(f"dsms:g={g}") for g in (small, big)}
         lu_runs = {g: _lu_solve_variants(f, 1j * math.sqrt(f.band[0] * f.band[1]), ("auto",))["auto"]

@@ -67,8 +67,11 @@ BACKENDS = ("auto", "superlu", "banded", "klu", "pardiso")
 #: ``kl + ku <= max_band`` and ``n2 <= max_border`` (``max_border_klu`` where KLU is
 #: installed, which takes the narrow bands with a larger border); PARDISO, where
 #: installed, for the wide bands from ``pardiso_min_n`` rows of S on
-#: (docs/design/backends.md, 2026-11-25 and 2026-11-26)
-BAND_RULE = {"max_band": 64, "max_border": 8, "max_border_klu": 1, "pardiso_min_n": 2000}
+#: (docs/design/backends.md, 2026-11-25 and 2026-11-26); the banded LU runs the compiled kernels of
+#: :mod:`~morsuite.linalg.kernels` up to ``kl + ku <= numba_max_band`` and LAPACK's blocked ``?gbtrf``
+#: above (2026-11-26, second session: the unblocked kernel is 1.2x faster at kl + ku = 10, 1.45x
+#: slower at 66)
+BAND_RULE = {"max_band": 64, "max_border": 8, "max_border_klu": 1, "pardiso_min_n": 2000, "numba_max_band": 16}
 
 
 def factor_nnz(lu) -> int:
@@ -231,9 +234,18 @@ def analyse(pattern, backend: str = "auto") -> dict:
         backends_ext.pardiso_ordering(pattern)
     info = {"backend": name, "requested": backend, "reason": reason, "kl": kl, "ku": ku,
             "n1": int(n1), "n2": int(n2), "nnz": int(pattern["_indices"].size), "available": av,
-            "kernels": "numba" if kernels.use_kernels() else "numpy/lapack"}
+            "kernels": _kernels_used(name, kl, ku)}
     pattern[key] = info
     return info
+
+
+def _kernels_used(backend: str, kl: int, ku: int) -> str:
+    """What runs the assembly and (banded backend) the band LU: for ``info`` and the manifest."""
+    if not kernels.use_kernels():
+        return "numpy/lapack"
+    if backend == "banded" and kl + ku > BAND_RULE["numba_max_band"]:
+        return "numba assembly, LAPACK band LU"
+    return "numba"
 
 
 _GBTRS: dict = {}
@@ -308,12 +320,13 @@ class BandedBorderLU:
     :math:`C = -B_{21} A_{11}^{-1} B_{12}` (its LU by ``?getrf``). Two kernels
     (``kernel``, :func:`morsuite.linalg.kernels.use_kernels`):
 
-    ``"numba"`` (default)
+    ``"numba"`` (default where ``kl + ku <= BAND_RULE["numba_max_band"]``)
         :mod:`~morsuite.linalg.kernels` (compiled ``?gbtf2`` and half-sweeps):
         :math:`W = A_{11}^{-1} B_{12}` by a forward half-sweep that starts at each
         column's first nonzero row and a full backward one.
     ``"lapack"``
-        ``?gbtrf``/``?gbtrs`` (n2 full banded solves for W).
+        ``?gbtrf``/``?gbtrs`` (n2 full banded solves for W): wider bands, where its blocked
+        algorithm wins, or without numba.
 
     Then :math:`C = -B_{21} W`. A solve is a banded solve and a product with W
     (transposed: two banded solves). Memory n1 (2 kl + ku + 1 + n2). The two kernels
@@ -336,7 +349,7 @@ class BandedBorderLU:
         ldab = structure["ldab"]
         # the transpose of LAPACK's (ldab, n1) band array
         ab = kernels.scatter(data, structure["a11"], np.zeros((n1, ldab), dtype=self.dtype))
-        self.kernel = "numba" if kernels.use_kernels() else "lapack"
+        self.kernel = "numba" if kernels.use_kernels() and kl + ku <= BAND_RULE["numba_max_band"] else "lapack"
         if self.kernel == "numba":  # compiled ?gbtf2 and half-sweeps (kernels): measured in docs/design/backends.md
             piv, self._dinv, info = kernels.gbtrf(ab, kl, ku)
             lu = ab.T
