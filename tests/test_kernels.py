@@ -13,7 +13,7 @@ from morsuite.linalg import kernels
 from morsuite.linalg.backends import BandedBorderLU
 from morsuite.reducers.shift_solves import map_threads
 
-pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
+pytestmark = pytest.mark.skipif(not kernels.available(), reason="numba is not installed")
 
 
 def _band(n, kl, ku, dtype, rng, dominant):

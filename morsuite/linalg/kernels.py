@@ -24,7 +24,7 @@ per right-hand side for a solve; no allocation.
 and the matrix's 1-norm in one pass over the pattern (numpy needs about ten: the
 products, the gathers of the scaling, the absolute values); on the chain models at
 n1 = 2e5 the passes are memory-bound (about 4.5 GB/s on one core here). ``numba`` is a default dependency
-(BSD-2); where it cannot be imported :data:`AVAILABLE` is False and
+(BSD-2), imported on first use; where it cannot be imported :func:`available` is False and
 :class:`~morsuite.linalg.backends.BandedBorderLU` uses LAPACK's routines instead
 (``MORSUITE_BAND_KERNEL=lapack`` forces that, for comparison and tests).
 """
@@ -36,20 +36,41 @@ import os
 
 import numpy as np
 
-__all__ = ["AVAILABLE", "assemble_scaled", "scatter", "LT_BACKWARD", "L_FORWARD", "UT_FORWARD", "U_BACKWARD", "gbtrf", "gbtrs", "sweep",
-           "use_kernels"]
+__all__ = ["LT_BACKWARD", "L_FORWARD", "UT_FORWARD", "U_BACKWARD", "assemble_scaled", "available", "compiled",
+           "gbtrf", "gbtrs", "scatter", "sweep", "use_kernels"]
 
-try:  # pragma: no cover - exercised where numba is missing
-    import numba
-    AVAILABLE = True
-except ImportError:  # pragma: no cover
-    numba = None
-    AVAILABLE = False
+_NUMBA: dict = {}  # "module": numba or None (not importable), imported on first use
+_JIT: dict = {}  # name -> compiled function
+
+
+def available() -> bool:
+    """True when numba can be imported (imported on the first call: about 1 s, so that a command that
+    factors nothing, e.g. a cached study run, does not pay it)."""
+    if "module" not in _NUMBA:
+        try:
+            import numba
+        except Exception:  # pragma: no cover - a missing or broken numba: the numpy/LAPACK paths
+            numba = None
+        _NUMBA["module"] = numba
+    return _NUMBA["module"] is not None
 
 
 def use_kernels() -> bool:
     """True when the compiled kernels are used: numba importable and ``MORSUITE_BAND_KERNEL`` not ``"lapack"``."""
-    return AVAILABLE and os.environ.get("MORSUITE_BAND_KERNEL", "numba").lower() != "lapack"
+    return os.environ.get("MORSUITE_BAND_KERNEL", "numba").lower() != "lapack" and available()
+
+
+def compiled(fn):
+    """``numba.njit(nogil=True, cache=True)(fn)``, made once per function (requires :func:`available`).
+
+    ``nogil``: threads run it concurrently; ``cache``: the machine code is kept on disk next to the
+    module (or in numba's user cache where that is not writable) and loaded by later processes.
+    """
+    f = _JIT.get(fn)
+    if f is None:
+        available()
+        f = _JIT[fn] = _NUMBA["module"].njit(nogil=True, cache=True)(fn)
+    return f
 
 
 def _gbtrf(ab, kl, ku, piv, dinv):
@@ -222,30 +243,20 @@ def _assemble(m, d, k, g, rows, cols, indptr, dvec, a, b, c, out):
     return norm
 
 
-if AVAILABLE:
-    _gbtrf_jit = numba.njit(nogil=True, cache=True)(_gbtrf)
-    _sweep_jit = numba.njit(nogil=True, cache=True)(_sweep)
-    _sweep1_jit = numba.njit(nogil=True, cache=True)(_sweep1)
-    _assemble_jit = numba.njit(nogil=True, cache=True)(_assemble)
-    _scatter_jit = numba.njit(nogil=True, cache=True)(_scatter)
-else:  # pragma: no cover
-    _gbtrf_jit = _sweep_jit = _sweep1_jit = _assemble_jit = _scatter_jit = None
-
-
 def gbtrf(ab: np.ndarray, kl: int, ku: int) -> tuple[np.ndarray, np.ndarray, int]:
     """Factor the band array ``ab`` (C-ordered ``(n, 2 kl + ku + 1)``, overwritten) in place.
 
     Returns ``(piv, dinv, info)``: 0-based pivots, the reciprocals of U's diagonal (the
     solves multiply by them; LAPACK divides, so results differ from LAPACK's in the
     last bits) and LAPACK's ``info`` (0, or the 1-based index of the first exactly zero
-    pivot; the factorization is then finished but singular). Requires :data:`AVAILABLE`.
+    pivot; the factorization is then finished but singular). Requires :func:`available`.
     Cost :math:`O(n k_l (k_l + k_u))`.
     """
     if not (ab.flags.c_contiguous and ab.ndim == 2 and ab.shape[1] == 2 * kl + ku + 1):
         raise ValueError(f"ab: a C-ordered (n, 2 kl + ku + 1) array is needed, got shape {ab.shape}")
     piv = np.empty(ab.shape[0], dtype=np.int64)
     dinv = np.empty(ab.shape[0], dtype=ab.dtype)
-    info = _gbtrf_jit(ab, int(kl), int(ku), piv, dinv)
+    info = compiled(_gbtrf)(ab, int(kl), int(ku), piv, dinv)
     return piv, dinv, int(info)
 
 
@@ -271,9 +282,9 @@ def sweep(ab: np.ndarray, kl: int, ku: int, piv: np.ndarray, dinv: np.ndarray, b
     if starts.shape != (k,) or (k > 1 and np.any(np.diff(starts) < 0)):
         raise ValueError(f"starts: {k} ascending row indices are needed")
     if k == 1:
-        _sweep1_jit(ab, int(kl), int(ku), piv, dinv, b[:, 0], int(part), int(starts[0]))
+        compiled(_sweep1)(ab, int(kl), int(ku), piv, dinv, b[:, 0], int(part), int(starts[0]))
     elif k:
-        _sweep_jit(ab, int(kl), int(ku), piv, dinv, b, int(part), starts)
+        compiled(_sweep)(ab, int(kl), int(ku), piv, dinv, b, int(part), starts)
     return b
 
 
@@ -301,7 +312,7 @@ def assemble_scaled(P: dict, dvec: np.ndarray, a, b, c, real: bool) -> tuple[np.
     dt = np.float64 if real else np.complex128
     a, b, c = (dt(x.real) if real else dt(x) for x in (complex(a), complex(b), complex(c)))
     out = np.empty(P["_m"].size, dtype=dt)
-    norm = _assemble_jit(P["_m"], P["_d"], P["_k"], P["_g"], P["_rows"], P["_cols"], P["_indptr"], dvec,
+    norm = compiled(_assemble)(P["_m"], P["_d"], P["_k"], P["_g"], P["_rows"], P["_cols"], P["_indptr"], dvec,
                          a, b, c, out)
     return out, float(norm)
 
@@ -310,8 +321,8 @@ def scatter(data: np.ndarray, where: tuple, out: np.ndarray) -> np.ndarray:
     """``out.flat[pos] = data[sel]`` for ``where = (sel, pos)`` in one pass (numpy's fancy indexing makes a
     temporary and two passes); out C-contiguous and zeroed where nothing lands. Returns out."""
     sel, pos = where
-    if AVAILABLE and out.flags.c_contiguous and use_kernels():
-        _scatter_jit(data, sel, pos, out)
+    if out.flags.c_contiguous and use_kernels():
+        compiled(_scatter)(data, sel, pos, out)
     else:
         out.ravel()[pos] = data[sel]
     return out
