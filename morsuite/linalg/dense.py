@@ -14,7 +14,7 @@ from scipy.sparse.csgraph import maximum_bipartite_matching
 
 from ..errors import InputError, MorsuiteError
 
-__all__ = ["dense_bt", "orth", "cholesky_qr2", "shift_distance", "match_sets", "lyap_factor", "sigma_max",
+__all__ = ["dense_bt", "orth", "cholesky_qr2", "right_solve", "shift_distance", "match_sets", "lyap_factor", "sigma_max",
            "BTResult", "UnstableError"]
 
 
@@ -94,6 +94,7 @@ def orth(X: np.ndarray, rank_tol: float = 1e-12, max_rank: int | None = None, me
 
     Returns (Q, s): Q has the leading left singular vectors whose singular
     values exceed ``rank_tol * s[0]`` (at most ``max_rank``), s all singular values.
+    Q is Fortran-ordered on the Cholesky-QR path.
 
     ``method``: ``"householder"`` (QR, then the SVD of R) or ``"auto"``: two
     Cholesky-QR passes (:func:`cholesky_qr2`) when the scaled X has relative
@@ -103,29 +104,77 @@ def orth(X: np.ndarray, rank_tol: float = 1e-12, max_rank: int | None = None, me
     """
     if method not in ("auto", "householder"):
         raise InputError(f"method must be 'auto' or 'householder'; got {method!r}")
+    U = s = None
+    if method == "auto" and 0 < X.shape[1] and X.shape[0] > 4 * X.shape[1] and not np.iscomplexobj(X):
+        U, s = _orth_cholesky(X, rank_tol, max_rank)
+        if U is not None:
+            return U, s
     norms = np.linalg.norm(X, axis=0)
     norms[norms == 0] = 1.0
     Xn = X / norms
-    U = s = None
-    if method == "auto" and 0 < X.shape[1] and X.shape[0] > 4 * X.shape[1]:
-        try:
-            Q, R = cholesky_qr2(Xn, min_diag=1e-6)
-            Ur, s, _ = np.linalg.svd(R)
-            if s[-1] > 1e-6 * s[0]:
-                U = Q @ Ur
-        except np.linalg.LinAlgError:
-            pass
-    if U is None:
-        if X.shape[0] > 4 * X.shape[1]:
-            Q0, R0 = np.linalg.qr(Xn)
-            U, s, _ = np.linalg.svd(R0)
-            U = Q0 @ U
-        else:
-            U, s, _ = np.linalg.svd(Xn, full_matrices=False)
-    k = int(np.sum(s > rank_tol * s[0])) if s.size and s[0] > 0 else 0
-    if max_rank is not None:
-        k = min(k, max_rank)
+    if X.shape[0] > 4 * X.shape[1]:
+        Q0, R0 = np.linalg.qr(Xn)
+        U, s, _ = np.linalg.svd(R0)
+        U = Q0 @ U
+    else:
+        U, s, _ = np.linalg.svd(Xn, full_matrices=False)
+    k = _kept(s, rank_tol, max_rank)
     return U[:, :k], s
+
+
+def _kept(s, rank_tol, max_rank):
+    """The number of singular values s above rank_tol * s[0], at most max_rank."""
+    k = int(np.sum(s > rank_tol * s[0])) if s.size and s[0] > 0 else 0
+    return k if max_rank is None else min(k, max_rank)
+
+
+def _orth_cholesky(X, rank_tol, max_rank):
+    """(U, s) of :func:`orth` by two Cholesky-QR passes on the unit-scaled X, or (None, None) when
+    a pass fails or the relative singular values reach 1e-6. Four passes over X: its Gram
+    matrix (the column norms are its diagonal, the scaled X is never formed), Q1 = X (R1 D)^-1,
+    the Gram matrix of Q1, and U = Q1 (R2^-1 Ur) for the kept columns only."""
+    G = X.T @ X
+    norms = np.sqrt(np.diag(G)).copy()
+    norms[norms == 0] = 1.0
+    try:
+        R1 = np.linalg.cholesky(G / np.outer(norms, norms)).T
+        d = np.abs(np.diag(R1))
+        if not d.min() > 1e-6 * d.max():
+            return None, None
+        Q1 = right_solve(X, R1 * norms)  # X D^-1 R1^-1
+        R2 = np.linalg.cholesky(Q1.T @ Q1).T
+    except np.linalg.LinAlgError:
+        return None, None
+    Ur, s, _ = np.linalg.svd(R2 @ R1)
+    if not s[-1] > 1e-6 * s[0]:
+        return None, None
+    k = _kept(s, rank_tol, max_rank)
+    return Q1 @ sla.solve_triangular(R2, Ur[:, :k], check_finite=False), s
+
+
+def right_solve(X, R):
+    r"""The product :math:`X R^{-1}` for an upper triangular R, by one triangular solve.
+
+    Parameters
+    ----------
+    X : ndarray, shape (n, k)
+        Real or complex; not modified.
+    R : ndarray, shape (k, k)
+        Upper triangular, nonsingular (its strictly lower part is not read).
+
+    Returns
+    -------
+    ndarray, shape (n, k), Fortran order
+
+    Notes
+    -----
+    BLAS ``trsm`` (side right) in place on a Fortran-ordered copy of X: one pass to copy X
+    and one to solve, :math:`n k^2` flops; ``scipy.linalg.solve_triangular(R, X.T, trans="T")``
+    transposes X on the way in and out.
+    """
+    trsm = sla.get_blas_funcs("trsm", (R, X))
+    return trsm(1.0, np.asfortranarray(R), np.array(X, order="F"), side=1, lower=0, trans_a=0,
+                overwrite_b=True)
 
 
 def cholesky_qr2(X, min_diag=0.0):
@@ -136,9 +185,10 @@ def cholesky_qr2(X, min_diag=0.0):
     d = np.abs(np.diag(R1))
     if not d.min() > min_diag * d.max():
         raise np.linalg.LinAlgError("ill-conditioned")
-    Q = sla.solve_triangular(R1, X.T, trans="T", lower=False, check_finite=False).T
+    Q = right_solve(X, R1)
     R2 = np.linalg.cholesky(Q.T @ Q).T
-    Q = sla.solve_triangular(R2, Q.T, trans="T", lower=False, check_finite=False).T
+    trsm = sla.get_blas_funcs("trsm", (R2, Q))
+    Q = trsm(1.0, np.asfortranarray(R2), Q, side=1, lower=0, trans_a=0, overwrite_b=True)  # Q is ours
     return Q, R2 @ R1
 
 
