@@ -89,37 +89,69 @@ def dense_bt(E, A, B, C, order: int | None = None, *, hsv_tol: float = 0.0) -> B
     return BTResult(Tl.T @ As @ Tr, Tl.T @ Bs, C @ Tr, hsv, Tl, Tr)
 
 
-def orth(X: np.ndarray, rank_tol: float = 1e-12, max_rank: int | None = None, method: str = "auto"):
+def orth(X: np.ndarray, rank_tol: float = 1e-12, max_rank: int | None = None, method: str = "auto",
+         ill_tol: float | None = None):
     """Orthonormal basis of the numerical range of X (columns scaled to unit norm first).
 
     Returns (Q, s): Q has the leading left singular vectors whose singular
     values exceed ``rank_tol * s[0]`` (at most ``max_rank``), s all singular values.
-    Q is Fortran-ordered on the Cholesky-QR path.
+    Q is Fortran-ordered for a tall real X.
 
     ``method``: ``"householder"`` (QR, then the SVD of R) or ``"auto"``: two
     Cholesky-QR passes (:func:`cholesky_qr2`) when the scaled X has relative
     singular values above 1e-6, where they give an orthonormal factor to
     rounding, else Householder. BLAS-3 instead of the BLAS-2 of Householder on a
     tall, thin matrix: measured 1.7 ms against 5.0 ms for 6001 x 20 on one thread.
+    ``ill_tol``: when given and the smallest kept singular value is below
+    ``ill_tol * s[0]``, Q is None and not formed (the caller wants another method then).
+    For a tall real X the Householder QR is LAPACK's geqrf, the orthonormal factor
+    (orgqr) formed only when it is returned: numpy.linalg.qr took 5x their time on
+    2e5 x 10 (docs/design/irka.md).
     """
     if method not in ("auto", "householder"):
         raise InputError(f"method must be 'auto' or 'householder'; got {method!r}")
-    U = s = None
-    if method == "auto" and 0 < X.shape[1] and X.shape[0] > 4 * X.shape[1] and not np.iscomplexobj(X):
+    tall = 0 < X.shape[1] and X.shape[0] > 4 * X.shape[1]
+    if method == "auto" and tall and not np.iscomplexobj(X):
         U, s = _orth_cholesky(X, rank_tol, max_rank)
-        if U is not None:
-            return U, s
+        if s is not None:
+            return (None, s) if _ill(s, _kept(s, rank_tol, max_rank), ill_tol) else (U, s)
     norms = np.linalg.norm(X, axis=0)
     norms[norms == 0] = 1.0
+    if tall and not np.iscomplexobj(X):
+        return _orth_householder(X, norms, rank_tol, max_rank, ill_tol)
     Xn = X / norms
-    if X.shape[0] > 4 * X.shape[1]:
+    if tall:
         Q0, R0 = np.linalg.qr(Xn)
         U, s, _ = np.linalg.svd(R0)
         U = Q0 @ U
     else:
         U, s, _ = np.linalg.svd(Xn, full_matrices=False)
     k = _kept(s, rank_tol, max_rank)
-    return U[:, :k], s
+    return (None, s) if _ill(s, k, ill_tol) else (U[:, :k], s)
+
+
+def _ill(s, k, ill_tol):
+    """Whether the k-th singular value is below ill_tol * s[0] (ill_tol None: never)."""
+    return ill_tol is not None and k > 0 and s[k - 1] < ill_tol * s[0]
+
+
+def _orth_householder(X, norms, rank_tol, max_rank, ill_tol):
+    """(U, s) of :func:`orth` for a tall real X by LAPACK geqrf on the scaled X, the SVD of R,
+    and (unless ill, see ``ill_tol``) orgqr and U = Q0 Ur for the kept columns only."""
+    geqrf, orgqr = sla.get_lapack_funcs(("geqrf", "orgqr"), (X,))
+    Xn = np.array(X, order="F", dtype=float)
+    Xn /= norms
+    qr, tau, _, info = geqrf(Xn, overwrite_a=1)
+    if info != 0:  # pragma: no cover - LAPACK argument error
+        raise np.linalg.LinAlgError(f"geqrf failed (info {info})")
+    Ur, s, _ = np.linalg.svd(np.triu(qr[:X.shape[1]]))
+    k = _kept(s, rank_tol, max_rank)
+    if _ill(s, k, ill_tol):
+        return None, s
+    Q0, _, info = orgqr(qr, tau, overwrite_a=1)
+    if info != 0:  # pragma: no cover - LAPACK argument error
+        raise np.linalg.LinAlgError(f"orgqr failed (info {info})")
+    return Q0 @ Ur[:, :k], s
 
 
 def _kept(s, rank_tol, max_rank):
