@@ -102,6 +102,7 @@ class IRKA(IRKABase):
         # of the n2 x n2 matrix G G^T (well conditioned: checked when the model was built);
         # never formed, no dense n1 x n2 array
         self._GGt = None
+        self._GGt_lock = threading.Lock()
         if self.options["kernel_projection"] and G.shape[0]:
             self._GGt = spla.splu((G @ G.T).tocsc())
             self._support = np.unique(G.tocsr().indices)  # the columns of G with an entry
@@ -127,6 +128,12 @@ class IRKA(IRKABase):
             steps = o["refine"] if self._refining() else 0
             return map_dask(self, jobs, steps, o["refine_precision"] == "extended", o["check_solves"] == "all")
         return map_threads(fn, jobs, self._threads)
+
+    def _map_bases(self, fn, bases):
+        """The right and left bases made orthonormal on ``solver_threads`` threads (BLAS and the
+        LAPACK calls release the GIL; the sparse LU of G G^T is used under a lock). Each basis
+        goes through the same operations whatever the thread count: the same bits."""
+        return map_threads(fn, bases, self._threads)
 
     def _outcome(self, *args, **kwargs):
         rom, info = super()._outcome(*args, **kwargs)
@@ -202,7 +209,9 @@ class IRKA(IRKABase):
         ns, k = self._support.size, Xs.shape[1]
         nb = Xs.shape[0] // ns
         Xb = Xs.reshape(nb, ns, k).transpose(1, 0, 2).reshape(ns, nb * k) if nb > 1 else Xs
-        C = np.asarray(self._Gs.T @ self._GGt.solve(np.asarray(self._Gs @ Xb)))
+        with self._GGt_lock:  # SuperLU's solve is not documented as thread-safe
+            Y = self._GGt.solve(np.asarray(self._Gs @ Xb))
+        C = np.asarray(self._Gs.T @ Y)
         return C.reshape(ns, nb, k).transpose(1, 0, 2).reshape(nb * ns, k) if nb > 1 else C
 
     def _lu_count(self):
