@@ -132,8 +132,11 @@ class IRKA(IRKABase):
     def _map_bases(self, fn, bases):
         """The right and left bases made orthonormal on ``solver_threads`` threads (BLAS and the
         LAPACK calls release the GIL; the sparse LU of G G^T is used under a lock). Each basis
-        goes through the same operations whatever the thread count: the same bits."""
-        return map_threads(fn, bases, self._threads)
+        goes through the same operations whatever the thread count: the same bits. Bases below
+        2^20 entries (8 MB) are done in order: their dense work is too short for two threads
+        to pay (the GIL is held between the calls into BLAS)."""
+        big = all(X is not None and X.size >= 1 << 20 for X in bases)
+        return map_threads(fn, bases, self._threads if big else 1)
 
     def _outcome(self, *args, **kwargs):
         rom, info = super()._outcome(*args, **kwargs)
