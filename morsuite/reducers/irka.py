@@ -92,6 +92,9 @@ class IRKA(IRKABase):
                            choices=("threads", "dask")),
     }
 
+    #: bases with fewer entries are made orthonormal in order (``_map_bases``)
+    PARALLEL_BASES_MIN = 1 << 20
+
     def _setup(self):
         self._solver = self.fom.new_solver(cache_size=0, pivot_tol=self.options["pivot_tol"])
         self._refiner = SaddleOperator(self._solver.pattern)
@@ -135,7 +138,7 @@ class IRKA(IRKABase):
         goes through the same operations whatever the thread count: the same bits. Bases below
         2^20 entries (8 MB) are done in order: their dense work is too short for two threads
         to pay (the GIL is held between the calls into BLAS)."""
-        big = all(X is not None and X.size >= 1 << 20 for X in bases)
+        big = all(X is not None and X.size >= self.PARALLEL_BASES_MIN for X in bases)
         return map_threads(fn, bases, self._threads if big else 1)
 
     def _outcome(self, *args, **kwargs):
