@@ -14,7 +14,7 @@ from scipy.sparse.csgraph import maximum_bipartite_matching
 
 from ..errors import InputError, MorsuiteError
 
-__all__ = ["dense_bt", "orth", "cholesky_qr2", "shift_distance", "match_sets", "lyap_factor", "sigma_max",
+__all__ = ["dense_bt", "orth", "cholesky_qr2", "right_solve", "shift_distance", "match_sets", "lyap_factor", "sigma_max",
            "BTResult", "UnstableError"]
 
 
@@ -89,43 +89,124 @@ def dense_bt(E, A, B, C, order: int | None = None, *, hsv_tol: float = 0.0) -> B
     return BTResult(Tl.T @ As @ Tr, Tl.T @ Bs, C @ Tr, hsv, Tl, Tr)
 
 
-def orth(X: np.ndarray, rank_tol: float = 1e-12, max_rank: int | None = None, method: str = "auto"):
+def orth(X: np.ndarray, rank_tol: float = 1e-12, max_rank: int | None = None, method: str = "auto",
+         ill_tol: float | None = None):
     """Orthonormal basis of the numerical range of X (columns scaled to unit norm first).
 
     Returns (Q, s): Q has the leading left singular vectors whose singular
     values exceed ``rank_tol * s[0]`` (at most ``max_rank``), s all singular values.
+    Q is Fortran-ordered for a tall real X.
 
     ``method``: ``"householder"`` (QR, then the SVD of R) or ``"auto"``: two
     Cholesky-QR passes (:func:`cholesky_qr2`) when the scaled X has relative
     singular values above 1e-6, where they give an orthonormal factor to
     rounding, else Householder. BLAS-3 instead of the BLAS-2 of Householder on a
     tall, thin matrix: measured 1.7 ms against 5.0 ms for 6001 x 20 on one thread.
+    ``ill_tol``: when given and the smallest kept singular value is below
+    ``ill_tol * s[0]``, Q is None and not formed (the caller wants another method then).
+    For a tall real X the Householder QR is LAPACK's geqrf, the orthonormal factor
+    (orgqr) formed only when it is returned: numpy.linalg.qr took 5x their time on
+    2e5 x 10 (docs/design/irka.md).
     """
     if method not in ("auto", "householder"):
         raise InputError(f"method must be 'auto' or 'householder'; got {method!r}")
+    tall = 0 < X.shape[1] and X.shape[0] > 4 * X.shape[1]
+    if method == "auto" and tall and not np.iscomplexobj(X):
+        U, s = _orth_cholesky(X, rank_tol, max_rank)
+        if s is not None:
+            return (None, s) if _ill(s, _kept(s, rank_tol, max_rank), ill_tol) else (U, s)
     norms = np.linalg.norm(X, axis=0)
     norms[norms == 0] = 1.0
+    if tall and not np.iscomplexobj(X):
+        return _orth_householder(X, norms, rank_tol, max_rank, ill_tol)
     Xn = X / norms
-    U = s = None
-    if method == "auto" and 0 < X.shape[1] and X.shape[0] > 4 * X.shape[1]:
-        try:
-            Q, R = cholesky_qr2(Xn, min_diag=1e-6)
-            Ur, s, _ = np.linalg.svd(R)
-            if s[-1] > 1e-6 * s[0]:
-                U = Q @ Ur
-        except np.linalg.LinAlgError:
-            pass
-    if U is None:
-        if X.shape[0] > 4 * X.shape[1]:
-            Q0, R0 = np.linalg.qr(Xn)
-            U, s, _ = np.linalg.svd(R0)
-            U = Q0 @ U
-        else:
-            U, s, _ = np.linalg.svd(Xn, full_matrices=False)
+    if tall:
+        Q0, R0 = np.linalg.qr(Xn)
+        U, s, _ = np.linalg.svd(R0)
+        U = Q0 @ U
+    else:
+        U, s, _ = np.linalg.svd(Xn, full_matrices=False)
+    k = _kept(s, rank_tol, max_rank)
+    return (None, s) if _ill(s, k, ill_tol) else (U[:, :k], s)
+
+
+def _ill(s, k, ill_tol):
+    """Whether the k-th singular value is below ill_tol * s[0] (ill_tol None: never)."""
+    return ill_tol is not None and k > 0 and s[k - 1] < ill_tol * s[0]
+
+
+def _orth_householder(X, norms, rank_tol, max_rank, ill_tol):
+    """(U, s) of :func:`orth` for a tall real X by LAPACK geqrf on the scaled X, the SVD of R,
+    and (unless ill, see ``ill_tol``) orgqr and U = Q0 Ur for the kept columns only."""
+    geqrf, orgqr = sla.get_lapack_funcs(("geqrf", "orgqr"), (X,))
+    Xn = np.array(X, order="F", dtype=float)
+    Xn /= norms
+    qr, tau, _, info = geqrf(Xn, overwrite_a=1)
+    if info != 0:  # pragma: no cover - LAPACK argument error
+        raise np.linalg.LinAlgError(f"geqrf failed (info {info})")
+    Ur, s, _ = np.linalg.svd(np.triu(qr[:X.shape[1]]))
+    k = _kept(s, rank_tol, max_rank)
+    if _ill(s, k, ill_tol):
+        return None, s
+    Q0, _, info = orgqr(qr, tau, overwrite_a=1)
+    if info != 0:  # pragma: no cover - LAPACK argument error
+        raise np.linalg.LinAlgError(f"orgqr failed (info {info})")
+    return Q0 @ Ur[:, :k], s
+
+
+def _kept(s, rank_tol, max_rank):
+    """The number of singular values s above rank_tol * s[0], at most max_rank."""
     k = int(np.sum(s > rank_tol * s[0])) if s.size and s[0] > 0 else 0
-    if max_rank is not None:
-        k = min(k, max_rank)
-    return U[:, :k], s
+    return k if max_rank is None else min(k, max_rank)
+
+
+def _orth_cholesky(X, rank_tol, max_rank):
+    """(U, s) of :func:`orth` by two Cholesky-QR passes on the unit-scaled X, or (None, None) when
+    a pass fails or the relative singular values reach 1e-6. Four passes over X: its Gram
+    matrix (the column norms are its diagonal, the scaled X is never formed), Q1 = X (R1 D)^-1,
+    the Gram matrix of Q1, and U = Q1 (R2^-1 Ur) for the kept columns only."""
+    G = X.T @ X
+    norms = np.sqrt(np.diag(G)).copy()
+    norms[norms == 0] = 1.0
+    try:
+        R1 = np.linalg.cholesky(G / np.outer(norms, norms)).T
+        d = np.abs(np.diag(R1))
+        if not d.min() > 1e-6 * d.max():
+            return None, None
+        Q1 = right_solve(X, R1 * norms)  # X D^-1 R1^-1
+        R2 = np.linalg.cholesky(Q1.T @ Q1).T
+    except np.linalg.LinAlgError:
+        return None, None
+    Ur, s, _ = np.linalg.svd(R2 @ R1)
+    if not s[-1] > 1e-6 * s[0]:
+        return None, None
+    k = _kept(s, rank_tol, max_rank)
+    return Q1 @ sla.solve_triangular(R2, Ur[:, :k], check_finite=False), s
+
+
+def right_solve(X, R):
+    r"""The product :math:`X R^{-1}` for an upper triangular R, by one triangular solve.
+
+    Parameters
+    ----------
+    X : ndarray, shape (n, k)
+        Real or complex; not modified.
+    R : ndarray, shape (k, k)
+        Upper triangular, nonsingular (its strictly lower part is not read).
+
+    Returns
+    -------
+    ndarray, shape (n, k), Fortran order
+
+    Notes
+    -----
+    BLAS ``trsm`` (side right) in place on a Fortran-ordered copy of X: one pass to copy X
+    and one to solve, :math:`n k^2` flops; ``scipy.linalg.solve_triangular(R, X.T, trans="T")``
+    transposes X on the way in and out.
+    """
+    trsm = sla.get_blas_funcs("trsm", (R, X))
+    return trsm(1.0, np.asfortranarray(R), np.array(X, order="F"), side=1, lower=0, trans_a=0,
+                overwrite_b=True)
 
 
 def cholesky_qr2(X, min_diag=0.0):
@@ -136,9 +217,10 @@ def cholesky_qr2(X, min_diag=0.0):
     d = np.abs(np.diag(R1))
     if not d.min() > min_diag * d.max():
         raise np.linalg.LinAlgError("ill-conditioned")
-    Q = sla.solve_triangular(R1, X.T, trans="T", lower=False, check_finite=False).T
+    Q = right_solve(X, R1)
     R2 = np.linalg.cholesky(Q.T @ Q).T
-    Q = sla.solve_triangular(R2, Q.T, trans="T", lower=False, check_finite=False).T
+    trsm = sla.get_blas_funcs("trsm", (R2, Q))
+    Q = trsm(1.0, np.asfortranarray(R2), Q, side=1, lower=0, trans_a=0, overwrite_b=True)  # Q is ours
     return Q, R2 @ R1
 
 

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .kernels import AVAILABLE, numba
+
 __all__ = ["gram_schmidt"]
 
 
@@ -76,10 +78,26 @@ def gram_schmidt(X, rank_tol, pivot=True):
 
 
 def _remove_direction(R, q, m, k, tmp):
-    """R[:, m:k] -= outer(q, q @ R[:, m:k]), a column at a time through the n-buffer tmp:
-    the same products and differences as with np.outer, bit for bit (tested), without
-    the n x (k - m) temporary."""
+    """R[:, m:k] -= outer(q, q @ R[:, m:k]), a column at a time: the same products and
+    differences as with np.outer, bit for bit (tested), without the n x (k - m) temporary;
+    compiled (one pass over each column, ``_update_columns``) when numba is there."""
     c = q @ R[:, m:k]
+    if _update_jit is not None and R.flags.f_contiguous and R.dtype == np.float64:
+        _update_jit(R, q, c, m, k)
+        return
     for j in range(m, k):
         np.multiply(q, c[j - m], out=tmp)
         np.subtract(R[:, j], tmp, out=R[:, j])
+
+
+def _update_columns(R, q, c, m, k):
+    """R[i, j] = R[i, j] - q[i] * c[j - m] for j in m..k-1: a product rounded, then a difference
+    rounded (no fused multiply-add: numba compiles without fastmath), as numpy does it."""
+    n = R.shape[0]
+    for j in range(m, k):
+        cj = c[j - m]
+        for i in range(n):
+            R[i, j] = R[i, j] - q[i] * cj
+
+
+_update_jit = numba.njit(nogil=True, cache=True)(_update_columns) if AVAILABLE else None

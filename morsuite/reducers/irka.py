@@ -43,7 +43,7 @@ import numpy as np
 import scipy.sparse.linalg as spla
 
 from ..errors import SingularShiftError
-from ..linalg.dense import cholesky_qr2
+from ..linalg.dense import cholesky_qr2, right_solve
 from ..linalg.orthonormal import gram_schmidt
 from ..linalg.refine import SaddleOperator, refined_solve
 from .base import Option, register
@@ -92,6 +92,9 @@ class IRKA(IRKABase):
                            choices=("threads", "dask")),
     }
 
+    #: bases with fewer entries are made orthonormal in order (``_map_bases``)
+    PARALLEL_BASES_MIN = 1 << 20
+
     def _setup(self):
         self._solver = self.fom.new_solver(cache_size=0, pivot_tol=self.options["pivot_tol"])
         self._refiner = SaddleOperator(self._solver.pattern)
@@ -102,8 +105,11 @@ class IRKA(IRKABase):
         # of the n2 x n2 matrix G G^T (well conditioned: checked when the model was built);
         # never formed, no dense n1 x n2 array
         self._GGt = None
+        self._GGt_lock = threading.Lock()
         if self.options["kernel_projection"] and G.shape[0]:
             self._GGt = spla.splu((G @ G.T).tocsc())
+            self._support = np.unique(G.tocsr().indices)  # the columns of G with an entry
+            self._Gs = G.tocsc()[:, self._support].tocsr()
         return {}
 
     def _solve(self, lu, rhs, trans, a):
@@ -126,6 +132,15 @@ class IRKA(IRKABase):
             return map_dask(self, jobs, steps, o["refine_precision"] == "extended", o["check_solves"] == "all")
         return map_threads(fn, jobs, self._threads)
 
+    def _map_bases(self, fn, bases):
+        """The right and left bases made orthonormal on ``solver_threads`` threads (BLAS and the
+        LAPACK calls release the GIL; the sparse LU of G G^T is used under a lock). Each basis
+        goes through the same operations whatever the thread count: the same bits. Bases below
+        2^20 entries (8 MB) are done in order: their dense work is too short for two threads
+        to pay (the GIL is held between the calls into BLAS)."""
+        big = all(X is not None and X.size >= self.PARALLEL_BASES_MIN for X in bases)
+        return map_threads(fn, bases, self._threads if big else 1)
+
     def _outcome(self, *args, **kwargs):
         rom, info = super()._outcome(*args, **kwargs)
         info.update(solver_threads=self._threads if self.options["executor"] == "threads" else None,
@@ -147,36 +162,63 @@ class IRKA(IRKABase):
         Lemma 1 puts the raw solutions in :math:`\mathrm{null}(G)` (to the solve
         accuracy), but orthonormalising an ill-conditioned basis moves a direction of
         singular value :math:`\sigma` out of it by about :math:`\varepsilon/\sigma`.
-        :math:`X - G^T (G G^T)^{-1} G X`, applied twice, costs
-        :math:`O(\mathrm{nnz}(G) k)` plus the sparse LU of :math:`G G^T` made in
-        ``_setup``; X is returned unchanged when the removed part is at most
-        ``kernel_tol`` (RMS per column)."""
+        :math:`X - G^T (G G^T)^{-1} G X`, applied twice, changes only the rows of X that
+        G touches (its columns with an entry) and costs :math:`O(\mathrm{nnz}(G) k)` plus the
+        sparse LU of :math:`G G^T` made in ``_setup``; X is returned unchanged when the removed
+        part is at most ``kernel_tol`` (RMS per column), else re-orthonormalised with one pass
+        over X (one Cholesky-QR step whose Gram matrix comes from those rows) when the result is
+        well conditioned, by Cholesky-QR2 or Gram-Schmidt otherwise."""
         if self._GGt is None or X.shape[1] == 0:
             return X
-        C = self._range_part(X)
-        if np.linalg.norm(C) <= self.options["kernel_tol"] * np.sqrt(X.shape[1]):
+        rows = self._support_rows(X.shape[0])
+        Xs = X[rows]
+        Cs = self._range_part_rows(Xs)  # range(G^T) lies on these rows: the rest of X is in null(G)
+        if np.linalg.norm(Cs) <= self.options["kernel_tol"] * np.sqrt(X.shape[1]):
             return X  # X is in null(G) to rounding (a well-conditioned basis): nothing to remove
-        X = X - C
-        X = X - self._range_part(X)  # twice is enough
+        Ys = Xs - Cs
+        Ys -= self._range_part_rows(Ys)  # twice is enough
         # re-orthonormalise in order (X is orthonormal up to the removed part); a direction
         # almost wholly in range(G^T) carries no state and is dropped (Gram-Schmidt). When
-        # every column kept most of its norm, X is near-orthonormal and two Cholesky-QR
-        # passes (BLAS-3, the same column span and order) do it at a fraction of the cost
-        if np.min(np.linalg.norm(X, axis=0)) > 0.5:
+        # every column kept most of its norm, X is near-orthonormal: its Gram matrix is
+        # I - Xs^T Xs + Ys^T Ys (X^T X = I to rounding), its Cholesky factor R well conditioned
+        # and Y R^-1 orthonormal to rounding; one pass over X (docs/design/irka.md)
+        gram = np.eye(X.shape[1]) - Xs.T @ Xs + Ys.T @ Ys
+        if np.min(np.diag(gram)) > 0.25:
             try:
-                return cholesky_qr2(X)[0]
+                R = np.linalg.cholesky(gram).T
+                sv = np.linalg.svd(R, compute_uv=False)
+                if sv[-1] > 0.25 * sv[0]:
+                    Q = right_solve(X, R)
+                    Q[rows] = right_solve(Ys, R)
+                    return Q
             except np.linalg.LinAlgError:
                 pass
-        return gram_schmidt(X, 1e-2, pivot=False)[0]
+        Y = np.array(X, order="F")
+        Y[rows] = Ys
+        if np.min(np.linalg.norm(Y, axis=0)) > 0.5:
+            try:
+                return cholesky_qr2(Y)[0]
+            except np.linalg.LinAlgError:
+                pass
+        return gram_schmidt(Y, 1e-2, pivot=False)[0]
 
-    def _range_part(self, X):
-        """:math:`G^T (G G^T)^{-1} G X_i` for each n1-row block :math:`X_i` of X (one block here;
-        a first-order variant stacks position and velocity blocks), in the shape of X."""
-        G, n1 = self.fom.G, self.fom.n1
-        nb, k = X.shape[0] // n1, X.shape[1]
-        Xb = X.reshape(nb, n1, k).transpose(1, 0, 2).reshape(n1, nb * k) if nb > 1 else X
-        C = G.T @ self._GGt.solve(np.asarray(G @ Xb))
-        return C.reshape(n1, nb, k).transpose(1, 0, 2).reshape(nb * n1, k) if nb > 1 else C
+    def _support_rows(self, nrows):
+        """The rows of an (nb n1)-row basis that G touches: the columns of G holding an entry,
+        in each of the nb blocks of n1 rows (one block here; a first-order variant stacks two)."""
+        n1 = self.fom.n1
+        return np.concatenate([b * n1 + self._support for b in range(nrows // n1)])
+
+    def _range_part_rows(self, Xs):
+        """:math:`G^T (G G^T)^{-1} G X` on the support rows (``_support_rows``), from the
+        support rows Xs of X: per n1-row block, :math:`G_s^T (G G^T)^{-1} G_s X_s` with
+        :math:`G_s` the columns of G holding an entry. Elsewhere the product is zero."""
+        ns, k = self._support.size, Xs.shape[1]
+        nb = Xs.shape[0] // ns
+        Xb = Xs.reshape(nb, ns, k).transpose(1, 0, 2).reshape(ns, nb * k) if nb > 1 else Xs
+        with self._GGt_lock:  # SuperLU's solve is not documented as thread-safe
+            Y = self._GGt.solve(np.asarray(self._Gs @ Xb))
+        C = np.asarray(self._Gs.T @ Y)
+        return C.reshape(ns, nb, k).transpose(1, 0, 2).reshape(nb * ns, k) if nb > 1 else C
 
     def _lu_count(self):
         return self._solver.stats.factorizations

@@ -228,6 +228,11 @@ class IRKABase(Reducer):
         """``[fn(job) for job in jobs]``, in order; a variant may run them concurrently."""
         return [fn(job) for job in jobs]
 
+    def _map_bases(self, fn, bases) -> list:
+        """``[fn(X) for X in bases]``: the right and left bases made orthonormal, in order;
+        a variant may run them concurrently (``fn`` then must be thread-safe)."""
+        return [fn(X) for X in bases]
+
     def _bases_safe(self, alpha, bdir, cdir, left):
         """Bases; a shift at a pole (singular saddle matrix) is perturbed and retried."""
         npert = 0
@@ -257,16 +262,16 @@ class IRKABase(Reducer):
         the numerical rank of the bases before the oblique selection, ill whether
         a kept basis direction has relative singular value below ``ill_cond_tol``."""
         o = self.options
-        V, sv, gs = self._orthonormal(Vraw)
-        ill = ill_conditioned(sv, V.shape[1], o["ill_cond_tol"])
-        V = self._restrict(V)
+
+        def basis(X):  # orthonormal, ill-conditioned or not, moved onto the state space
+            Q, s, used_gs = self._orthonormal(X)
+            return self._restrict(Q), ill_conditioned(s, Q.shape[1], o["ill_cond_tol"]), used_gs
         if left:
-            W, sw, gs_w = self._orthonormal(Wraw)
-            gs = gs or gs_w
-            ill = ill or ill_conditioned(sw, W.shape[1], o["ill_cond_tol"])
-            W = self._restrict(W)
+            (V, ill, gs), (W, ill_w, gs_w) = self._map_bases(basis, [Vraw, Wraw])
+            gs, ill = gs or gs_w, ill or ill_w
             V, W, k, k_rank = oblique_selection(V, W, o["oblique_tol"], self.name)
         else:
+            V, ill, gs = basis(Vraw)
             W, k = V, V.shape[1]
             k_rank = k
             if k == 0:

@@ -75,8 +75,9 @@ def orthonormal_basis(X, how, rank_tol, ill_cond_tol, previous_ill=False):
         return (*gram_schmidt(X, rank_tol), True)
     if how == "auto" and previous_ill:
         return (*gram_schmidt(X, rank_tol), True)
-    Q, s = orth(X, rank_tol)
-    if how == "auto" and Q.shape[1] and s[Q.shape[1] - 1] < ill_cond_tol * s[0]:
+    # ill_tol: an ill-conditioned X's Householder basis is not formed, Gram-Schmidt replaces it
+    Q, s = orth(X, rank_tol, ill_tol=ill_cond_tol if how == "auto" else None)
+    if Q is None:
         return (*gram_schmidt(X, rank_tol), True)
     return Q, s, False
 

@@ -53,15 +53,27 @@ def raw_bases(red, alpha, bdir, cdir, left: bool):
             continue  # its conjugate partner's LU and solve give both columns
         jobs.append((a if cplx else a.real, F @ (b if cplx else b.real),
                      (L.T @ (c if cplx else c.real)) if left else None, a))
-    Vcols, Wcols = [], []
+    ncols = sum(2 if np.iscomplexobj(job[0]) else 1 for job in jobs)
+    V = W = None
+    j = 0
     for (x, w), (af, _, _, a) in zip(red._map_shifts(shift_solves(red), jobs), jobs):
         cplx = np.iscomplexobj(af)
         v = red._basis_vector(x, a, False)  # in shift order: a variant may record values here
-        Vcols += [v.real, v.imag] if cplx else [np.real(v)]
+        if V is None:  # Fortran order: each column written in one contiguous pass, no column_stack copy
+            V = np.empty((v.shape[0], ncols), order="F")
+            W = np.empty((v.shape[0], ncols), order="F") if left else None
+        _put(V, j, v, cplx)
         if left:
-            w = red._basis_vector(w, a, True)
-            Wcols += [w.real, w.imag] if cplx else [np.real(w)]
-    return np.column_stack(Vcols), (np.column_stack(Wcols) if left else None)
+            _put(W, j, red._basis_vector(w, a, True), cplx)
+        j += 2 if cplx else 1
+    return V, W
+
+
+def _put(X, j, v, cplx):
+    """Column j of X := Re v (and column j + 1 := Im v when ``cplx``)."""
+    X[:, j] = v.real
+    if cplx:
+        X[:, j + 1] = v.imag
 
 
 def shift_solves(red):
