@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernels import AVAILABLE, numba
+from . import kernels
 
 __all__ = ["gram_schmidt"]
 
@@ -82,8 +82,8 @@ def _remove_direction(R, q, m, k, tmp):
     differences as with np.outer, bit for bit (tested), without the n x (k - m) temporary;
     compiled (one pass over each column, ``_update_columns``) when numba is there."""
     c = q @ R[:, m:k]
-    if _update_jit is not None and R.flags.f_contiguous and R.dtype == np.float64:
-        _update_jit(R, q, c, m, k)
+    if R.flags.f_contiguous and R.dtype == np.float64 and kernels.use_kernels():
+        kernels.compiled(_update_columns)(R, q, c, m, k)
         return
     for j in range(m, k):
         np.multiply(q, c[j - m], out=tmp)
@@ -99,5 +99,3 @@ def _update_columns(R, q, c, m, k):
         for i in range(n):
             R[i, j] = R[i, j] - q[i] * cj
 
-
-_update_jit = numba.njit(nogil=True, cache=True)(_update_columns) if AVAILABLE else None
