@@ -28,11 +28,14 @@ sequence with every pole twice,
 .. math::
 
     \partial J/\partial y_{c,j} = 2\,\mathrm{Re}\,u_{c,j}^He,\qquad
-    G = 2\,\mathrm{Re}\,(U^HU - W^HW),
+    G = 2\,\mathrm{Re}\,(\tilde U^H\tilde U),\quad \tilde U = U - Z_{12}^T\overline W,
 
 with :math:`e = E(-A_2)\beta_2`, :math:`u_{c,j} = g_{c,j}(-A_2)\beta_2` and
 :math:`w_{c,j} = (I - \hat\beta_1\hat\beta_1^T)g_{c,j}(-A_1)\beta_1` (the part of :math:`g_{c,j}` in
-:math:`V_0` removed: Kaufman's Gauss-Newton matrix of variable projection); each
+:math:`V_0` removed: Kaufman's Gauss-Newton matrix of variable projection; :math:`\Pi_0g_{c,j} =
+\overline{w_{c,j}}^Tx_1` has :math:`(\Pi_0g_{c,j})(-A_2)\beta_2 = Z_{12}^T\overline{w_{c,j}}` with
+:math:`A_1Z_{12} + Z_{12}A_2^T + \beta_1\beta_2^T = 0`, so :math:`\tilde U` holds :math:`(I - \Pi_0)g_{c,j}`
+with no difference of two Gram matrices); each
 :math:`g_{c,j}(-A)\beta` is one Sylvester solve with the cascade realization of :math:`T_r` and
 :math:`h_{c,j}` (companion form in :math:`\tilde s`), one per cluster. The relative gradient is
 :math:`\rho = \|(I - \hat\beta_2\hat\beta_2^T)e\|/\sqrt J` (:func:`~.h2_orthonormal.tm_rho`).
@@ -249,8 +252,9 @@ def cluster_evaluate(cl: Clusters, y, target, *, derivatives: int = 2):
     g = 2.0 * np.real(U.conj().T @ e)
     G = None
     if derivatives > 1:
-        W = np.vstack(W).T
-        G = 2.0 * np.real(U.conj().T @ U - W.conj().T @ W)
+        # (I - Pi_0) g in the doubled basis: the rows of Z12 are the basis x_1 in it; no difference of Grams
+        Ut = U - Z12.T @ np.conj(np.vstack(W).T)
+        G = 2.0 * np.real(Ut.conj().T @ Ut)
         G = 0.5 * (G + G.T)
     return ClusterEvaluation(np.asarray(y, float), J, floor, g, G, rho, lam, A1, b1, alpha)
 
