@@ -14,7 +14,7 @@ import scipy.linalg as sla
 
 from morsuite.errors import MorsuiteError
 from morsuite.linalg.dense import match_sets
-from morsuite.linalg.h2_clusters import (Clusters, ModalTM, _fd_hessian, cluster_descent,
+from morsuite.linalg.h2_clusters import (Clusters, ModalTM, _fd_hessian, alternating_descent, cluster_descent,
                                          cluster_evaluate)
 from morsuite.linalg.h2_gradient import ModalTarget
 from morsuite.linalg.h2_poles import Coordinates, ModalValues, optimal_residues
@@ -132,3 +132,24 @@ def test_newton_descent_converges_to_the_pole_residue_optimum():
     perm, dist = match_sets(ev.poles, co.split(ref.x)[0], scale=np.abs(ev.poles))
     assert dist.max() < 1e-6
     assert _dense_error2(full, ev.realization()) == pytest.approx(ev.value, rel=1e-8)
+
+
+def test_alternating_descent_hands_over_to_the_same_optimum():
+    """Cluster Gauss-Newton, then the pole-residue descent from its poles (residues re-optimised): the
+    handover keeps the model (no jump in J) and ends at the pole-residue descent's own optimum."""
+    full, tgt, lam = _target()
+    poles = _start(lam)
+    tv = ModalValues(tgt)
+    co, x = _pole_residue(poles)
+    co_a, ev_a, its, reason, record = alternating_descent(co, x, tv, rounds=2, cluster_maxit=5, gtol=1e-9)
+    assert reason == "converged" and ev_a.rho <= 1e-9 and record
+    assert record[0]["h2_pole"] <= record[0]["h2_cluster"] * (1 + 1e-12)
+    co_r, ref, _, why, _, _ = pole_descent(co, optimal_residues(co, x, tv).x, tv, maxit=300, gtol=1e-9)
+    assert why == "converged"
+    assert ev_a.value == pytest.approx(ref.value, rel=1e-8)
+    assert _dense_error2(full, _real(co_a, ev_a.x)) == pytest.approx(ev_a.value, rel=1e-8)
+
+
+def _real(co, x):
+    from morsuite.linalg.h2_poles import _real_modal
+    return _real_modal(co, x)

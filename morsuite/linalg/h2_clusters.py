@@ -55,9 +55,11 @@ import scipy.linalg as sla
 
 from ..errors import InputError
 from .h2_orthonormal import tm_realization, tm_rho
-from .h2_poles_descent import _tr_step
+from .h2_poles import Coordinates, optimal_residues
+from .h2_poles_descent import _tr_step, pole_descent
 
-__all__ = ["Clusters", "ModalTM", "ClusterEvaluation", "cluster_evaluate", "cluster_descent", "CTOL"]
+__all__ = ["Clusters", "ModalTM", "ClusterEvaluation", "cluster_evaluate", "cluster_descent", "pole_coordinates",
+           "alternating_descent", "CTOL", "MAX_DEGREE"]
 
 EPS = np.finfo(float).eps
 
@@ -350,3 +352,54 @@ def cluster_descent(poles, target, *, ctol: float = CTOL, maxit: int = 200, gtol
         if ev.rho <= gtol:
             reason = "converged"
     return ev, it, reason, hist
+
+
+def pole_coordinates(poles):
+    r"""(Coordinates, x) of :mod:`.h2_poles` at the given poles (conjugate-closed) with zero residues, the
+    first residue coordinate the pivot (for :func:`~.h2_poles.optimal_residues`)."""
+    lam = np.asarray(poles, dtype=complex)
+    re, up = lam[lam.imag == 0].real, lam[lam.imag > 0]
+    co = Coordinates(re.size, up.size)
+    return co, co.join(re, np.zeros(re.size), up, np.zeros(up.size))
+
+
+def alternating_descent(co: Coordinates, x, target, *, rounds: int = 3, cluster_maxit: int = 150,
+                        pole_maxit: int = 150, gtol: float = 1e-7):
+    r"""Alternate :func:`cluster_descent` (Gauss-Newton in cluster-polynomial coordinates: moves clusters
+    of poles the pole-residue metric cannot) and :func:`~.h2_poles_descent.pole_descent` (exact Hessian in
+    pole-residue coordinates: leaves the saddles that Gauss-Newton, blind to negative curvature, plateaus
+    at), from the pole-residue point x against the dense modal ``target`` (a
+    :class:`~.h2_poles.ModalValues`), for at most ``rounds`` rounds; stops after a round that does not
+    decrease J (the cancellation-free value) or when the pole descent converges. Returns ``(Coordinates,
+    evaluation, iterations, reason, record)`` of the best point by J; ``record``: per round the
+    surrogate H2 errors after each half, the iterations, reasons and both relative gradients.
+    Measurements: ``docs/design/so_h2.md`` (2026-11-26, second session)."""
+    tt = ModalTM(target.target)
+    ev = optimal_residues(co, x, target)
+    best = (target.precise(co, ev.x)[0], co, ev)
+    reason, total, record = "stalled", 0, []
+    for _ in range(rounds):
+        lam = co.split(ev.x)[0]
+        try:
+            evc, itc, rc, _ = cluster_descent(lam, tt, maxit=cluster_maxit, gtol=gtol, hessian="gn")
+            co2, x2 = pole_coordinates(evc.poles)
+            pr = optimal_residues(co2, x2, target)
+            if pr is None:
+                break
+            co2, ev2, itp, reason, _, _ = pole_descent(co2, pr.x, target, maxit=pole_maxit, gtol=gtol)
+        except (InputError, np.linalg.LinAlgError, ValueError):
+            break
+        total += itc + itp
+        v = target.precise(co2, ev2.x)[0]
+        record.append({"h2_cluster": float(np.sqrt(max(evc.value, 0.0))), "iterations_cluster": itc,
+                       "reason_cluster": rc, "rho_cluster": float(evc.rho),
+                       "h2_pole": float(np.sqrt(max(v, 0.0))), "iterations_pole": itp, "reason_pole": reason,
+                       "rho_pole_residue": float(ev2.rho)})
+        if not v < best[0]:
+            break
+        best = (v, co2, ev2)
+        co, ev = co2, ev2
+        if reason == "converged":
+            break
+    _, co, ev = best
+    return co, ev, total, reason, record

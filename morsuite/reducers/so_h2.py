@@ -102,6 +102,9 @@ class SOH2(Reducer):
         "starts": Option(5, "int", "varpro: candidates (best by surrogate error first) descended from", low=1),
         "newton_maxit": Option(300, "int", "varpro: Newton iterations per start against the surrogate", low=1),
         "chord_maxit": Option(5, "int", "varpro: chord steps against the full model (r LUs each)", low=0),
+        "cluster_rounds": Option(0, "int", "varpro: when the surrogate descent does not converge, rounds of "
+                                 "Gauss-Newton in cluster-polynomial coordinates alternated with it (0: none; "
+                                 "linalg/h2_clusters.py)", low=0),
         "parametrization": Option("general", "choice", "general K, D, F, L with steps leaving the stable set "
                                   "rejected, or passive: K diagonal positive, D = L_D L_D^T (stable by "
                                   "construction; starts from the fv level)", choices=tuple(PARAMETRISATIONS)),
@@ -325,7 +328,8 @@ class SOH2(Reducer):
         elif descent == "varpro":
             with blas_threads(1):
                 kdfl, prec = pole_phase(roms, order, sur, self._full, gtol=o["gtol"], maxit=o["newton_maxit"],
-                                        chord_maxit=o["chord_maxit"], starts=o["starts"])
+                                        chord_maxit=o["chord_maxit"], starts=o["starts"],
+                                        cluster_rounds=o["cluster_rounds"])
             rec.update(prec)
             if kdfl is not None:
                 theta = np.concatenate([np.asarray(X, dtype=float).ravel() for X in kdfl])
