@@ -370,9 +370,11 @@ def alternating_descent(co: Coordinates, x, target, *, rounds: int = 3, cluster_
     pole-residue coordinates: leaves the saddles that Gauss-Newton, blind to negative curvature, plateaus
     at), from the pole-residue point x against the dense modal ``target`` (a
     :class:`~.h2_poles.ModalValues`), for at most ``rounds`` rounds; stops after a round that does not
-    decrease J (the cancellation-free value) or when the pole descent converges. Returns ``(Coordinates,
-    evaluation, iterations, reason, record)`` of the best point by J; ``record``: per round the
-    surrogate H2 errors after each half, the iterations, reasons and both relative gradients.
+    decrease J (the cancellation-free value), or with ``"converged"`` when the pole descent converges or
+    the orthonormal relative gradient of the round's result (the certified form, which the pole-residue
+    one underestimates at clusters) is at most ``10 * gtol``. Returns ``(Coordinates, evaluation,
+    iterations, reason, record)`` of the best point by J; ``record``: per round the target's H2 errors
+    after each half, the iterations, reasons and the relative gradients.
     Measurements: ``docs/design/so_h2.md`` (2026-11-26, second session)."""
     tt = ModalTM(target.target)
     ev = optimal_residues(co, x, target)
@@ -391,7 +393,10 @@ def alternating_descent(co: Coordinates, x, target, *, rounds: int = 3, cluster_
             break
         total += itc + itp
         v = target.precise(co2, ev2.x)[0]
-        record.append({"h2_cluster": float(np.sqrt(max(evc.value, 0.0))), "iterations_cluster": itc,
+        lam2 = co2.split(ev2.x)[0]
+        cl2 = Clusters(lam2)
+        ev_tm = cluster_evaluate(cl2, cl2.y, tt, derivatives=1)
+        record.append({"rho_pole_orthonormal": float(ev_tm.rho) if ev_tm is not None else None,"h2_cluster": float(np.sqrt(max(evc.value, 0.0))), "iterations_cluster": itc,
                        "reason_cluster": rc, "rho_cluster": float(evc.rho),
                        "h2_pole": float(np.sqrt(max(v, 0.0))), "iterations_pole": itp, "reason_pole": reason,
                        "rho_pole_residue": float(ev2.rho)})
@@ -399,6 +404,8 @@ def alternating_descent(co: Coordinates, x, target, *, rounds: int = 3, cluster_
             break
         best = (v, co2, ev2)
         co, ev = co2, ev2
+        if ev_tm is not None and ev_tm.rho <= 10.0 * gtol:
+            reason = "converged"    # the orthonormal rho (the certified form) is small on the target
         if reason == "converged":
             break
     _, co, ev = best
