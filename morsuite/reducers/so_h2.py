@@ -40,7 +40,8 @@ The result is never worse than the start in exact H2 error (:func:`.h2_decision.
 form beside it as ``relative_gradient_pole_residue``),
 ``status``, ``returned_start``, ``iterations`` (``iterations_surrogate`` + ``iterations_full``),
 ``history`` and ``history_full``, ``stop_reason`` and ``stop_reason_full``; varpro: ``starts``
-(per start: surrogate errors, iterations, reason), ``descended_from``,
+(per start: surrogate errors, iterations, reason), ``descended_from``, ``cluster_record`` (option
+``cluster_rounds``: per round the surrogate errors, iterations and relative gradients; docs/design/so_h2.md),
 ``relative_gradient_full``; lbfgs: ``gradient_norm``; ``lu_count`` (made by this call) with
 ``lu_breakdown`` (gramians, irka, exact) and ``lu_count_gramians``, ``time_breakdown``,
 ``setup_reused``, ``setup_cost``.

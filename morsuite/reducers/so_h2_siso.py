@@ -56,7 +56,8 @@ def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
         None when no start could be descended from or the result has no second-order realization;
         ``record``: per start its surrogate error before and after, iterations, reason; the chosen
         start; ``iterations_surrogate``, ``iterations_full``, ``history``, ``history_full``,
-        ``stop_reason``, ``stop_reason_full``, ``relative_gradient_full`` (after the chord steps).
+        ``stop_reason``, ``stop_reason_full``, ``relative_gradient_full`` (after the chord steps),
+        ``cluster_record`` (the rounds of ``cluster_rounds``, if any).
     """
     tv = ModalValues(sur)
     runs, alive = {}, []
@@ -97,10 +98,10 @@ def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
     if best is None:
         return None, rec
     label, co, ev, its, reason, hist, _ = best
-    rec["cluster_rounds"] = []
+    rec["cluster_record"] = []
     if reason != "converged" and cluster_rounds:
         co, ev, its_c, reason, rounds = alternating_descent(co, ev.x, tv, rounds=cluster_rounds, gtol=1e-3 * gtol)
-        rec["cluster_rounds"] = rounds
+        rec["cluster_record"] = rounds
         rec["iterations_surrogate"] += its_c
     rec.update(descended_from=label, history=hist, stop_reason=reason)
     fv = FullValues(full)
