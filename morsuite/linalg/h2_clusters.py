@@ -40,10 +40,14 @@ with no difference of two Gram matrices); each
 :math:`h_{c,j}` (companion form in :math:`\tilde s`), one per cluster. The relative gradient is
 :math:`\rho = \|(I - \hat\beta_2\hat\beta_2^T)e\|/\sqrt J` (:func:`~.h2_orthonormal.tm_rho`).
 
-The descent (:func:`cluster_descent`) is a trust region (Levenberg-Marquardt) with Kaufman's
-matrix, in the norm of its diagonal; the clusters are re-formed after every accepted step. Cost per
-evaluation: the target's values :math:`T(-A)\beta` for the sequences of n and 2n poles (a modal
-target of order N: :math:`O(Nn^2)`), and :math:`O(n^3)` dense work. Measurements: ``docs/design/so_h2.md``.
+The descent (:func:`cluster_descent`) is a trust region with Kaufman's matrix (Gauss-Newton, the
+default ``"gn"``; a secant or a differenced Hessian as options), in the norm of its diagonal; the clusters
+are re-formed when it stalls. Gauss-Newton is blind to negative curvature and plateaus near saddles
+(relative gradient about 0.1 at tcom(2000), r = 30); :func:`alternating_descent` alternates it with the
+pole-residue descent of :mod:`.h2_poles_descent` (exact Hessian), which leaves them. Cost per
+evaluation: the target's values :math:`T(-A)\beta` for the sequences of n and 2n poles (a modal target of
+order N: one triangular Sylvester solve, :math:`O(Nn^2)`), and :math:`O(n^3)` dense work; 0.063 s at
+n = 60, N = 120. Measurements: ``docs/design/so_h2.md`` (2026-11-26, second session).
 """
 
 from __future__ import annotations
@@ -278,11 +282,12 @@ def _fd_hessian(cl, ev, target, h=1e-6):
 
 
 def cluster_descent(poles, target, *, ctol: float = CTOL, maxit: int = 200, gtol: float = 1e-7,
-                    hessian: str = "sr1", restarts: int = 10):
+                    hessian: str = "gn", restarts: int = 10):
     r"""Trust-region descent in cluster-polynomial coordinates from the poles ``poles`` (module
-    docstring). Model Hessian: Kaufman's matrix G plus, with ``hessian="sr1"`` (default), a symmetric
-    rank-one secant estimate S of the rest (the terms in E), updated with
-    :math:`y^\# = g_+ - g - G_+p` (structured quasi-Newton, as NL2SOL); ``"gn"``: G alone; ``"fd"``: the
+    docstring). Model Hessian: ``hessian="gn"`` (default): Kaufman's matrix G alone; ``"sr1"``: G plus a
+    symmetric rank-one secant estimate S of the rest (the terms in E), updated with
+    :math:`y^\# = g_+ - g - G_+p` (structured quasi-Newton, as NL2SOL; 3.4x the time of "gn" for the same
+    plateau at tcom(2000), r = 30); ``"fd"``: the
     Hessian by differences of the gradient (diagnostics, 2d evaluations per iteration). Trust region in
     the norm of G's diagonal, starting at :math:`\sqrt J`; a step is taken when it decreases J by at
     least 1e-4 of the predicted decrease (below 10 floors of J the decrease is the trapezoidal rule on
