@@ -69,6 +69,8 @@ def test_clusters_group_close_poles_and_give_them_back():
     assert dist.max() < 1e-6     # a double-ish root of a quartic: about sqrt(eps) of the gap
     with pytest.raises(MorsuiteError, match="poles"):
         cluster_descent(np.array([0.1, -1.0]), ModalTM(_target()[1]))
+    with pytest.raises(MorsuiteError, match="hessian"):
+        cluster_descent(poles, ModalTM(_target()[1]), hessian="newton")
 
 
 def test_value_and_rho_against_dense_and_pole_residue_references():

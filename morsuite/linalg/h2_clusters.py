@@ -296,6 +296,10 @@ def cluster_descent(poles, target, *, ctol: float = CTOL, maxit: int = 200, gtol
     at a stall with no restarts left (``"stalled"``) or ``maxit`` (``"cap"``). Returns ``(evaluation,
     iterations, reason, history of sqrt(J))``. Cost per iteration: one evaluation per trial step
     (module docstring)."""
+    if hessian not in ("gn", "sr1", "fd"):
+        raise InputError(f"hessian must be 'gn', 'sr1' or 'fd', got {hessian!r}")
+    if not ctol > 0:
+        raise InputError(f"ctol must be positive, got {ctol!r}")
     cl = Clusters(poles, ctol)
     ev = cluster_evaluate(cl, cl.y, target)
     if ev is None:
