@@ -9,7 +9,9 @@ whose residues sum to zero, and back (:mod:`morsuite.linalg.h2_poles`): the desc
    projection against the surrogate :math:`T_N` (the residues that minimise J for the poles, one
    linear solve; trust-region Newton over the poles with the exact Hessian's Schur complement),
    to a surrogate relative gradient of ``1e-3 * gtol``, for ``probe`` iterations each; the best by
-   surrogate error continues up to ``maxit``, and the second if the first does not converge.
+   surrogate error continues up to ``maxit``, and the second if the first does not converge. If
+   none converges, optionally (``cluster_rounds``) rounds alternating Gauss-Newton in cluster-polynomial
+   coordinates with this descent (:func:`~morsuite.linalg.h2_clusters.alternating_descent`).
 2. Chord steps against the full model: its gradient (one LU per pole pair) with the surrogate's
    Hessian, until the full model's relative gradient is at most ``gtol`` or ``chord_maxit`` steps.
    They converge at the rate of the surrogate's error relative to the model's error.
@@ -25,13 +27,15 @@ import numpy as np
 
 from ..errors import InputError
 from ..linalg.h2_poles import Coordinates, FullValues, ModalValues, chord_step, evaluate, second_order_of
+from ..linalg.h2_clusters import alternating_descent
 from ..linalg.h2_poles_descent import pole_descent
 from .so_h2_starts import standard_realization
 
 __all__ = ["pole_phase"]
 
 
-def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, probe=30, finalists=2):
+def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, probe=30, finalists=2,
+               cluster_rounds=0):
     """Run steps 1 to 3 of the module docstring.
 
     Parameters
@@ -43,6 +47,8 @@ def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
     probe : iterations every start gets before the best (by surrogate error) gets the rest of ``maxit``
     finalists : starts continued, best first, until one reaches stationarity on the surrogate; the
         result is the best converged one, or the best of all if none converged
+    cluster_rounds : when the result has not converged on the surrogate, at most this many rounds of
+        :func:`~morsuite.linalg.h2_clusters.alternating_descent` from it (0: none)
 
     Returns
     -------
@@ -50,7 +56,8 @@ def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
         None when no start could be descended from or the result has no second-order realization;
         ``record``: per start its surrogate error before and after, iterations, reason; the chosen
         start; ``iterations_surrogate``, ``iterations_full``, ``history``, ``history_full``,
-        ``stop_reason``, ``stop_reason_full``, ``relative_gradient_full`` (after the chord steps).
+        ``stop_reason``, ``stop_reason_full``, ``relative_gradient_full`` (after the chord steps),
+        ``cluster_record`` (the rounds of ``cluster_rounds``, if any).
     """
     tv = ModalValues(sur)
     runs, alive = {}, []
@@ -91,6 +98,11 @@ def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
     if best is None:
         return None, rec
     label, co, ev, its, reason, hist, _ = best
+    rec["cluster_record"] = []
+    if reason != "converged" and cluster_rounds:
+        co, ev, its_c, reason, rounds = alternating_descent(co, ev.x, tv, rounds=cluster_rounds, gtol=1e-3 * gtol)
+        rec["cluster_record"] = rounds
+        rec["iterations_surrogate"] += its_c
     rec.update(descended_from=label, history=hist, stop_reason=reason)
     fv = FullValues(full)
     evf = evaluate(co, ev.x, fv, hessian=False)
