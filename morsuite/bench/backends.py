@@ -1,8 +1,8 @@
 """Benchmark ``lu-backends``: the sparse LU backends against scipy's splu, their scaling, shift-parallel IRKA.
 
 Every ratio is measured side by side in one process, the variants interleaved
-(one of each per round, ``rounds`` rounds) and the medians compared, so that the
-load of a shared machine hits all alike. Parts:
+(one of each per round, ``rounds`` rounds, the order rotated each round) and the medians
+compared, so that the load of a shared machine hits all alike. Parts:
 
 1. ``lu``: one LU plus one solve at a shift in the band, through the model's
    solver (assembly, equilibration, factorization, solve with [F; 0], the
@@ -140,11 +140,14 @@ def _band_kernel(value):
 
 
 def _interleaved(variants: dict, rounds: int) -> dict:
-    """Median seconds per variant, the variants run one after the other in each round."""
+    """Median seconds per variant, the variants run one after the other in each round, the order
+    rotated by one from round to round (the first variant after splu, which frees hundreds of MB,
+    measured 4-14 ms slower than the same backend later in the round: 2026-11-26)."""
     times = {k: [] for k in variants}
-    for _ in range(rounds):
-        for k, f in variants.items():
-            times[k].append(f())
+    names = list(variants)
+    for i in range(rounds):
+        for k in names[i % len(names):] + names[:i % len(names)]:
+            times[k].append(variants[k]())
     return {k: float(np.median(v)) for k, v in times.items()}
 
 
