@@ -23,6 +23,7 @@ from typing import Any, Callable, ClassVar
 import numpy as np
 
 from ..errors import InputError, OptionError
+from ..linalg.warmup import warm_kernels
 from ..utils import blas_threads, to_plain
 from .outcome import check_outcome, complete_outcome
 
@@ -225,6 +226,7 @@ class Reducer:
         # the dense work of a reducer is on tall-skinny n1 x r blocks and r x r
         # matrices, where BLAS threads only add synchronisation (10x slower on a
         # loaded 2-core machine, measured): pin BLAS to BLAS_THREADS for the run
+        warm_kernels()  # numba's compile (or cache load) is not the reduction's time
         with blas_threads(BLAS_THREADS):
             t0 = time.perf_counter()
             rom, info = self._reduce(r)

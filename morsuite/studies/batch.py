@@ -92,7 +92,7 @@ class Shared:
 
 # -- workers -----------------------------------------------------------------
 def _pin(counter, cores):
-    """Worker initializer: pin this process to the next core of ``cores``."""
+    """Worker initializer: pin this process to the next core of ``cores``; compile the kernels."""
     with counter.get_lock():
         i = counter.value
         counter.value += 1
@@ -100,6 +100,8 @@ def _pin(counter, cores):
         os.sched_setaffinity(0, {cores[i % len(cores)]})
     except (AttributeError, OSError):
         pass
+    from ..linalg.warmup import warm_kernels
+    warm_kernels()  # numba's compile or cache load before any unit is timed
 
 
 def _run_unit(fn_name, args, kwargs):

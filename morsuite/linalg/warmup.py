@@ -1,0 +1,49 @@
+"""Compile the numba kernels before anything is timed (:func:`warm_kernels`)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import scipy.sparse as sp
+
+from . import kernels
+from .saddle import SaddlePointSolver
+
+__all__ = ["warm_kernels"]
+
+
+_WARM: dict = {}
+
+
+def warm_kernels() -> float:
+    """Compile (or load from numba's on-disk cache) the compiled kernels before anything is timed.
+
+    Runs the paths a reduction takes on a 40-position chain with a tie constraint: LUs at a complex
+    and a real shift (banded backend: the band LU, the border's half-sweeps, the one-pass assembly,
+    the scatter), solves and transposed solves with one and three right-hand sides, and one
+    Gram-Schmidt basis. Idempotent (a flag per process); returns the seconds it took (0.0 after the
+    first call, or where the kernels are off). Measured 2026-11-26: about 8.5 s when nothing is
+    cached (a fresh install's first process), 0.2-0.5 s afterwards; called by
+    :meth:`morsuite.reducers.base.Reducer.reduce` before its timer starts and by the study runner's
+    worker processes (``docs/design/backends.md``).
+    """
+    if _WARM.get("done") or not kernels.use_kernels():
+        return 0.0
+    t0 = time.perf_counter()
+    from .orthonormal import gram_schmidt
+
+    n = 40
+    T = sp.diags([-np.ones(n - 1), 2.0 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1], format="csr")
+    M = sp.identity(n, format="csr")
+    G = sp.csr_matrix(([1.0, -1.0], ([0, 0], [0, n - 1])), shape=(1, n))  # a tie: x_0 = x_{n-1}
+    solver = SaddlePointSolver(M, 0.01 * T, T, G, cache_size=0, backend="banded")
+    rhs = np.linspace(1.0, 2.0, n)
+    for s in (0.3j, 1.7):
+        lu = solver.factor(s)
+        for b in (rhs, np.column_stack([rhs, rhs[::-1], np.ones(n)])):
+            lu.solve(b)
+            lu.solve(b, trans=True)
+    gram_schmidt(np.asfortranarray(np.vander(np.linspace(0.1, 1.0, n), 4)), 1e-12)
+    _WARM["done"] = True
+    return time.perf_counter() - t0
