@@ -321,14 +321,17 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, 
         return shared
     if run_kwargs is not None:
         planned = {(u.kind, k) for u in units.values() for k in u.keys.values()}
+        unclaimed = set(planned)
         for study, plan in zip(studies, plans):
-            mine = {c for c in _claims(plan) if c in planned}
-            own, planned = mine & planned, planned - mine
+            reads = {c for c in _claims(plan) if c in planned}
+            own, unclaimed = reads & unclaimed, unclaimed - reads
             uid = f"study-{study.name}"
+            # it waits for every unit it reads, also those another study claims (otherwise it could
+            # start first and compute them itself: seen when the workers' start was slow)
             units[uid] = _Unit(uid, "morsuite.studies.batch:_run_study", (str(study.path), dict(run_kwargs)),
                                "study", "", _report_estimate(run_kwargs["out"], study.name),
                                deps={u.id for u in units.values() if u.kind != "study"
-                                     and any((u.kind, k) in mine for k in u.keys.values())},
+                                     and any((u.kind, k) in reads for k in u.keys.values())},
                                label=f"study {study.name}")
             owners[uid] = own
     if units:
