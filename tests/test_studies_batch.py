@@ -186,3 +186,27 @@ def test_each_unit_runs_on_one_pinned_core(tmp_path):
     for r in g.rs:
         arrays, meta = cache.get("reduction", g.keys[r])
         assert meta["info"]["solver_threads"] == 1 and ("reduction", g.keys[r]) in shared.fresh
+
+
+def test_a_study_waits_for_what_another_study_claims(tmp_path):
+    """Each study's own run depends on every unit computing something it reads, also on those whose
+    entries an earlier study claims (sb reads irka r = 4, which sa claims): otherwise it may start
+    first and compute them itself (the race CI met when the workers' start was slow)."""
+    from morsuite.studies.batch import _add_study_units, _units
+    from morsuite.studies.cache import Cache
+    from morsuite.studies.plan import build_plan
+    from morsuite.studies.spec import load_spec
+
+    (tmp_path / "a.toml").write_text(A)
+    (tmp_path / "b.toml").write_text(B)
+    studies = [load_spec(tmp_path / "a.toml"), load_spec(tmp_path / "b.toml")]
+    plans = [build_plan(s) for s in studies]
+    units = _units(plans, Cache(tmp_path / "cache"), {})
+    owners = _add_study_units(units, studies, plans, {"out": str(tmp_path / "out")})
+    computing = {u.id: {(u.kind, k) for k in u.keys.values()} for u in units.values() if u.kind != "study"}
+    for study, plan in zip(studies, plans):
+        reads = {("reduction", g.keys[r]) for g in plan.reduces.values() for r in g.rs}
+        needed = {uid for uid, keys in computing.items() if keys & reads}
+        assert needed and needed <= units[f"study-{study.name}"].deps, study.name
+    irka4 = next(("reduction", g.keys[4]) for g in plans[1].reduces.values() if g.method.reducer == "irka")
+    assert irka4 in owners["study-sa"] and irka4 not in owners["study-sb"]

@@ -320,20 +320,7 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, 
             run(study, **run_kwargs)
         return shared
     if run_kwargs is not None:
-        planned = {(u.kind, k) for u in units.values() for k in u.keys.values()}
-        unclaimed = set(planned)
-        for study, plan in zip(studies, plans):
-            reads = {c for c in _claims(plan) if c in planned}
-            own, unclaimed = reads & unclaimed, unclaimed - reads
-            uid = f"study-{study.name}"
-            # it waits for every unit it reads, also those another study claims (otherwise it could
-            # start first and compute them itself: seen when the workers' start was slow)
-            units[uid] = _Unit(uid, "morsuite.studies.batch:_run_study", (str(study.path), dict(run_kwargs)),
-                               "study", "", _report_estimate(run_kwargs["out"], study.name),
-                               deps={u.id for u in units.values() if u.kind != "study"
-                                     and any((u.kind, k) in reads for k in u.keys.values())},
-                               label=f"study {study.name}")
-            owners[uid] = own
+        owners = _add_study_units(units, studies, plans, run_kwargs)
     if units:
         _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0)
     busy = sum(e["wall_s"] for e in log if e["kind"] != "study")
@@ -346,6 +333,26 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, 
         print(f"morsuite run: {n_units} units of work shared by {len(studies)} studies on {jobs} worker "
               f"processes: {wall:.1f} s ({busy:.1f} s busy)", file=sys.stderr)
     return shared
+
+
+def _add_study_units(units, studies, plans, run_kwargs) -> dict:
+    """Add each study's own run to ``units``: it depends on every unit computing something it reads
+    (also what another study claims: otherwise it could start first and compute that itself, seen
+    when the workers' start was slow); returns study unit id -> the computed entries it claims
+    (fresh for the first study in order that reads them)."""
+    planned = {(u.kind, k) for u in units.values() for k in u.keys.values()}
+    unclaimed, owners = set(planned), {}
+    for study, plan in zip(studies, plans):
+        reads = {c for c in _claims(plan) if c in planned}
+        own, unclaimed = reads & unclaimed, unclaimed - reads
+        uid = f"study-{study.name}"
+        units[uid] = _Unit(uid, "morsuite.studies.batch:_run_study", (str(study.path), dict(run_kwargs)),
+                           "study", "", _report_estimate(run_kwargs["out"], study.name),
+                           deps={u.id for u in units.values() if u.kind != "study"
+                                 and any((u.kind, k) in reads for k in u.keys.values())},
+                           label=f"study {study.name}")
+        owners[uid] = own
+    return owners
 
 
 def _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0):
