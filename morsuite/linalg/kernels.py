@@ -40,7 +40,7 @@ __all__ = ["LT_BACKWARD", "L_FORWARD", "UT_FORWARD", "U_BACKWARD", "assemble_sca
            "gbtrf", "gbtrs", "scatter", "sweep", "use_kernels"]
 
 _NUMBA: dict = {}  # "module": numba or None (not importable), imported on first use
-_JIT: dict = {}  # name -> compiled function
+_JIT: dict = {}  # python function -> its compiled dispatcher
 
 
 def available() -> bool:

@@ -97,18 +97,9 @@ class SaddleOperator:
         if cache.get("a") != complex(a):  # the entries of S(a): once per shift, for both solves
             m, d, k, g = cache["parts"]
             ar, ai = ft(complex(a).real), ft(complex(a).imag)
-            # (a a) m + a d + k + g, with a a = (ar ar - ai ai) + i (ar ai + ai ar); in place,
-            # the same operations in the same order as the expression (no temporaries)
-            old = cache.get("data", {}).get(True, (None, None))
-            dre = np.multiply(m, ar * ar - ai * ai, out=old[0])
-            tmp = cache.setdefault("tmp", np.empty_like(m))
-            dre += np.multiply(d, ar, out=tmp)
-            dre += k
-            dre += g
-            dim = None
-            if ai != 0:
-                dim = np.multiply(m, ar * ai + ai * ar, out=old[1])
-                dim += np.multiply(d, ai, out=tmp)
+            # (a a) m + a d + k + g, with a a = (ar ar - ai ai) + i (ar ai + ai ar)
+            dre = (((ar * ar - ai * ai) * m + ar * d) + k) + g
+            dim = (ar * ai + ai * ar) * m + ai * d if ai != 0 else None
             cache.update(a=complex(a), data={True: (dre, dim)})
         if bool(trans) not in cache["data"]:  # the CSR order of the entries, made when first needed
             perm = cache["perm"]
@@ -116,7 +107,6 @@ class SaddleOperator:
             cache["data"][False] = (dre[perm], None if dim is None else dim[perm])
         dre, dim = cache["data"][bool(trans)]
         idx, starts, nonempty = cache["structure"][bool(trans)]
-        bufs = cache.setdefault("bufs", [np.empty(idx.size, dtype=ft) for _ in range(4)])
 
         def segsum(v, n):
             if nonempty.size == n:  # every row (column) has an entry
@@ -126,22 +116,14 @@ class SaddleOperator:
             return y
 
         def apply(xr, xi=None):
-            # gathers and products into reused buffers: the products and sums of
-            # dre * gr - dim * gi and dre * gi + dim * gr, in that order, bit for bit
             n = xr.shape[0]
-            gr, gi, t, u = bufs
-            np.take(xr, idx, out=gr)
+            gr = xr[idx]
             if xi is None:
-                return (segsum(np.multiply(dre, gr, out=t), n),
-                        None if dim is None else segsum(np.multiply(dim, gr, out=u), n))
-            np.take(xi, idx, out=gi)
+                return segsum(dre * gr, n), (None if dim is None else segsum(dim * gr, n))
+            gi = xi[idx]
             if dim is None:
-                return segsum(np.multiply(dre, gr, out=t), n), segsum(np.multiply(dre, gi, out=u), n)
-            np.multiply(dre, gr, out=t)
-            t -= np.multiply(dim, gi, out=u)
-            np.multiply(dre, gi, out=u)
-            u += np.multiply(dim, gr, out=gr)
-            return segsum(t, n), segsum(u, n)
+                return segsum(dre * gr, n), segsum(dre * gi, n)
+            return segsum(dre * gr - dim * gi, n), segsum(dre * gi + dim * gr, n)
 
         return apply
 

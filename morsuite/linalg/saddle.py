@@ -264,7 +264,7 @@ class SaddlePointSolver:
                             base.dr, base.dc, q=base.q)
         t0 = time.perf_counter()
         perm = self._ordering()
-        dr, dc, As = self._assemble_scaled(a, b, c, perm)
+        dr, dc, As, norms = self._assemble_scaled(a, b, c, perm)
         t1 = time.perf_counter()
         banded = self.backend == "banded"
         other = self.backend != "superlu"  # a backend with SuperLU as its first fallback
@@ -329,8 +329,7 @@ class SaddlePointSolver:
             lambda As=As: spla.splu(As, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=1.0),
         ) if checked else ()
         f = SaddleLU(key, lu, self.n1, self.n2, False, self.stats, ratio, np.iscomplexobj(As.data),
-                     As if checked else None, self.backward_tol,
-                     {"1": As.norm1} if hasattr(As, "norm1") else {}, dr, dc,
+                     As if checked else None, self.backward_tol, norms, dr, dc,
                      fallback, q=perm["q"] if perm else None)
         if self.cache_size > 0:
             self._cache[key] = f
@@ -369,7 +368,9 @@ class SaddlePointSolver:
         return self.pattern[key]
 
     def _assemble_scaled(self, a, b, c, perm=None):
-        """Assemble and equilibrate in one pass: returns (dr, dc, Dr S Dc) ((None, None, S) if off).
+        """Assemble and equilibrate in one pass: returns (dr, dc, Dr S Dc, norms) ((None, None, S, {}) if off);
+        ``norms``: ``{"1": ||Dr S Dc||_1}`` where the compiled assembly computed it on the way (the
+        backward-error check's norm, :class:`SaddleLU` ``norms``), else empty (computed when needed).
 
         The diagonal scaling needs only the diagonals of M, D, K and the entries
         of G, so it is computed first and applied while the entries of S are
@@ -381,14 +382,12 @@ class SaddlePointSolver:
             d = self._diagonal_scaling(a, b, c)
             real = self.real and all(complex(x).imag == 0 for x in (a, b, c))
             data, norm1 = kernels.assemble_scaled(P, d, a, b, c, real)
-            A = self._csc(data, P)
-            A.norm1 = norm1  # the check's ||A||_1 (SaddleLU._norm), computed in the same pass
-            return d, d, A
+            return d, d, self._csc(data, P), {"1": norm1}  # the check's ||A||_1, from the same pass
         data = self._combine(a, b, c, P)
         if self.scaling == "ruiz":
-            return self._ruiz(data)
+            return (*self._ruiz(data), {})
         if self.scaling == "none":
-            return None, None, self._csc(data, P)
+            return None, None, self._csc(data, P), {}
         d = self._diagonal_scaling(a, b, c)
         w, w2 = self._scratch()
         # mode="clip": the indices are valid by construction, and take's default mode "raise"
@@ -397,7 +396,7 @@ class SaddlePointSolver:
         np.take(d, P["_cols"], out=w2, mode="clip")
         w *= w2
         data *= w
-        return d, d, self._csc(data, P)
+        return d, d, self._csc(data, P), {}
 
     def _combine(self, a, b, c, P):
         """Entries of a M + b D + c K + [G^T; G] on the fixed pattern (a new array).
