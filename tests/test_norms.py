@@ -221,6 +221,24 @@ def test_quadrature_resolves_sharp_mimo_peaks():
     assert q == pytest.approx(ms.analysis.h2_error(fom, rom, method="pole-residue"), rel=1e-8)
 
 
+def test_quadrature_memo_returns_what_a_fresh_model_computes():
+    """The model's memo of T(jw) at the quadrature's nodes: a second evaluation of the same reduced
+    model makes no LU and gives the same bits; and a value does not depend on what was evaluated
+    before: at rtol = 1e-3 (nodes refined only where needed) after a run at 1e-8 (refined nearly
+    everywhere) it equals the value computed with the memo emptied."""
+    fom = ms.models.dsms(g=40)
+    rom = reduce(fom, "bt", 16)
+    v1, d1 = ms.analysis.h2_error(fom, rom, method="quadrature", details=True)
+    v2, d2 = ms.analysis.h2_error(fom, rom, method="quadrature", details=True)
+    assert d1["lu_count"] > 0 and d2["lu_count"] == 0 and v2 == v1
+    loose, dl = ms.analysis.h2_error(fom, rom, method="quadrature", rtol=1e-3, details=True)
+    assert dl["lu_count"] == 0
+    fom.cache.pop(("fom_response", 1))  # the memo emptied: computed afresh
+    fresh, df = ms.analysis.h2_error(fom, rom, method="quadrature", rtol=1e-3, details=True)
+    assert df["lu_count"] > 0 and fresh == loose
+    assert fresh != v1  # the loose run kept unrefined values: the memo did not hand it refined ones
+
+
 def test_untrusted_value_is_flagged():
     fom = ms.models.dsms(g=40)
     rom = reduce(fom, "bt", 26)

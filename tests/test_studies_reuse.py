@@ -199,6 +199,20 @@ def test_rerender_draws_everything_and_the_bytes_are_the_same(study, draws):
     assert _snapshot(results / "reuse") == before     # deterministic drawing: nothing had to be replaced
 
 
+def test_figures_drawn_on_two_processes_are_the_serial_ones(study):
+    """render_jobs = 2 (forked drawing processes, as `morsuite run` asks when nothing timed runs):
+    the same files, bytes and output records as the serial drawing."""
+    spec, results = study
+    before = _snapshot(results / "reuse")
+    serial = _outputs(run(spec, out=results, quiet=True, rerender=True).manifest)
+    forked = _outputs(run(spec, out=results, quiet=True, rerender=True, render_jobs=2).manifest)
+    assert _snapshot(results / "reuse") == before
+    assert list(forked) == list(serial)
+    for oid, rec in serial.items():
+        assert {k: v for k, v in forked[oid].items() if k != "time_s"} == {k: v for k, v in rec.items() if k != "time_s"}
+    assert all(not rec["reused"] and rec["files"] for rec in forked.values())
+
+
 def test_other_formats_are_a_new_key(study, draws):
     spec, results = study
     res = run(spec, out=results, quiet=True, formats=("png",))

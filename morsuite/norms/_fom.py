@@ -22,6 +22,8 @@ __all__ = ["FomResponse", "refined_unit"]
 
 LD = np.longdouble
 CLD = np.clongdouble
+#: shifts whose T(s) a model's memo keeps (a few MB at most; emptied when full)
+MEMO_SIZE = 20000
 
 
 class FomResponse:
@@ -36,6 +38,13 @@ class FomResponse:
     cache_size : int
         LUs kept by the solver (2: a shift and its conjugate, or the value and
         the derivative at one shift, share one LU).
+    memo : bool
+        Keep :math:`T(s)` (the whole matrix, with its unit and whether it was refined) per exact
+        shift in ``fom.cache``, at most :data:`MEMO_SIZE` shifts, and serve :meth:`transfer`
+        from it (default False): the H2 quadrature's nodes recur across the reduced models of one
+        model (``docs/design/norms.md``, 2026-11-26 third session). Each call returns what a
+        fresh response would (the unrefined value where ``need`` declines refinement, else the
+        refined one, computed when not kept yet), so the values do not depend on earlier calls.
 
     Notes
     -----
@@ -44,9 +53,12 @@ class FomResponse:
     (:func:`refined_unit`).
     """
 
-    def __init__(self, fom, *, refine: int = 1, cache_size: int = 2):
+    def __init__(self, fom, *, refine: int = 1, cache_size: int = 2, memo: bool = False):
         self.fom = fom
         self.refine = int(refine)
+        cache = getattr(fom, "cache", None)
+        # T(s) by exact shift, kept in the model's cache for later calls of this process (memo=True)
+        self._memo = cache.setdefault(("fom_response", self.refine), {}) if memo and cache is not None else None
         self.solver = fom.new_solver(cache_size=cache_size)
         self._op = None  # the long-double S(s) x on the solver's pattern, made on the first refinement
         self.last_unit = refined_unit(0.0, self.refine)
@@ -95,16 +107,32 @@ class FomResponse:
         where the value is about to be subtracted from a nearly equal one.
         """
         fom = self.fom
+        memo = self._memo if b is None else None
+        hit = memo.get(complex(s)) if memo is not None else None
+        if hit is not None:  # the value a fresh call would return, whatever the earlier calls asked
+            T0, T, unit = hit
+            if self.refine == 0 or (need is not None and not need(T0)):
+                self.last_unit = refined_unit(0.0, 0)
+                return T0
+            if T is not None:
+                self.last_unit = unit
+                return T
         B = fom.F if b is None else fom.F @ np.asarray(b).reshape(fom.m, -1)
         lu, x = self._first(s, B)
         X = x[: fom.n1]
         T0 = fom.L @ X.real + 1j * (fom.L @ X.imag)
+        T = None
         if self.refine == 0 or (need is not None and not need(T0)):
             self.last_unit = refined_unit(0.0, 0)
-            return T0
-        X = self._refined(s, lu, B, x)
-        L = fom.L.astype(LD)
-        return (L @ X.real) + 1j * (L @ X.imag).astype(CLD)
+        else:
+            X = self._refined(s, lu, B, x)
+            L = fom.L.astype(LD)
+            T = (L @ X.real) + 1j * (L @ X.imag).astype(CLD)
+        if memo is not None:
+            if len(memo) >= MEMO_SIZE:
+                memo.clear()
+            memo[complex(s)] = (T0, T, self.last_unit)
+        return T0 if T is None else T
 
     def transfer_and_derivative(self, s, need=None):
         r""":math:`T(s)` (refined as :meth:`transfer`, with ``need``) and

@@ -212,7 +212,7 @@ def _quadrature(fom, arrays, rom, rtol, max_nodes, refine, ritz=None):
     """||T - Tr||^2 by adaptive quadrature of ||E(jw)||_F^2, its absolute floor, and a record."""
     E, A, B, C, D = arrays
     rr = RomResponse(E, A, B, C, D, refine=refine)
-    ev = FomResponse(fom, refine=refine)
+    ev = FomResponse(fom, refine=refine, memo=True)  # nodes recur across the model's ROMs
     lam = rom.poles()
     bp = breakpoints(lam)
     if ritz is not None and ritz.size:

@@ -347,7 +347,8 @@ class SOH2(Reducer):
             e, floor, st = e0, f0, {"rho": None, "value": e0 ** 2, "lu_count": 0}
         else:
             st = full_stationarity(self._full, *standard_realization(rom))
-            e, floor, _ = decision_h2(fom, rom, counter=self._decision_lus)
+            # the start returned unchanged: its exact evaluation stands (no second quadrature)
+            e, floor, _ = (e0, f0, None) if returned_start else decision_h2(fom, rom, counter=self._decision_lus)
             if not returned_start and e > e0 + floor + f0:
                 # never worse than the start (at the decision's accuracy)
                 rec["stop_reason_full"] = f"result ({e:.6e}) worse than the start ({e0:.6e}): start returned"

@@ -22,7 +22,9 @@ cores) first computes what any of the studies lacks, all at once, with :func:`sh
 - the longest units start first (their times in the results folder's manifests when a
   previous run left them, unknown units before known ones), each new unit on the first
   free worker; a study's own run (figures, tables, page) is a unit too, which starts as
-  soon as the units it reads are done.
+  soon as the units it reads are done; when only study runs are left, it draws its figures on
+  ``jobs`` processes (:func:`~morsuite.studies.outputs.realize_many`: nothing timed shares the
+  cores then, and the last study's figures are the run's tail).
 
 Every result goes into the artifact cache. Each study runs as usual
 (:func:`~morsuite.studies.runner.run` with ``shared=``): it finds its artifacts in the
@@ -109,10 +111,10 @@ def _run_unit(fn_name, args, kwargs):
     import importlib
 
     mod, _, fn = fn_name.partition(":")
-    t0 = time.perf_counter()
+    started, t0 = time.time(), time.perf_counter()
     out = getattr(importlib.import_module(mod), fn)(*args, **kwargs)
     cores = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
-    return out, {"wall_s": time.perf_counter() - t0, "pid": os.getpid(), "cores": cores}
+    return out, {"wall_s": time.perf_counter() - t0, "pid": os.getpid(), "cores": cores, "started": started}
 
 
 @dataclass
@@ -317,7 +319,7 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, 
     if run_kwargs is not None and not units:  # all cached: the reports in this process, as without workers
         from .runner import run
         for study in studies:
-            run(study, **run_kwargs)
+            run(study, **{"render_jobs": jobs, **run_kwargs})
         return shared
     if run_kwargs is not None:
         owners = _add_study_units(units, studies, plans, run_kwargs)
@@ -359,6 +361,7 @@ def _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0):
     """List scheduling: the longest ready unit goes to the first free worker."""
     ctx = multiprocessing.get_context("spawn")
     counter = ctx.Value("i", 0)
+    wall0 = time.time() - (time.perf_counter() - t0)  # the run's start on the workers' clock
     results, done, running = {}, set(), {}
     pending = dict(units)
     with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_pin, initargs=(counter, cores)) as pool:
@@ -368,7 +371,9 @@ def _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0):
                 if u.kind == "study":  # its share: what it claims of what was computed, the failures it may meet
                     part = Shared(shared.jobs, owners[u.id] & shared.fresh, dict(shared.failed),
                                   {**shared.record, "started_after_s": time.perf_counter() - t0})
-                    args = u.args + (part,)
+                    # nothing timed left to run or running: its figures may take every core
+                    alone = all(x.kind == "study" for x in [*pending.values(), *running.values()])
+                    args = (u.args[0], {**u.args[1], "render_jobs": jobs if alone else 1}, part)
                 else:
                     args = u.args + ((_rom_entries(cache, u.rom_from, results),) if u.kind == "norm_error" else ())
                 running[pool.submit(_run_unit, u.fn, args, {})] = u
@@ -383,9 +388,11 @@ def _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0):
                 if u.kind != "study":
                     results[u.id] = value
                     _store(cache, shared, u, value)
+                rec["start_s"] = rec.pop("started") - wall0
                 log.append({"unit": u.label, "kind": u.kind, **rec})
                 if not quiet:
-                    print(f"  {rec['wall_s']:7.1f} s  core {rec['cores']}  {u.label}", file=sys.stderr)
+                    print(f"  {rec['wall_s']:7.1f} s  core {rec['cores']}  at {rec['start_s']:6.1f} s  {u.label}",
+                          file=sys.stderr)
 
 
 # -- the studies' own runs ---------------------------------------------------------

@@ -32,7 +32,9 @@ import functools
 import hashlib
 import importlib.metadata
 import json
+import multiprocessing
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -43,7 +45,7 @@ from ..report.tables import TableData
 from .cache import source_digest
 from .spec import plain
 
-__all__ = ["figure_key", "table_key", "realize", "previous_records", "OUTPUT_KINDS"]
+__all__ = ["figure_key", "table_key", "realize", "realize_many", "previous_records", "OUTPUT_KINDS"]
 
 OUTPUT_KINDS = ("figure", "table")
 _WRITERS = ("numpy", "pandas", "matplotlib")
@@ -133,3 +135,32 @@ def realize(output, item, outdir: Path, formats, previous: dict, rerender: bool 
         after = {n: sha256_file(outdir / n) for n in names}
     return {**rec, "key": key, "reused": not todo, "cached": not todo, "files": after, "rendered": todo,
             "changed": [n for n in names if after[n] != before[n]], "time_s": time.perf_counter() - t0}
+
+
+def realize_many(pairs, outdir: Path, formats, previous: dict, rerender: bool = False, jobs: int = 1) -> list:
+    """:func:`realize` for each ``(output, item)`` of ``pairs``; the records in the same order.
+
+    ``jobs`` > 1 (default 1) draws the figures on up to ``jobs`` processes forked from this one
+    (where the platform forks; elsewhere, and for tables, here): the study runner asks for it when
+    no timed computation shares the machine (the last studies of ``morsuite run``, whose figures are
+    the run's tail, ``docs/design/reports.md``). The files and records are those of the serial loop:
+    each figure is drawn by one process, deterministically.
+
+    Cost: that of the serial loop divided by up to ``jobs``, plus a fork and the pickling of each
+    figure's data.
+    """
+    pairs = list(pairs)
+    figures = [k for k, (_, item) in enumerate(pairs) if not isinstance(item, TableData) and item.curves]
+    if jobs <= 1 or len(figures) < 2 or "fork" not in multiprocessing.get_all_start_methods():
+        return [realize(o, item, outdir, formats, previous, rerender) for o, item in pairs]
+    out = [None] * len(pairs)
+    with ProcessPoolExecutor(max_workers=min(jobs, len(figures)), mp_context=multiprocessing.get_context("fork")) as pool:
+        futures = {k: pool.submit(realize, pairs[k][0], pairs[k][1], outdir, formats,
+                                  {pairs[k][0].id: previous[pairs[k][0].id]} if pairs[k][0].id in previous else {},
+                                  rerender) for k in figures}
+        for k, (o, item) in enumerate(pairs):
+            if k not in futures:
+                out[k] = realize(o, item, outdir, formats, previous, rerender)
+        for k, fut in futures.items():
+            out[k] = fut.result()
+    return out

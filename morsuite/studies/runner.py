@@ -32,7 +32,7 @@ from . import tasks as T
 from .cache import Cache
 from .execute import choose, compute, progress_enabled
 from .memo import SpecMemo
-from .outputs import previous_records, realize
+from .outputs import previous_records, realize_many
 from .pages import PAGE, realize_page, study_page, write_index
 from .plan import SUMMARY, build_plan
 from .results import SUMMARY_COLUMNS, Results, summary as make_summary
@@ -85,7 +85,8 @@ def _remove_stale(outdir: Path, old: dict, keep: set):
 
 
 def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: int = 1, scheduler=None,
-        quiet: bool = False, formats=("png", "pdf"), rerender: bool = False, shared=None) -> RunResult:
+        quiet: bool = False, formats=("png", "pdf"), rerender: bool = False, shared=None,
+        render_jobs: int = 1) -> RunResult:
     """Run a study.
 
     Parameters
@@ -106,6 +107,9 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
         them): its artifacts are taken from the cache, recorded as computed by the first study
         that uses them, and its failures are taken as they are; the manifest records it as
         ``shared_compute``. Default None.
+    render_jobs : processes that draw the figures (default 1: this one; more fork this process,
+        :func:`~morsuite.studies.outputs.realize_many`). ``morsuite run`` asks for its jobs
+        when nothing timed runs beside the study.
 
     Cost: one sparse LU per frequency of each full-order response, the reducers' own
     LUs, the norms' (:mod:`morsuite.studies.norms`) and one LU per full-model simulation
@@ -192,17 +196,17 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
     outdir.mkdir(parents=True, exist_ok=True)
     old = _old_manifest(outdir)
     previous = previous_records(old)
-    files, notes, records, shown = [], [], [], []
+    files, notes, pairs = [], [], []
     for scene in study.scenes:
         for item in build(scene, study, res):
             notes += item.notes
             if not isinstance(item, TableData) and not item.curves:
                 notes.append(f"scene {scene.name!r}: nothing to draw; no figure {item.name!r} written")
-            output = plan.outputs[f"{'table' if isinstance(item, TableData) else 'figure'}/{item.name}"]
-            records.append(realize(output, item, outdir, formats, previous, rerender))
-            shown.append((item, records[-1]))
+            pairs.append((plan.outputs[f"{'table' if isinstance(item, TableData) else 'figure'}/{item.name}"], item))
     summary = make_summary(study, plan, res, SUMMARY)
-    records.append(realize(plan.outputs[f"table/{SUMMARY}"], summary, outdir, formats, previous, rerender))
+    pairs.append((plan.outputs[f"table/{SUMMARY}"], summary))
+    records = realize_many(pairs, outdir, formats, previous, rerender, jobs=render_jobs)
+    shown = [(item, rec) for (_, item), rec in zip(pairs[:-1], records[:-1])]
     files += [outdir / name for rec in records for name in rec["files"]]
     for gid, entries in reductions.items():
         g = plan.reduces[gid]
@@ -361,6 +365,12 @@ def _compute_missing(plan, cache, choice, bars, desc, have, todo) -> dict:
 
     cache_root = str(cache.root) if choice.local_files else None
     graph, fom_nodes, red_nodes, sim_nodes = {}, dict(foms), {}, dict(sims)
+
+    def literal(obj, name):
+        # data holding no dask object: one opaque node, so that dask does not walk its nested dicts
+        # (the reductions' info): walking them took 1.6 s per metrics node on the sweep (2026-11-26)
+        return delayed(obj, name=f"{name}-literal", traverse=False)
+
     for fid, f in plan.foms.items():
         if fid not in foms:
             lo, hi, n = f.bounds
@@ -374,7 +384,8 @@ def _compute_missing(plan, cache, choice, bars, desc, have, todo) -> dict:
             choice.name, dask_key_name=gid)
     for mid, rs in todo["metrics"].items():
         mg = plan.metrics[mid]
-        graph[mid] = delayed(T.metrics, pure=False)(fom_nodes[mg.fom], rs, reductions[mg.reduce],
+        fom = fom_nodes[mg.fom] if mg.fom not in foms else literal(foms[mg.fom], f"{mid}-fom")
+        graph[mid] = delayed(T.metrics, pure=False)(fom, rs, literal(reductions[mg.reduce], mid),
                                                    red_nodes.get(mg.reduce, {}), dask_key_name=mid)
     def after(model):
         # the norms share the model's Gramian factors with bt: let the reductions of the model run
@@ -390,7 +401,8 @@ def _compute_missing(plan, cache, choice, bars, desc, have, todo) -> dict:
         red = plan.reduces[g.reduce]
         graph[gid] = delayed(N.error_norms, pure=False)(
             red.model.source, g.kind, g.options, rs, {r: g.keys[r] for r in rs}, choice.name,
-            reductions[g.reduce], red_nodes.get(g.reduce, {}), after=after(red.model), dask_key_name=gid)
+            literal(reductions[g.reduce], gid), red_nodes.get(g.reduce, {}), after=after(red.model),
+            dask_key_name=gid)
     for sid, sim in plan.sims.items():
         if sid not in sims:
             graph[sid] = sim_nodes[sid] = delayed(TD.full_simulation, pure=False)(
@@ -400,5 +412,5 @@ def _compute_missing(plan, cache, choice, bars, desc, have, todo) -> dict:
         model = plan.sims[g.sim].model
         graph[gid] = delayed(TD.rom_simulations, pure=False)(
             sim_nodes[g.sim], list(model.band), model.m, g.rom_method, rs, {r: g.keys[r] for r in rs}, choice.name,
-            reductions[g.reduce], red_nodes.get(g.reduce, {}), dask_key_name=gid)
+            literal(reductions[g.reduce], gid), red_nodes.get(g.reduce, {}), dask_key_name=gid)
     return compute(graph, choice, progress=bars, desc=desc)
