@@ -345,9 +345,12 @@ def _norm_notes(plan, norms, norm_errors) -> list:
             who = f"{g.kind} error of {red.method.reducer} on {red.model.name} at r = {r}"
             if "error" in e:
                 out.append(f"{who} failed: {e['error']}")
+            elif not e.get("trusted", True) and g.kind == "hinf":
+                out.append(f"{who} is the peak found (value {e.get('value')}), a lower bound not certified by an "
+                           f"upper bound; shown with hinf_certified = False")
             elif not e.get("trusted", True):
                 out.append(f"{who} is not accurate to four digits (value {e.get('value')}, estimated relative "
-                           f"accuracy {e.get('rel_floor')}); shown with h2_trusted = False")
+                           f"accuracy {e.get('rel_floor')}); shown with {g.kind}_trusted = False")
             elif e.get("reason"):
                 out.append(f"{who} is infinite: {e['reason']}")
     return out
