@@ -30,6 +30,30 @@ def test_plot_returns_handles_with_log_axes_and_labels():
     assert ax.get_legend() is not None
 
 
+def test_log_tick_labels_are_plain_text_at_the_default_positions():
+    """The report style labels log axes 10⁻², 2×10⁻¹ in plain text (no mathtext to parse) at the ticks
+    matplotlib's own formatter labels, with the same numbers."""
+    from matplotlib.ticker import LogFormatterSciNotation
+
+    from morsuite.report.figures import _plain_tick
+
+    fig, ax = plot(_fig())
+    fig.canvas.draw()
+    for axis in (ax.xaxis, ax.yaxis):
+        for minor, default in ((False, LogFormatterSciNotation(base=10.0)),
+                               (True, LogFormatterSciNotation(base=10.0, labelOnlyBase=False))):
+            locs = axis.get_ticklocs(minor=minor)
+            texts = [t.get_text() for t in axis.get_ticklabels(minor=minor)]
+            default.set_axis(axis)
+            default.set_locs(locs)
+            assert len(texts) == len(locs) > 0
+            for loc, text in zip(locs, texts):
+                assert "$" not in text and text == _plain_tick(default(loc))
+    labels = {t.get_text() for t in ax.xaxis.get_ticklabels()}
+    assert {"10\u207b\u00b2", "10\u207b\u00b9", "10\u2070"} <= labels
+    assert _plain_tick("$\\mathdefault{2\\times10^{-13}}$") == "2\u00d710\u207b\u00b9\u00b3"
+
+
 def test_zero_and_inf_values_are_gaps_on_log_axes():
     fd = _fig()
     fd.curves[0].data.loc[3, "value"] = 0.0
