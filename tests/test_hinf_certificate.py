@@ -228,3 +228,20 @@ def test_hinf_norm_cache_knows_whether_the_resonances_were_there():
         del fom.cache[key]  # the factors gone: the value computed without them is the one served
     v3, d3 = ms.analysis.hinf_norm(fom, details=True)
     assert d3["cached"] and d3["model_resonances_from"] is None and v3 == v1
+
+
+def test_hinf_search_does_not_depend_on_the_models_memo():
+    """The peak search takes T(jw) from the model's memo where an earlier search sampled the same
+    frequency (its budgets count samples, not LUs made): the same value, samples and refinements as
+    with the memo emptied, and fewer LUs when the start grids share frequencies."""
+    fom = ms.models.dsms(g=60)
+    ms.analysis.h2_norm(fom)  # the model's resonances: the start grids of its reduced models share them
+    roms = [reduce(fom, "bt", r) for r in (6, 10)]
+    ms.analysis.hinf_error(fom, roms[0], certify_dim=10)
+    v, d = ms.analysis.hinf_error(fom, roms[1], certify_dim=10, details=True)
+    for key in [k for k in fom.cache if isinstance(k, tuple) and k and str(k[0]).startswith("fom_response")]:
+        del fom.cache[key]
+    v0, d0 = ms.analysis.hinf_error(fom, roms[1], certify_dim=10, details=True)
+    assert v == v0 and d["samples"] == d0["samples"] and d["peak_frequency"] == d0["peak_frequency"]
+    assert d["refinements"] == d0["refinements"]
+    assert d["lu_count"] < d0["lu_count"] == d0["samples"]

@@ -81,12 +81,12 @@ def climb(sig, w, h, rtol, budget):
     Returns ``(value, frequency, lus, complete)``; ``complete`` is False when the budget ran out
     before the maximum was bracketed and refined.
     """
-    lu0 = sig.ev.lu_count
+    lu0 = sig.calls
     fa, da = sig(w)
     a, step = w, h
     direction = 1.0 if (da >= 0 or w == 0) else -1.0
     b, fb, complete = a, fa, False
-    while sig.ev.lu_count - lu0 < budget - 2:
+    while sig.calls - lu0 < budget - 2:
         b = max(a + direction * step, 0.0)
         fb, db = sig(b)
         if direction * db <= 0 or fb < fa or b == 0.0:
@@ -96,12 +96,12 @@ def climb(sig, w, h, rtol, budget):
         step *= 2.0
     best = max((fa, a), (fb, b))
     lo, hi = min(a, b), max(a, b)
-    left = budget - (sig.ev.lu_count - lu0)
+    left = budget - (sig.calls - lu0)
     if complete and hi > lo:
         (fv, wv), used, _ = refine_peak(sig, lo, 0.5 * (lo + hi), hi, rtol, left - 1)
         complete = used < left - 1
         best = max(best, (fv, wv))
-    return best[0], best[1], sig.ev.lu_count - lu0, complete
+    return best[0], best[1], sig.calls - lu0, complete
 
 
 def certify(sig, realization, value, w_peak, *, tol, rounds, lus, rtol, w_lo):
@@ -114,7 +114,7 @@ def certify(sig, realization, value, w_peak, *, tol, rounds, lus, rtol, w_lo):
 
     Returns ``(value, w_peak, upper_bound or None, certified, record)``.
     """
-    t0, lu0 = time.perf_counter(), sig.ev.lu_count
+    t0, lu0, made0 = time.perf_counter(), sig.calls, sig.ev.lu_count
     A, B, C, D = realization()
     t_real = time.perf_counter() - t0
     scale = max(sig.scale, value)
@@ -145,7 +145,7 @@ def certify(sig, realization, value, w_peak, *, tol, rounds, lus, rtol, w_lo):
         # Boyd-Balakrishnan: sigma exceeds gamma between crossings; probe them and their midpoints
         ws = ls.frequencies
         probe = np.unique(np.concatenate([ws, 0.5 * (ws[1:] + ws[:-1])]))
-        if probe.size + 4 > lus - (sig.ev.lu_count - lu0):
+        if probe.size + 4 > lus - (sig.calls - lu0):
             rec["reason"] = f"LU budget certify_lus = {lus} too small for {ws.size} candidates"
             break
         vals = np.array([sig(w)[0] for w in probe])
@@ -153,14 +153,14 @@ def certify(sig, realization, value, w_peak, *, tol, rounds, lus, rtol, w_lo):
         if vals[i] >= gamma:
             h = 0.25 * float(np.min(np.abs(np.delete(probe, i) - probe[i]))) if probe.size > 1 else 1e-4 * probe[i]
             fv, wv, used, _ = climb(sig, float(probe[i]), max(h, 1e-12 * probe[i]), rtol,
-                                    max(lus - (sig.ev.lu_count - lu0), 4))
+                                    max(lus - (sig.calls - lu0), 4))
             entry["climbs"].append({"candidate": float(probe[i]), "peak": wv, "value": fv, "lus": used,
                                     "complete": True})
             value, w_peak = max((value, w_peak), (fv, wv))
             continue  # a peak the search missed: test again above it
         improved, dismissed = False, 0
         for w, re in zip(ls.frequencies, ls.real_parts):
-            left = lus - (sig.ev.lu_count - lu0)
+            left = lus - (sig.calls - lu0)
             if left < 4:
                 break
             h = max(4.0 * re, 1e-4 * w, 1e-8 * ls.threshold)
@@ -180,7 +180,7 @@ def certify(sig, realization, value, w_peak, *, tol, rounds, lus, rtol, w_lo):
         else:
             rec["reason"] = f"LU budget certify_lus = {lus} spent on {dismissed} of {ls.frequencies.size} candidates"
         break
-    rec.update(lu_count=sig.ev.lu_count - lu0, time_s=time.perf_counter() - t0)
+    rec.update(lu_count=sig.ev.lu_count - made0, time_s=time.perf_counter() - t0)
     return value, w_peak, upper, certified, rec
 
 

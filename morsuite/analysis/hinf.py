@@ -115,10 +115,14 @@ class _Sigma:
     """sigma_max(T(jw) - Tr(jw)) and its derivative, one LU per frequency, all samples kept."""
 
     def __init__(self, fom, rr, refine, rtol):
-        self.ev = FomResponse(fom, refine=refine)
+        # the model's memo: the start grids of a model's reduced models share most frequencies
+        self.ev = FomResponse(fom, refine=refine, memo=True)
         self.rr = rr
         self.rtol = rtol
         self.samples = {}
+        #: frequencies evaluated (one LU each without the model's memo): the budgets count these, so
+        #: that a search does not depend on what the memo holds
+        self.calls = 0
         #: the largest ||T(jw)||_F sampled: the scale of the cancellation in T - T_r
         self.scale = 0.0
 
@@ -127,6 +131,7 @@ class _Sigma:
         if w in self.samples:
             return self.samples[w]
         s = 1j * w
+        self.calls += 1
         if self.rr is None:
             T, dT = self.ev.transfer_and_derivative(s, need=lambda T0: False)
         else:
@@ -191,7 +196,7 @@ def _search(fom, rr, rom_poles, feed, *, max_lus, grid_lus, rtol, per_decade, re
     best = (float(fs.max()), float(ws[np.argmax(fs)]))
     refinements = []
     for i in cands:
-        left = max(max_lus - sig.ev.lu_count, 0)
+        left = max(max_lus - sig.calls, 0)
         if left == 0:
             break
         if i == ws.size - 1:

@@ -39,10 +39,11 @@ class FomResponse:
         LUs kept by the solver (2: a shift and its conjugate, or the value and
         the derivative at one shift, share one LU).
     memo : bool
-        Keep :math:`T(s)` (the whole matrix, with its unit and whether it was refined) per exact
-        shift in ``fom.cache``, at most :data:`MEMO_SIZE` shifts, and serve :meth:`transfer`
+        Keep :math:`T(s)` (the whole matrix, with its unit and whether it was refined; and
+        :math:`T'(s)` for :meth:`transfer_and_derivative`) per exact shift in ``fom.cache``, at most :data:`MEMO_SIZE` shifts, and serve :meth:`transfer`
         from it (default False): the H2 quadrature's nodes recur across the reduced models of one
-        model (``docs/design/norms.md``, 2026-11-26 third session). Each call returns what a
+        model, as do the H-infinity search's start grids (``docs/design/norms.md``, 2026-11-26
+        third session). Each call returns what a
         fresh response would (the unrefined value where ``need`` declines refinement, else the
         refined one, computed when not kept yet), so the values do not depend on earlier calls.
 
@@ -57,8 +58,10 @@ class FomResponse:
         self.fom = fom
         self.refine = int(refine)
         cache = getattr(fom, "cache", None)
-        # T(s) by exact shift, kept in the model's cache for later calls of this process (memo=True)
-        self._memo = cache.setdefault(("fom_response", self.refine), {}) if memo and cache is not None else None
+        # T(s) (and T'(s)) by exact shift, kept in the model's cache for later calls of this process (memo=True)
+        on = memo and cache is not None
+        self._memo = cache.setdefault(("fom_response", self.refine), {}) if on else None
+        self._memo_d = cache.setdefault(("fom_response_derivative", self.refine), {}) if on else None
         self.solver = fom.new_solver(cache_size=cache_size)
         self._op = None  # the long-double S(s) x on the solver's pattern, made on the first refinement
         self.last_unit = refined_unit(0.0, self.refine)
@@ -138,16 +141,30 @@ class FomResponse:
         r""":math:`T(s)` (refined as :meth:`transfer`, with ``need``) and
         :math:`T'(s) = -Y^T(2sM + D)X` (:math:`S(s)^TY = [L^T; 0]`, double precision):
         one LU, one plain and one transposed solve (plus the refinement)."""
-        fom = self.fom
+        fom, memo = self.fom, self._memo_d
+        hit = memo.get(complex(s)) if memo is not None else None
+        if hit is not None:  # as in transfer: what a fresh call would return
+            T0, Tr, unit, dT = hit
+            if not self.refine or (need is not None and not need(T0)):
+                self.last_unit = refined_unit(0.0, 0)
+                return T0, dT
+            if Tr is not None:
+                self.last_unit = unit
+                return Tr, dT
         lu, x = self._first(s, fom.F)
         X = x[: fom.n1]
-        T = fom.L @ X.real + 1j * (fom.L @ X.imag)
-        if self.refine and (need is None or need(T)):
+        T0 = fom.L @ X.real + 1j * (fom.L @ X.imag)
+        Tr = None
+        if self.refine and (need is None or need(T0)):
             Xr = self._refined(s, lu, fom.F, x)
             L = fom.L.astype(LD)
-            T = (L @ Xr.real) + 1j * (L @ Xr.imag).astype(CLD)
+            Tr = (L @ Xr.real) + 1j * (L @ Xr.imag).astype(CLD)
         else:
             self.last_unit = refined_unit(0.0, 0)
         Y = lu.solve(fom.L.T.astype(complex), trans=True)
         dT = -(Y.T @ ((2 * s) * (fom.M @ X) + fom.D @ X))
-        return T, dT
+        if memo is not None:
+            if len(memo) >= MEMO_SIZE:
+                memo.clear()
+            memo[complex(s)] = (T0, Tr, self.last_unit, dT)
+        return (T0 if Tr is None else Tr), dT
