@@ -103,7 +103,7 @@ def _pin(counter, cores):
     except (AttributeError, OSError):
         pass
     from ..linalg.warmup import warm_kernels
-    warm_kernels()  # numba's compile or cache load before any unit is timed
+    warm_kernels(first=i)  # numba's compile or cache load before any unit is timed; each worker its half first
 
 
 def _run_unit(fn_name, args, kwargs):
