@@ -156,6 +156,9 @@ class IRKAFO(SurrogatePhase, IRKA):
         "track_h2": Option(True, "bool", "exact H2 error of every iterate from the next iteration's solves "
                            "(needs the Gramian factors: computed once per model if not cached; the "
                            "certificate is computed either way)"),
+        "refine_certificate": Option(False, "bool", "refine the certification round's solves like an iteration's "
+                                     "(they make no basis; unrefined, the certificate and the tracked H2 error "
+                                     "carry the LU's forward error, well below certificate_tol)"),
         "certificate_tol": Option(1e-4, "float", "largest interpolation residual rho (module docstring) at "
                                   "which a converged iterate counts as converged", low=0, high=1,
                                   open_low=True, open_high=True),
@@ -223,6 +226,13 @@ class IRKAFO(SurrogatePhase, IRKA):
         self._data = (alpha, bdir, cdir)
         self._track(alpha, bdir, cdir)
         return V, W
+
+    def _refining(self) -> bool:
+        """The engine's rule (refine after an ill-conditioned iteration), except in the certification
+        round, whose solves make no basis (``refine_certificate``)."""
+        if getattr(self, "_certifying", False) and not self.options["refine_certificate"]:
+            return False
+        return super()._refining()
 
     def _next_data(self, it, current, proposed, relax, blend=False):
         """A Newton step with the surrogate's Jacobian (chord) while one is in force, else the
@@ -345,10 +355,15 @@ class IRKAFO(SurrogatePhase, IRKA):
         o, iters, lu0 = self.options, [x for x in self._iterates if x["iteration"] > 0], self._lu_count()
         last = iters[-1] if iters else None
         if converged and last is not None and "certificate" not in last:
+            # these solves make no basis: only T b, c^T T, c^T T' b at the mirrored poles, which an unrefined
+            # solve gives to its forward error (docs/design/irka_fo.md, 2026-11-26, third session)
+            self._certifying = True
             try:
                 self._bases(*last["next"], o["projection"] == "petrov")
             except SingularShiftError:
                 last["certificate"] = None  # a mirrored pole is a pole of the full model: not certified
+            finally:
+                self._certifying = False
         cert_lus = self._lu_count() - lu0
         scored = [x for x in self._iterates if "h2_squared" in x]
         last_ok = (converged and last is not None and last.get("certificate") is not None
