@@ -38,7 +38,8 @@ derivative is the real or imaginary part of the holomorphic one.
 Cost: one complex QZ of the k x k pencil with both eigenvector sets, then
 :math:`O(k(1 + m + p)(Nk + k^2(m + p)))` flops (the eigenvector perturbations enter only
 through :math:`C_c\delta x_k` and :math:`B_c^T\delta y_k` at the image's poles, never as k x k
-products), against one map evaluation per real coordinate (about :math:`k(m + p - 1)` of them)
+products; SISO: :math:`O(kN)` per parameter, the eigenvalues' derivatives only), against one map
+evaluation per real coordinate (about :math:`k(m + p - 1)` of them)
 for forward differences. Checked against central differences in ``tests/test_irka_jacobian.py``;
 measurements in ``docs/design/irka_fo.md`` (2026-11-26).
 """
@@ -123,6 +124,11 @@ def map_jacobian(mu, Bs, Cs, chart, x, y):
         rA = dw @ muVX if dw is not None else np.zeros(k, complex)
         cE = YtW @ dv if dv is not None else np.zeros(k, complex)
         cA = YtWmu @ dv if dv is not None else np.zeros(k, complex)
+        if m == 1 and p == 1:
+            # SISO: the chart holds the shifts only, so only the eigenvalues' derivatives are needed: the
+            # diagonal of G below (the same products, in the same order), O(k) instead of O(k^2)
+            dG = Y[i] * rA - Y[i] * rE * lam + (cA - cE * lam) * X[i]
+            return -(dG / nu)[pole][:, None]
         # G[l, k] = y_l^T (dA - lambda_k dE) x_k ; H[k, l] = y_k^T (dA - lambda_k dE) x_l
         G = np.outer(Y[i], rA) - np.outer(Y[i], rE) * lam[None, :] + (cA[:, None] - cE[:, None] * lam[None, :]) * X[i][None, :]
         H = (Y[i][:, None] * (rA[None, :] - lam[:, None] * rE[None, :])
