@@ -70,10 +70,10 @@ that iterate: the tangential Hermite interpolation residual at its mirrored pole
 the derivative mismatch scaled to the relative shift change it amounts to (near a pole
 at distance :math:`\mathrm{Re}\,\sigma` the derivative varies on that scale). The last
 iterate is certified by one more round of solves at its mirrored poles (r/2 LUs for r/2
-pairs). ``converged`` is True when the engine's criterion holds and
-:math:`\rho \le` ``certificate_tol``; that iterate is returned. Otherwise the returned
-iterate is the stable one of smallest exact H2 error (ties within the values' accuracy,
-or within ``H2_TIE`` relative, go to the later one), with ``converged=False`` and a
+pairs; unrefined unless ``refine_certificate``: they make no basis). ``converged`` is True
+when the engine's criterion holds and :math:`\rho \le` ``certificate_tol``; that iterate is
+returned. Otherwise the returned iterate is the stable one of smallest exact H2 error (ties
+within the values' accuracy, or within ``H2_TIE`` relative, go to the later one), with ``converged=False`` and a
 :class:`~morsuite.errors.ConvergenceWarning`.
 
 Options: :attr:`IRKAFO.OPTIONS` (those of ``irka`` plus the ones above). Cost: the Gramian
