@@ -14,7 +14,7 @@ from morsuite.reducers import irka as irka_module
 
 from test_irka_fo import Projected, hermite_mismatch, modal
 
-SPEC = "dsms:g=200"  # at 20 states the bases are ill-conditioned from the first iteration on: the later ones refine
+SPEC = "dsms:g=100"  # at 20 states the bases are ill-conditioned from the first iteration on: the later ones refine
 
 
 def _run(monkeypatch, **options):
