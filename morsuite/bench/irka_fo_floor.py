@@ -3,9 +3,9 @@ r"""Benchmark ``irka-fo-floor``: irka-fo's own work against its LU floor over th
 The orders of ``studies/sweep.toml`` for irka-fo: dsms(g=1000) at 4, 12, ..., 60 states and
 tcom(nc=2000) at 12, 28, 44, 60, reduced in increasing r on ONE reducer per model, as the
 study does (``studies.tasks.reduce_sweep``), with one solver thread (``SOLVER_THREADS``), as on
-the study's workers, each pinned to one core (``studies.batch``). The start (the model's Gramian factors by LR-ADI,
-shared with ``bt``, and the SVD of first-order BT) is paid by the first call and shown apart
-(``start_s``, ``start_lu_count``); every row then reports
+the study's workers, each pinned to one core (``studies.batch``). The start (the model's Gramian
+factors by LR-ADI, shared with ``bt``, and the SVD of first-order BT) is paid by the first call
+and shown apart (``start_s``, ``start_lu_count``); every row then reports
 
 - ``own_first_s``: the first call's ``time_s`` less the start's part of it
   (``time_breakdown["start"]``): the surrogate (its BT projection ``surrogate_projection_s``

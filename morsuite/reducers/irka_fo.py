@@ -73,8 +73,8 @@ iterate is certified by one more round of solves at its mirrored poles (r/2 LUs 
 pairs; unrefined unless ``refine_certificate``: they make no basis). ``converged`` is True
 when the engine's criterion holds and :math:`\rho \le` ``certificate_tol``; that iterate is
 returned. Otherwise the returned iterate is the stable one of smallest exact H2 error (ties
-within the values' accuracy, or within ``H2_TIE`` relative, go to the later one), with ``converged=False`` and a
-:class:`~morsuite.errors.ConvergenceWarning`.
+within the values' accuracy, or within ``H2_TIE`` relative, go to the later one), with
+``converged=False`` and a :class:`~morsuite.errors.ConvergenceWarning`.
 
 Options: :attr:`IRKAFO.OPTIONS` (those of ``irka`` plus the ones above). Cost: the Gramian
 factors once per model (the start; ``info["lu_count_shared"]``, in ``lu_count`` when paid by this call),
