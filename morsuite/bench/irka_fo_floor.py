@@ -2,9 +2,10 @@ r"""Benchmark ``irka-fo-floor``: irka-fo's own work against its LU floor over th
 
 The orders of ``studies/sweep.toml`` for irka-fo: dsms(g=1000) at 4, 12, ..., 60 states and
 tcom(nc=2000) at 12, 28, 44, 60, reduced in increasing r on ONE reducer per model, as the
-study does (``studies.tasks.reduce_sweep``). The start (the model's Gramian factors by LR-ADI,
-shared with ``bt``, and the SVD of first-order BT) is paid by the first call and shown apart
-(``start_s``, ``start_lu_count``); every row then reports
+study does (``studies.tasks.reduce_sweep``), with one solver thread (``SOLVER_THREADS``), as on
+the study's workers, each pinned to one core (``studies.batch``). The start (the model's Gramian
+factors by LR-ADI, shared with ``bt``, and the SVD of first-order BT) is paid by the first call
+and shown apart (``start_s``, ``start_lu_count``); every row then reports
 
 - ``own_first_s``: the first call's ``time_s`` less the start's part of it
   (``time_breakdown["start"]``): the surrogate (its BT projection ``surrogate_projection_s``
@@ -40,6 +41,8 @@ __all__ = ["bench_irka_fo_floor", "CASES"]
 #: (model, orders) of the full run: the orders of studies/sweep.toml for irka-fo
 CASES = [("dsms:g=1000", list(range(4, 61, 8))), ("tcom:nc=2000", [12, 28, 44, 60])]
 QUICK = [("tcom:nc=60", [8, 16]), ("dsms:g=200", [4, 12])]
+#: irka-fo's solver threads in the benchmark: 1, as on the study's pinned workers (2026-11-26, third session)
+SOLVER_THREADS = 1
 
 
 def _one(red, fom, r):
@@ -66,7 +69,9 @@ def sweep_rows(spec: str, orders, repeat: int = 3, echo=None) -> list:
     from .. import models, reducers
 
     fom = models.parse(spec)
-    red = reducers.make("irka-fo", fom)
+    # one solver thread: the study's workers are pinned to a core each, where the automatic thread
+    # count resolves to 1 (studies.batch); the floor's LU is single-threaded too
+    red = reducers.make("irka-fo", fom, solver_threads=SOLVER_THREADS)
     rows = []
     for r in sorted(orders):
         info, own1, build, lf1 = _one(red, fom, r)
@@ -79,6 +84,7 @@ def sweep_rows(spec: str, orders, repeat: int = 3, echo=None) -> list:
         ratios = [x[1] / (int(x[0]["lu_count_own"]) * x[3]["median_s"]) for x in reps]
         sur = info.get("surrogate") or {}
         row = {"model": spec, "r": r, "states": info["states"], "converged": info["converged"],
+               "solver_threads": info.get("solver_threads"),
                "status": info["status"], "iterations": info["iterations"], "time_s": float(info["time_s"]),
                "start_s": start_s, "start_lu_count": int(info.get("lu_count_start", 0)),
                "lu_count_shared": int(info.get("lu_count_shared", 0)), "lu_count_own": n,

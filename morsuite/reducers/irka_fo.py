@@ -70,11 +70,11 @@ that iterate: the tangential Hermite interpolation residual at its mirrored pole
 the derivative mismatch scaled to the relative shift change it amounts to (near a pole
 at distance :math:`\mathrm{Re}\,\sigma` the derivative varies on that scale). The last
 iterate is certified by one more round of solves at its mirrored poles (r/2 LUs for r/2
-pairs). ``converged`` is True when the engine's criterion holds and
-:math:`\rho \le` ``certificate_tol``; that iterate is returned. Otherwise the returned
-iterate is the stable one of smallest exact H2 error (ties within the values' accuracy,
-or within ``H2_TIE`` relative, go to the later one), with ``converged=False`` and a
-:class:`~morsuite.errors.ConvergenceWarning`.
+pairs; unrefined unless ``refine_certificate``: they make no basis). ``converged`` is True
+when the engine's criterion holds and :math:`\rho \le` ``certificate_tol``; that iterate is
+returned. Otherwise the returned iterate is the stable one of smallest exact H2 error (ties
+within the values' accuracy, or within ``H2_TIE`` relative, go to the later one), with
+``converged=False`` and a :class:`~morsuite.errors.ConvergenceWarning`.
 
 Options: :attr:`IRKAFO.OPTIONS` (those of ``irka`` plus the ones above). Cost: the Gramian
 factors once per model (the start; ``info["lu_count_shared"]``, in ``lu_count`` when paid by this call),
@@ -156,6 +156,9 @@ class IRKAFO(SurrogatePhase, IRKA):
         "track_h2": Option(True, "bool", "exact H2 error of every iterate from the next iteration's solves "
                            "(needs the Gramian factors: computed once per model if not cached; the "
                            "certificate is computed either way)"),
+        "refine_certificate": Option(False, "bool", "refine the certification round's solves like an iteration's "
+                                     "(they make no basis; unrefined, the certificate and the tracked H2 error "
+                                     "carry the LU's forward error, well below certificate_tol)"),
         "certificate_tol": Option(1e-4, "float", "largest interpolation residual rho (module docstring) at "
                                   "which a converged iterate counts as converged", low=0, high=1,
                                   open_low=True, open_high=True),
@@ -223,6 +226,13 @@ class IRKAFO(SurrogatePhase, IRKA):
         self._data = (alpha, bdir, cdir)
         self._track(alpha, bdir, cdir)
         return V, W
+
+    def _refining(self) -> bool:
+        """The engine's rule (refine after an ill-conditioned iteration), except in the certification
+        round, whose solves make no basis (``refine_certificate``)."""
+        if getattr(self, "_certifying", False) and not self.options["refine_certificate"]:
+            return False
+        return super()._refining()
 
     def _next_data(self, it, current, proposed, relax, blend=False):
         """A Newton step with the surrogate's Jacobian (chord) while one is in force, else the
@@ -293,22 +303,32 @@ class IRKAFO(SurrogatePhase, IRKA):
             rec.update(self._h2_of(rec["modal"], alpha))
 
     def _certificate(self, rom, alpha, bdir, cdir):
-        """The interpolation residual rho (module docstring) of ``rom`` at the captured shifts."""
+        """The interpolation residual rho (module docstring) of ``rom`` at the captured shifts: one
+        batched dense solve for every :math:`(aE_r - A_r)^{-1}B_r` and one for
+        :math:`(aE_r - A_r)^{-1}E_r(aE_r - A_r)^{-1}B_r` (the values of ``rom.transfer`` and
+        ``rom.transfer_derivative``, all shifts at once)."""
+        caps = self._capture
+        if not caps:
+            return 0.0
+        if any("cT" not in cap for cap in caps):
+            return None  # Galerkin projection: no left solves
+        a = np.array([cap["a"] for cap in caps], dtype=complex)
+        idx = [int(np.flatnonzero(alpha == x)[0]) for x in a]
+        real = np.abs(a.imag) <= COMPLEX_TOL * np.abs(a)
+        E, A = np.asarray(rom.E), np.asarray(rom.A)
+        P = a[:, None, None] * E - A
+        try:
+            X = np.linalg.solve(P, np.broadcast_to(rom.B, (a.size,) + rom.B.shape))
+            Y = np.linalg.solve(P, E @ X)
+        except np.linalg.LinAlgError:  # a shift is a pole of the reduced model (it has +-lambda)
+            return np.inf
+        Tr, dT = rom.C @ X + rom.D, -(rom.C @ Y)
         worst = 0.0
-        for cap in self._capture:
-            if "cT" not in cap:
-                return None  # Galerkin projection: no left solves
-            a = cap["a"]
-            i = int(np.flatnonzero(alpha == a)[0])
-            real = abs(a.imag) <= COMPLEX_TOL * abs(a)
-            b, c = (bdir[i].real, cdir[i].real) if real else (bdir[i], cdir[i])
-            try:
-                Tr = rom.transfer(a)
-                dTr = c @ rom.transfer_derivative(a) @ b
-            except np.linalg.LinAlgError:  # the shift is a pole of the reduced model (it has +-lambda)
-                return np.inf
-            worst = max(worst, _rel(cap["Tb"], Tr @ b), _rel(cap["cT"], c @ Tr),
-                        _rel(cap["dT"], dTr) * abs(a.real) / abs(a))
+        for j, cap in enumerate(caps):
+            i = idx[j]
+            b, c = (bdir[i].real, cdir[i].real) if real[j] else (bdir[i], cdir[i])
+            worst = max(worst, _rel(cap["Tb"], Tr[j] @ b), _rel(cap["cT"], c @ Tr[j]),
+                        _rel(cap["dT"], c @ dT[j] @ b) * abs(a[j].real) / abs(a[j]))
         return float(worst)
 
     def _h2_of(self, modal, alpha):
@@ -345,10 +365,15 @@ class IRKAFO(SurrogatePhase, IRKA):
         o, iters, lu0 = self.options, [x for x in self._iterates if x["iteration"] > 0], self._lu_count()
         last = iters[-1] if iters else None
         if converged and last is not None and "certificate" not in last:
+            # these solves make no basis: only T b, c^T T, c^T T' b at the mirrored poles, which an unrefined
+            # solve gives to its forward error (docs/design/irka_fo.md, 2026-11-26, third session)
+            self._certifying = True
             try:
                 self._bases(*last["next"], o["projection"] == "petrov")
             except SingularShiftError:
                 last["certificate"] = None  # a mirrored pole is a pole of the full model: not certified
+            finally:
+                self._certifying = False
         cert_lus = self._lu_count() - lu0
         scored = [x for x in self._iterates if "h2_squared" in x]
         last_ok = (converged and last is not None and last.get("certificate") is not None
