@@ -155,3 +155,17 @@ def test_alternating_descent_hands_over_to_the_same_optimum():
 def _real(co, x):
     from morsuite.linalg.h2_poles import _real_modal
     return _real_modal(co, x)
+
+
+def test_product_form_of_the_target_values_against_triangular_solves():
+    """ModalTM.tm_values by the all-pass product form against one triangular solve per target pole
+    (h2_orthonormal.modal_tm_values) and the triangular Sylvester solve, for a sequence with repeats and
+    poles 1e-6 apart."""
+    from morsuite.linalg.h2_orthonormal import modal_tm_values, tm_realization
+    _, tgt, lam = _target()
+    tt = ModalTM(tgt)
+    seq = np.repeat(np.array([-0.03 + 0.5j, -0.03 - 0.5j, -0.03 * (1 + 1e-6) + 0.5j, -0.2, -1.0 + 3j]), 2)
+    A, b = tm_realization(seq)
+    ref = modal_tm_values(A, b, tt.mu, tt.psi)
+    np.testing.assert_allclose(tt.tm_values(A, b, seq), ref, rtol=1e-10, atol=1e-12 * np.abs(ref).max())
+    np.testing.assert_allclose(tt.tm_values(A, b), ref, rtol=1e-10, atol=1e-12 * np.abs(ref).max())
