@@ -169,3 +169,25 @@ def test_product_form_of_the_target_values_against_triangular_solves():
     ref = modal_tm_values(A, b, tt.mu, tt.psi)
     np.testing.assert_allclose(tt.tm_values(A, b, seq), ref, rtol=1e-10, atol=1e-12 * np.abs(ref).max())
     np.testing.assert_allclose(tt.tm_values(A, b), ref, rtol=1e-10, atol=1e-12 * np.abs(ref).max())
+
+
+def test_projection_value_against_the_error_systems_lyapunov_solution():
+    """The cancellation-free value of the projection (h2_orthonormal.projection_value, ModalValues.projected)
+    against the error system's Lyapunov solution (scipy) for the optimal model of the poles, and against the
+    residual form of h2_value at the pole-residue optimum."""
+    full, tgt, lam = _target()
+    tv = ModalValues(tgt)
+    for k in (3, 4):
+        poles = _start(lam, k)
+        cl = Clusters(poles)
+        ev = cluster_evaluate(cl, cl.y, ModalTM(tgt))
+        J_dense = _dense_error2(full, ev.realization())
+        co = Coordinates(0, k)
+        x = co.join([], [], poles[:k], np.full(k, 0.1 + 0.1j))
+        co.set_pivot(2 * k)
+        x[2 * k] -= (co.a @ x) / co.a[2 * k]
+        pr = optimal_residues(co, x, tv)
+        J, floor = tv.projected(co, pr.x)
+        assert J == pytest.approx(J_dense, rel=1e-12)
+        assert 0 < floor < 1e-10 * J
+        assert J == pytest.approx(tv.precise(co, pr.x)[0], rel=1e-9)

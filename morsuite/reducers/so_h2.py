@@ -106,6 +106,9 @@ class SOH2(Reducer):
         "cluster_rounds": Option(0, "int", "varpro: when the surrogate descent does not converge, rounds of "
                                  "Gauss-Newton in cluster-polynomial coordinates alternated with it (0: none; "
                                  "linalg/h2_clusters.py)", low=0),
+        "cluster_surrogate_tol": Option(None, "float", "varpro: when the cluster rounds ran, their result is polished "
+                                        "on a surrogate this close (relative to the start's error; None: not)",
+                                        low=0, high=1, open_low=True, open_high=True, nullable=True),
         "parametrization": Option("general", "choice", "general K, D, F, L with steps leaving the stable set "
                                   "rejected, or passive: K diagonal positive, D = L_D L_D^T (stable by "
                                   "construction; starts from the fv level)", choices=tuple(PARAMETRISATIONS)),
@@ -330,7 +333,9 @@ class SOH2(Reducer):
             with blas_threads(1):
                 kdfl, prec = pole_phase(roms, order, sur, self._full, gtol=o["gtol"], maxit=o["newton_maxit"],
                                         chord_maxit=o["chord_maxit"], starts=o["starts"],
-                                        cluster_rounds=o["cluster_rounds"])
+                                        cluster_rounds=o["cluster_rounds"],
+                                        tighter=None if o["cluster_surrogate_tol"] is None else
+                                        (lambda: self._surrogates.choose(r, roms, o["cluster_surrogate_tol"])[0]))
             rec.update(prec)
             if kdfl is not None:
                 theta = np.concatenate([np.asarray(X, dtype=float).ravel() for X in kdfl])
