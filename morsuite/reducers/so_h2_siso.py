@@ -11,7 +11,10 @@ whose residues sum to zero, and back (:mod:`morsuite.linalg.h2_poles`): the desc
    to a surrogate relative gradient of ``1e-3 * gtol``, for ``probe`` iterations each; the best by
    surrogate error continues up to ``maxit``, and the second if the first does not converge. If
    none converges, optionally (``cluster_rounds``) rounds alternating Gauss-Newton in cluster-polynomial
-   coordinates with this descent (:func:`~morsuite.linalg.h2_clusters.alternating_descent`).
+   coordinates with this descent (:func:`~morsuite.linalg.h2_clusters.alternating_descent`), from the best
+   start that stalled (else the best), their result polished on a closer surrogate (``tighter``: Newton,
+   then one more round if that does not converge) so that the chord steps start within that surrogate's
+   distance of the model's stationary point.
 2. Chord steps against the full model: its gradient (one LU per pole pair) with the surrogate's
    Hessian, until the full model's relative gradient is at most ``gtol`` or ``chord_maxit`` steps.
    They converge at the rate of the surrogate's error relative to the model's error.
