@@ -313,7 +313,7 @@ def _fd_hessian(cl, ev, target, h=1e-6):
 
 
 def cluster_descent(poles, target, *, ctol: float = CTOL, maxit: int = 200, gtol: float = 1e-7,
-                    hessian: str = "gn", restarts: int = 10):
+                    hessian: str = "gn", restarts: int = 10, plateau: tuple | None = None):
     r"""Trust-region descent in cluster-polynomial coordinates from the poles ``poles`` (module
     docstring). Model Hessian: ``hessian="gn"`` (default): Kaufman's matrix G alone; ``"sr1"``: G plus a
     symmetric rank-one secant estimate S of the rest (the terms in E), updated with
@@ -324,7 +324,8 @@ def cluster_descent(poles, target, *, ctol: float = CTOL, maxit: int = 200, gtol
     least 1e-4 of the predicted decrease (below 10 floors of J the decrease is the trapezoidal rule on
     the gradients along the step). The clusters are fixed until the descent stalls; then re-formed
     from the poles (S reset), at most ``restarts`` times. Stops at ``rho <= gtol`` (``"converged"``),
-    at a stall with no restarts left (``"stalled"``) or ``maxit`` (``"cap"``). Returns ``(evaluation,
+    at a stall with no restarts left (``"stalled"``), ``maxit`` (``"cap"``) or, with ``plateau = (k, f)``, when
+    :math:`\sqrt J` decreased by less than the fraction f over the last k iterations (``"plateau"``). Returns ``(evaluation,
     iterations, reason, history of sqrt(J))``. Cost per iteration: one evaluation per trial step
     (module docstring)."""
     if hessian not in ("gn", "sr1", "fd"):
@@ -388,6 +389,9 @@ def cluster_descent(poles, target, *, ctol: float = CTOL, maxit: int = 200, gtol
             continue
         ev = accepted
         hist.append(float(np.sqrt(max(ev.value, 0.0))))
+        if plateau is not None and len(hist) > plateau[0] and hist[-1] > (1.0 - plateau[1]) * hist[-1 - plateau[0]]:
+            reason = "plateau"
+            break
     else:
         if ev.rho <= gtol:
             reason = "converged"
@@ -404,7 +408,7 @@ def pole_coordinates(poles):
 
 
 def alternating_descent(co: Coordinates, x, target, *, rounds: int = 3, cluster_maxit: int = 150,
-                        pole_maxit: int = 150, gtol: float = 1e-7):
+                        pole_maxit: int = 150, gtol: float = 1e-7, plateau: tuple | None = None):
     r"""Alternate :func:`cluster_descent` (Gauss-Newton in cluster-polynomial coordinates: moves clusters
     of poles the pole-residue metric cannot) and :func:`~.h2_poles_descent.pole_descent` (exact Hessian in
     pole-residue coordinates: leaves the saddles that Gauss-Newton, blind to negative curvature, plateaus
@@ -423,7 +427,7 @@ def alternating_descent(co: Coordinates, x, target, *, rounds: int = 3, cluster_
     for _ in range(rounds):
         lam = co.split(ev.x)[0]
         try:
-            evc, itc, rc, _ = cluster_descent(lam, tt, maxit=cluster_maxit, gtol=gtol, hessian="gn")
+            evc, itc, rc, _ = cluster_descent(lam, tt, maxit=cluster_maxit, gtol=gtol, hessian="gn", plateau=plateau)
             co2, x2 = pole_coordinates(evc.poles)
             pr = optimal_residues(co2, x2, target)
             if pr is None:

@@ -37,9 +37,15 @@ from .so_h2_starts import standard_realization
 
 __all__ = ["pole_phase"]
 
+#: (k, f): the cluster Gauss-Newton of the rounds hands over to the pole descent when sqrt(J) decreased by less
+#: than the fraction f over its last k iterations (None: at its iteration cap only); docs/design/so_h2.md
+PLATEAU = (20, 5e-3)
+#: Newton iterations of the polish on the closer surrogate (and the cap of its alternation round)
+POLISH_MAXIT = 60
+
 
 def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, probe=30, finalists=2,
-               cluster_rounds=0, tighter=None, polish_maxit=150):
+               cluster_rounds=0, tighter=None, polish_maxit=POLISH_MAXIT):
     """Run steps 1 to 3 of the module docstring.
 
     Parameters
@@ -114,7 +120,8 @@ def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
             best = results[min(stalled, key=score.get)]
     label, co, ev, its, reason, hist, _ = best
     if reason != "converged" and cluster_rounds:
-        co, ev, its_c, reason, rounds = alternating_descent(co, ev.x, tv, rounds=cluster_rounds, gtol=1e-3 * gtol)
+        co, ev, its_c, reason, rounds = alternating_descent(co, ev.x, tv, rounds=cluster_rounds, gtol=1e-3 * gtol,
+                                                            plateau=PLATEAU)
         rec["cluster_record"] = rounds
         rec["iterations_surrogate"] += its_c
         if tighter is not None:
@@ -170,7 +177,7 @@ def _polish(co, ev, tighter, *, gtol, maxit):
         co2, ev2, its, reason, _, _ = pole_descent(co, start.x, tv, maxit=maxit, gtol=gtol)
         if reason != "converged":
             co2, ev2, its2, reason, rounds = alternating_descent(co2, ev2.x, tv, rounds=1, cluster_maxit=maxit,
-                                                                 pole_maxit=maxit, gtol=gtol)
+                                                                 pole_maxit=maxit, gtol=gtol, plateau=PLATEAU)
             its += its2
             rec["rounds"] = rounds
     except (InputError, np.linalg.LinAlgError, ValueError) as exc:
