@@ -104,9 +104,9 @@ class SOH2(Reducer):
         "starts": Option(5, "int", "varpro: candidates (best by surrogate error first) descended from", low=1),
         "newton_maxit": Option(300, "int", "varpro: Newton iterations per start against the surrogate", low=1),
         "chord_maxit": Option(5, "int", "varpro: chord steps against the full model (r LUs each)", low=0),
-        "cluster_rounds": Option(3, "int", "varpro: when the surrogate descent does not converge, rounds of "
-                                 "Gauss-Newton in cluster-polynomial coordinates alternated with it (0: none; "
-                                 "linalg/h2_clusters.py)", low=0),
+        "cluster_rounds": Option(3, "int", "varpro: when no start converges on the surrogate, rounds of "
+                                 "Gauss-Newton in cluster-polynomial coordinates alternated with it, from the best "
+                                 "stalled start (0: none; linalg/h2_clusters.py)", low=0),
         "cluster_polish": Option(2, "int", "varpro: when the cluster rounds ran, their result is polished on the "
                                  "surrogate of this many times the states (0: not; 2: the one that estimated the "
                                  "surrogate's distance, no new SVD)", low=0),
