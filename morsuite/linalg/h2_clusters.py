@@ -46,8 +46,9 @@ are re-formed when it stalls. Gauss-Newton is blind to negative curvature and pl
 (relative gradient about 0.1 at tcom(2000), r = 30); :func:`alternating_descent` alternates it with the
 pole-residue descent of :mod:`.h2_poles_descent` (exact Hessian), which leaves them. Cost per
 evaluation: the target's values :math:`T(-A)\beta` for the sequences of n and 2n poles (a modal target of
-order N: one triangular Sylvester solve, :math:`O(Nn^2)`), and :math:`O(n^3)` dense work; 0.063 s at
-n = 60, N = 120. Measurements: ``docs/design/so_h2.md`` (2026-11-26, second session).
+order N: the all-pass product form, :math:`O(nN)`, :meth:`ModalTM.tm_values`), three triangular Sylvester
+solves (the cross Gramians of the two bases and the clusters' cascades, all clusters at once) and
+:math:`O(n^3)` dense work. Measurements: ``docs/design/so_h2.md`` (2026-11-26, second and third sessions).
 """
 
 from __future__ import annotations
