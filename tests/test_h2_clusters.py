@@ -155,3 +155,65 @@ def test_alternating_descent_hands_over_to_the_same_optimum():
 def _real(co, x):
     from morsuite.linalg.h2_poles import _real_modal
     return _real_modal(co, x)
+
+
+def test_product_form_of_the_target_values_against_triangular_solves():
+    """ModalTM.tm_values by the all-pass product form against one triangular solve per target pole
+    (h2_orthonormal.modal_tm_values) and the triangular Sylvester solve, for a sequence with repeats and
+    poles 1e-6 apart."""
+    from morsuite.linalg.h2_orthonormal import modal_tm_values, tm_realization
+    _, tgt, lam = _target()
+    tt = ModalTM(tgt)
+    seq = np.repeat(np.array([-0.03 + 0.5j, -0.03 - 0.5j, -0.03 * (1 + 1e-6) + 0.5j, -0.2, -1.0 + 3j]), 2)
+    A, b = tm_realization(seq)
+    ref = modal_tm_values(A, b, tt.mu, tt.psi)
+    np.testing.assert_allclose(tt.tm_values(A, b, seq), ref, rtol=1e-10, atol=1e-12 * np.abs(ref).max())
+    np.testing.assert_allclose(tt.tm_values(A, b), ref, rtol=1e-10, atol=1e-12 * np.abs(ref).max())
+
+
+def test_projection_value_against_the_error_systems_lyapunov_solution():
+    """The cancellation-free value of the projection (h2_orthonormal.projection_value, ModalValues.projected)
+    against the error system's Lyapunov solution (scipy) for the optimal model of the poles, and against the
+    residual form of h2_value at the pole-residue optimum."""
+    full, tgt, lam = _target()
+    tv = ModalValues(tgt)
+    for k in (3, 4):
+        poles = _start(lam, k)
+        cl = Clusters(poles)
+        ev = cluster_evaluate(cl, cl.y, ModalTM(tgt))
+        J_dense = _dense_error2(full, ev.realization())
+        co = Coordinates(0, k)
+        x = co.join([], [], poles[:k], np.full(k, 0.1 + 0.1j))
+        co.set_pivot(2 * k)
+        x[2 * k] -= (co.a @ x) / co.a[2 * k]
+        pr = optimal_residues(co, x, tv)
+        J, floor = tv.projected(co, pr.x)
+        assert J == pytest.approx(J_dense, rel=1e-12)
+        assert 0 < floor < 1e-10 * J
+        assert J == pytest.approx(tv.precise(co, pr.x)[0], rel=1e-9)
+
+
+def test_polish_moves_a_coarse_optimum_to_the_closer_targets_stationary_point():
+    """so_h2_siso._polish: the optimum against a coarse target (the model without its two weakest modes) moved
+    to the full target: stationary there (the orthonormal relative gradient of h2_clusters, an independent
+    form), its J the error system's Lyapunov value, and the same point as the pole descent against the full
+    target from the same start."""
+    from morsuite.reducers.so_h2_siso import _polish
+    full, tgt, lam = _target()
+    weight = np.abs(tgt.C[0] * tgt.B[:, 0]) / np.abs(tgt.poles.real)
+    keep = np.sort(np.argsort(weight)[4:])                 # two conjugate pairs dropped
+    coarse = ModalValues(ModalTarget(tgt.poles[keep], tgt.B[keep], tgt.C[:, keep]))
+    co, x = _pole_residue(_start(lam))
+    co, ev_c, _, why, _, _ = pole_descent(co, optimal_residues(co, x, coarse).x, coarse, maxit=300, gtol=1e-9)
+    assert why == "converged"
+    tv = ModalValues(tgt)
+    assert optimal_residues(co, ev_c.x, tv).rho > 1e-4     # not stationary for the full target
+    co_p, ev_p, its, reason, rec = _polish(co, ev_c, lambda: tgt, gtol=1e-9, maxit=100)
+    assert reason == "converged" and its > 0 and rec["states"] == tgt.order
+    poles = co_p.split(ev_p.x)[0]
+    cl = Clusters(poles)
+    assert cluster_evaluate(cl, cl.y, ModalTM(tgt), derivatives=1).rho < 1e-7
+    assert _dense_error2(full, _real(co_p, ev_p.x)) == pytest.approx(ev_p.value, rel=1e-8)
+    _, ref, _, _, _, _ = pole_descent(co, optimal_residues(co, ev_c.x, tv).x, tv, maxit=300, gtol=1e-9)
+    perm, dist = match_sets(poles, co.split(ref.x)[0], scale=np.abs(poles))
+    assert dist.max() < 1e-6

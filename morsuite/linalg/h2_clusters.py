@@ -46,8 +46,9 @@ are re-formed when it stalls. Gauss-Newton is blind to negative curvature and pl
 (relative gradient about 0.1 at tcom(2000), r = 30); :func:`alternating_descent` alternates it with the
 pole-residue descent of :mod:`.h2_poles_descent` (exact Hessian), which leaves them. Cost per
 evaluation: the target's values :math:`T(-A)\beta` for the sequences of n and 2n poles (a modal target of
-order N: one triangular Sylvester solve, :math:`O(Nn^2)`), and :math:`O(n^3)` dense work; 0.063 s at
-n = 60, N = 120. Measurements: ``docs/design/so_h2.md`` (2026-11-26, second session).
+order N: the all-pass product form, :math:`O(nN)`, :meth:`ModalTM.tm_values`), three triangular Sylvester
+solves (the cross Gramians of the two bases and the clusters' cascades, all clusters at once) and
+:math:`O(n^3)` dense work. Measurements: ``docs/design/so_h2.md`` (2026-11-26, second and third sessions).
 """
 
 from __future__ import annotations
@@ -82,11 +83,29 @@ class ModalTM:
         self.psi = np.asarray(target.C)[0] * np.asarray(target.B)[:, 0]
         self.norm2, self.norm2_floor = float(target.norm2), float(target.norm2_floor)
 
-    def tm_values(self, A, beta):
-        """:math:`T(-A)\\beta` (class docstring) for a lower triangular A: one triangular Sylvester solve
-        :math:`AZ + Z\\,\\mathrm{diag}(\\mu) = -\\beta 1^T`, then :math:`Z\\psi`."""
-        Z = _tri_sylvester(A, np.diag(self.mu.astype(complex)), -np.outer(beta, np.ones(self.mu.size)))
-        return Z @ self.psi
+    def tm_values(self, A, beta, sequence=None):
+        r""":math:`T(-A)\beta` (class docstring). With the pole ``sequence`` of a Takenaka-Malmquist
+        realization (:func:`~.h2_orthonormal.tm_realization`: ``A = tm_realization(sequence)[0]``), by the
+        product form :math:`T(-A)\beta = \sum_j\psi_jx(-\mu_j)`,
+
+        .. math::
+
+            x_k(s) = \frac{\beta_k}{s - a_k}\prod_{i<k}\frac{s + \bar a_i}{s - a_i}
+
+        (all-pass factors of modulus below one for s in the right half-plane): :math:`O(nN)`; without
+        it, one triangular Sylvester solve :math:`AZ + Z\,\mathrm{diag}(\mu) = -\beta 1^T`,
+        :math:`O(n^2N + nN^2)`."""
+        if sequence is None:
+            Z = _tri_sylvester(A, np.diag(self.mu.astype(complex)), -np.outer(beta, np.ones(self.mu.size)))
+            return Z @ self.psi
+        a = np.asarray(sequence, dtype=complex)[:, None]
+        s = -self.mu[None, :]
+        den = s - a
+        blaschke = np.cumprod((s + np.conj(a)) / den, axis=0)
+        X = np.empty_like(den)
+        X[0] = 1.0 / den[0]
+        X[1:] = blaschke[:-1] / den[1:]
+        return (np.asarray(beta)[:, None] * X) @ self.psi
 
 
 class Clusters:
@@ -145,7 +164,13 @@ class Clusters:
         out = []
         for c in range(len(self.m)):
             yc = self.coefficients(y, c)
-            r = np.roots(np.concatenate([[1.0], yc[::-1]])) if self.m[c] > 1 else np.array([-yc[0]])
+            if self.m[c] == 2:     # the quadratic formula (np.roots' companion eigenvalues cost 0.15 ms)
+                h = -0.5 * yc[1]
+                d = np.sqrt(complex(h * h - yc[0]))
+                r = np.array([h + d, h - d]) if d.real == 0 else np.array([h + d, yc[0] / (h + d)] if h >= 0
+                                                                          else [h - d, yc[0] / (h - d)])
+            else:
+                r = np.roots(np.concatenate([[1.0], yc[::-1]])) if self.m[c] > 1 else np.array([-yc[0]])
             out.append(self.mu[c] + self.sigma[c] * r.astype(complex))
         lam = np.concatenate(out)
         if not (np.all(np.isfinite(lam)) and np.all(lam.real < 0)):
@@ -182,11 +207,13 @@ def _tri_sylvester(A_low, B_low, C):
     return X / scale
 
 
-def _cascade_values(Z1, alpha, Ah, bh, A_right):
-    r""":math:`g_j(-A_r)\beta_r` for all j (rows), with :math:`Z_1` solving
-    :math:`A_1Z_1 + Z_1A_r^T + \beta_1\beta_r^T = 0` (the cascade :math:`T_r` then :math:`h`: its second
-    block row :math:`A_hZ_h + Z_hA_r^T + b_h\alpha^TZ_1 = 0`, by the Schur form of the small :math:`A_h`)."""
-    R, Q = sla.schur(Ah.astype(complex), output="complex")
+def _cascade_values(schur_h, bh, alpha, Z1, A_right):
+    r""":math:`g_j(-A_r)\beta_r` for all coordinates j of all clusters (rows), with :math:`Z_1` solving
+    :math:`A_1Z_1 + Z_1A_r^T + \beta_1\beta_r^T = 0`: the cascade :math:`T_r` then :math:`h`, its second
+    block row :math:`A_hZ_h + Z_hA_r^T + b_h\alpha^TZ_1 = 0` with :math:`A_h` the block diagonal of the
+    clusters' companion matrices (``schur_h`` = (R, Q), its complex Schur form) and :math:`b_h` their
+    stacked input vectors: one triangular Sylvester solve for every cluster at once."""
+    R, Q = schur_h
     rhs = -(Q.conj().T @ np.outer(bh, alpha @ Z1))
     Y, scale, info = sla.lapack.ztrsyl(R, np.asarray(A_right, dtype=complex).T, rhs)
     if info < 0:
@@ -223,6 +250,13 @@ class ClusterEvaluation:
         return (np.real(S @ Ac @ Si), np.real(S @ Bc), np.real(Cc @ Si))
 
 
+def _tm_values(target, A, beta, sequence):
+    """``target.tm_values`` with the product form where the target has it (:meth:`ModalTM.tm_values`)."""
+    if isinstance(target, ModalTM):
+        return target.tm_values(A, beta, sequence)
+    return target.tm_values(A, beta)
+
+
 def cluster_evaluate(cl: Clusters, y, target, *, derivatives: int = 2):
     """J (with ``derivatives`` >= 1 the gradient and rho, 2 (default) Kaufman's matrix too) at y against ``target``
     (anything with ``tm_values(A, beta)`` and ``norm2``, ``norm2_floor``); None outside the domain
@@ -232,7 +266,7 @@ def cluster_evaluate(cl: Clusters, y, target, *, derivatives: int = 2):
         return None
     seq = _sequence(lam)
     A1, b1 = tm_realization(seq)
-    v1 = target.tm_values(A1, b1)
+    v1 = _tm_values(target, A1, b1, seq)
     bh1 = b1 / np.linalg.norm(b1)
     alpha = np.conj(v1)
     alpha = alpha - bh1 * (bh1 @ alpha)
@@ -245,21 +279,19 @@ def cluster_evaluate(cl: Clusters, y, target, *, derivatives: int = 2):
     A2, b2 = tm_realization(seq2)
     Z12 = _tri_sylvester(A1, A2, -np.outer(b1, b2))
     Z11 = _tri_sylvester(A1, A1, -np.outer(b1, b1)) if derivatives > 1 else None
-    e = target.tm_values(A2, b2) - alpha @ Z12
+    e = _tm_values(target, A2, b2, seq2) - alpha @ Z12
     rho = tm_rho(e, b2, J)
-    U, W = [], []
-    for c in range(len(cl.m)):
-        Ah, bh = cl.h_realization(y, c)
-        U.append(_cascade_values(Z12, alpha, Ah, bh, A2))
-        if derivatives > 1:
-            w = _cascade_values(Z11, alpha, Ah, bh, A1)
-            W.append(w - np.outer(w @ bh1, bh1))
-    U = np.vstack(U).T           # columns per coordinate
+    hs = [cl.h_realization(y, c) for c in range(len(cl.m))]
+    schur_h = sla.schur(sla.block_diag(*[h[0] for h in hs]).astype(complex), output="complex")
+    bh = np.concatenate([h[1] for h in hs])
+    U = _cascade_values(schur_h, bh, alpha, Z12, A2).T       # columns per coordinate
     g = 2.0 * np.real(U.conj().T @ e)
     G = None
     if derivatives > 1:
+        W = _cascade_values(schur_h, bh, alpha, Z11, A1)
+        W = W - np.outer(W @ bh1, bh1)
         # (I - Pi_0) g in the doubled basis: the rows of Z12 are the basis x_1 in it; no difference of Grams
-        Ut = U - Z12.T @ np.conj(np.vstack(W).T)
+        Ut = U - Z12.T @ np.conj(W.T)
         G = 2.0 * np.real(Ut.conj().T @ Ut)
         G = 0.5 * (G + G.T)
     return ClusterEvaluation(np.asarray(y, float), J, floor, g, G, rho, lam, A1, b1, alpha)
@@ -282,7 +314,7 @@ def _fd_hessian(cl, ev, target, h=1e-6):
 
 
 def cluster_descent(poles, target, *, ctol: float = CTOL, maxit: int = 200, gtol: float = 1e-7,
-                    hessian: str = "gn", restarts: int = 10):
+                    hessian: str = "gn", restarts: int = 10, plateau: tuple | None = None):
     r"""Trust-region descent in cluster-polynomial coordinates from the poles ``poles`` (module
     docstring). Model Hessian: ``hessian="gn"`` (default): Kaufman's matrix G alone; ``"sr1"``: G plus a
     symmetric rank-one secant estimate S of the rest (the terms in E), updated with
@@ -293,7 +325,8 @@ def cluster_descent(poles, target, *, ctol: float = CTOL, maxit: int = 200, gtol
     least 1e-4 of the predicted decrease (below 10 floors of J the decrease is the trapezoidal rule on
     the gradients along the step). The clusters are fixed until the descent stalls; then re-formed
     from the poles (S reset), at most ``restarts`` times. Stops at ``rho <= gtol`` (``"converged"``),
-    at a stall with no restarts left (``"stalled"``) or ``maxit`` (``"cap"``). Returns ``(evaluation,
+    at a stall with no restarts left (``"stalled"``), ``maxit`` (``"cap"``) or, with ``plateau = (k, f)``, when
+    :math:`\sqrt J` decreased by less than the fraction f over the last k iterations (``"plateau"``). Returns ``(evaluation,
     iterations, reason, history of sqrt(J))``. Cost per iteration: one evaluation per trial step
     (module docstring)."""
     if hessian not in ("gn", "sr1", "fd"):
@@ -357,6 +390,9 @@ def cluster_descent(poles, target, *, ctol: float = CTOL, maxit: int = 200, gtol
             continue
         ev = accepted
         hist.append(float(np.sqrt(max(ev.value, 0.0))))
+        if plateau is not None and len(hist) > plateau[0] and hist[-1] > (1.0 - plateau[1]) * hist[-1 - plateau[0]]:
+            reason = "plateau"
+            break
     else:
         if ev.rho <= gtol:
             reason = "converged"
@@ -373,7 +409,7 @@ def pole_coordinates(poles):
 
 
 def alternating_descent(co: Coordinates, x, target, *, rounds: int = 3, cluster_maxit: int = 150,
-                        pole_maxit: int = 150, gtol: float = 1e-7):
+                        pole_maxit: int = 150, gtol: float = 1e-7, plateau: tuple | None = None):
     r"""Alternate :func:`cluster_descent` (Gauss-Newton in cluster-polynomial coordinates: moves clusters
     of poles the pole-residue metric cannot) and :func:`~.h2_poles_descent.pole_descent` (exact Hessian in
     pole-residue coordinates: leaves the saddles that Gauss-Newton, blind to negative curvature, plateaus
@@ -392,7 +428,7 @@ def alternating_descent(co: Coordinates, x, target, *, rounds: int = 3, cluster_
     for _ in range(rounds):
         lam = co.split(ev.x)[0]
         try:
-            evc, itc, rc, _ = cluster_descent(lam, tt, maxit=cluster_maxit, gtol=gtol, hessian="gn")
+            evc, itc, rc, _ = cluster_descent(lam, tt, maxit=cluster_maxit, gtol=gtol, hessian="gn", plateau=plateau)
             co2, x2 = pole_coordinates(evc.poles)
             pr = optimal_residues(co2, x2, target)
             if pr is None:

@@ -172,6 +172,11 @@ class ModalTarget:
         self.norm2_floor = 2.0 * EPS * np.sqrt(lam.size) * self.norm2
 
     @property
+    def gramian_factor(self):
+        """F with :math:`FF^H` the observability Gramian of the modal realization (positive eigenvalues kept)."""
+        return self._qfactor
+
+    @property
     def order(self) -> int:
         """Number of poles of the modal target."""
         return self.poles.size

@@ -44,7 +44,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
-__all__ = ["tm_realization", "tm_rho", "realization_tm_values", "modal_tm_values", "TMRecursion"]
+__all__ = ["tm_realization", "tm_rho", "realization_tm_values", "modal_tm_values", "projection_value",
+           "TMRecursion"]
 
 
 def tm_realization(sequence):
@@ -84,6 +85,48 @@ def modal_tm_values(A_tm, beta, mu, psi):
     for m, p in zip(np.asarray(mu), np.asarray(psi)):
         out += p * sla.solve_triangular(-m * I - A_tm, beta.astype(complex), lower=True)
     return out
+
+
+def projection_value(poles, mu, b, c, qfactor):
+    r"""The H2 error of the best model with the given poles, :math:`J = \|T - \Pi_{V_0}T\|^2`
+    (:math:`V_0 = \{p/q: \deg p \le n - 2\}`, :math:`q` the poles' polynomial: the variable projection value
+    of :mod:`morsuite.linalg.h2_clusters`), for a modal target :math:`T = \sum_j c_jb_j/(s - \mu_j)`
+    with observability Gramian :math:`Q = FF^H` (``qfactor`` F), without the cancellation of
+    :math:`\|T\|^2 - \|\Pi_{V_0}T\|^2`.
+
+    In the Takenaka-Malmquist realization of the poles (controllability Gramian I, so :math:`V = X`) the
+    cancellation-free residual form (``docs/design/so_h2.md``) has closed-form residuals:
+    :math:`R_B = b\odot\overline{\mathcal B(-\bar\mu)}` with the Blaschke product
+    :math:`\mathcal B(s) = \prod_k(s + \bar a_k)/(s - a_k) = 1 - \beta^Tx(s)`, and
+    :math:`R_C = \hat\beta(\hat\beta^T\bar v)`, :math:`\beta^T\bar v = \overline{\sum_jc_jb_j(1 - \mathcal B(-\mu_j))}`:
+
+    .. math::
+
+        J = \|F^HR_B\|^2 + \frac{|\sum_jc_jb_j(1 - \mathcal B(-\mu_j))|^2}{\|\beta\|^2} .
+
+    The Blaschke factors have modulus below one in the right half-plane and vanish at target poles equal
+    to reduced ones, so nothing of the size of :math:`\|T\|^2` is formed. Requires target poles and
+    ``poles`` closed under conjugation (a real T and real models). Returns ``(J, floor)``, the floor a
+    bound on the rounding of the sums. Cost: :math:`O(nN + Nk)`, k the rank of F (no Schur form, no
+    Lyapunov solve)."""
+    a = np.asarray(poles, dtype=complex)[:, None]
+    mu = np.asarray(mu, dtype=complex)
+    eps = np.finfo(float).eps
+    sr = -np.conj(mu)[None, :]
+    rb = np.asarray(b) * np.conj(np.prod((sr + np.conj(a)) / (sr - a), axis=0))
+    s = -mu[None, :]
+    one_minus = 1.0 - np.prod((s + np.conj(a)) / (s - a), axis=0)
+    psi = np.asarray(c) * np.asarray(b)
+    nb = np.sqrt(np.sum(-2.0 * a.real))
+    fr = qfactor.conj().T @ rb
+    j1 = float(np.sum(np.abs(fr) ** 2))
+    rc = np.sum(psi * one_minus) / nb
+    j2 = float(abs(rc) ** 2)
+    n, N = a.shape[0], mu.size
+    e1 = 4.0 * eps * (n + np.sqrt(N)) * float(np.linalg.norm(np.abs(qfactor).T @ np.abs(rb)))
+    e2 = 4.0 * eps * (n + np.sqrt(N)) * float(np.sum(np.abs(psi) * (1.0 + np.abs(one_minus)))) / nb
+    floor = 2.0 * np.sqrt(j1) * e1 + e1 * e1 + 2.0 * np.sqrt(j2) * e2 + e2 * e2
+    return j1 + j2, float(floor)
 
 
 class TMRecursion:

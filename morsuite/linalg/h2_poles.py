@@ -165,6 +165,15 @@ class ModalValues:
         ev = h2_value(self.target, *_real_modal(co, x)[:1], *_bc(co, x))
         return ev.value, ev.floor
 
+    def projected(self, co, x):
+        r"""(J, floor) of the best model with the poles of x (the residues the optimal ones, as variable
+        projection makes them): :func:`~.h2_orthonormal.projection_value`, cancellation-free like
+        :meth:`precise` and without its Schur forms, Lyapunov solves and balancing (timings:
+        ``docs/design/so_h2.md``, 2026-11-26, third session)."""
+        from .h2_orthonormal import projection_value
+        t = self.target
+        return projection_value(co.split(x)[0], t.poles, t.B[:, 0], t.C[0], t.gramian_factor)
+
     def values(self, s, second: bool = True):
         """(T(s), T'(s), T''(s) or None) at the points s."""
         R = 1.0 / (s[:, None] - self.mu[None, :])

@@ -106,10 +106,12 @@ def varpro_descent(co: Coordinates, x, target, *, maxit: int = 300, gtol: float 
             fl = max(ev.floor, trial.floor)
             pt = None
             if pred <= 10.0 * fl and hasattr(target, "precise"):
-                # the decrease is below the pole-residue formula's rounding: compare without it
+                # the decrease is below the pole-residue formula's rounding: compare without it (the value of
+                # the projection where the target has it: the residues are the optimal ones)
+                value_of = getattr(target, "projected", target.precise)
                 if precise is None:
-                    precise = target.precise(co, ev.x)
-                pt = target.precise(co, trial.x)
+                    precise = value_of(co, ev.x)
+                pt = value_of(co, trial.x)
                 act, fl = precise[0] - pt[0], max(precise[1], pt[1])
             tiny = act > -fl and pred <= 4.0 * fl
             ratio = act / pred if pred > 0 else 0.0

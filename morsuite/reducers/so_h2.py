@@ -42,6 +42,7 @@ form beside it as ``relative_gradient_pole_residue``),
 ``history`` and ``history_full``, ``stop_reason`` and ``stop_reason_full``; varpro: ``starts``
 (per start: surrogate errors, iterations, reason), ``descended_from``, ``cluster_record`` (option
 ``cluster_rounds``: per round the surrogate errors, iterations and relative gradients; docs/design/so_h2.md),
+``polish`` (option ``cluster_polish``: the closer surrogate's states, errors before and after, iterations),
 ``relative_gradient_full``; lbfgs: ``gradient_norm``; ``lu_count`` (made by this call) with
 ``lu_breakdown`` (gramians, irka, exact) and ``lu_count_gramians``, ``time_breakdown``,
 ``setup_reused``, ``setup_cost``.
@@ -103,9 +104,12 @@ class SOH2(Reducer):
         "starts": Option(5, "int", "varpro: candidates (best by surrogate error first) descended from", low=1),
         "newton_maxit": Option(300, "int", "varpro: Newton iterations per start against the surrogate", low=1),
         "chord_maxit": Option(5, "int", "varpro: chord steps against the full model (r LUs each)", low=0),
-        "cluster_rounds": Option(0, "int", "varpro: when the surrogate descent does not converge, rounds of "
-                                 "Gauss-Newton in cluster-polynomial coordinates alternated with it (0: none; "
-                                 "linalg/h2_clusters.py)", low=0),
+        "cluster_rounds": Option(3, "int", "varpro: when no start converges on the surrogate, rounds of "
+                                 "Gauss-Newton in cluster-polynomial coordinates alternated with it, from the best "
+                                 "stalled start (0: none; linalg/h2_clusters.py)", low=0),
+        "cluster_polish": Option(2, "int", "varpro: when the cluster rounds ran, their result is polished on the "
+                                 "surrogate of this many times the states (0: not; 2: the one that estimated the "
+                                 "surrogate's distance, no new SVD)", low=0),
         "parametrization": Option("general", "choice", "general K, D, F, L with steps leaving the stable set "
                                   "rejected, or passive: K diagonal positive, D = L_D L_D^T (stable by "
                                   "construction; starts from the fv level)", choices=tuple(PARAMETRISATIONS)),
@@ -330,7 +334,9 @@ class SOH2(Reducer):
             with blas_threads(1):
                 kdfl, prec = pole_phase(roms, order, sur, self._full, gtol=o["gtol"], maxit=o["newton_maxit"],
                                         chord_maxit=o["chord_maxit"], starts=o["starts"],
-                                        cluster_rounds=o["cluster_rounds"])
+                                        cluster_rounds=o["cluster_rounds"],
+                                        tighter=None if not o["cluster_polish"] else
+                                        (lambda: self._surrogates.target(o["cluster_polish"] * srec["states_asked"])[0]))
             rec.update(prec)
             if kdfl is not None:
                 theta = np.concatenate([np.asarray(X, dtype=float).ravel() for X in kdfl])

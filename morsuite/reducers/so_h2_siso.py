@@ -11,7 +11,10 @@ whose residues sum to zero, and back (:mod:`morsuite.linalg.h2_poles`): the desc
    to a surrogate relative gradient of ``1e-3 * gtol``, for ``probe`` iterations each; the best by
    surrogate error continues up to ``maxit``, and the second if the first does not converge. If
    none converges, optionally (``cluster_rounds``) rounds alternating Gauss-Newton in cluster-polynomial
-   coordinates with this descent (:func:`~morsuite.linalg.h2_clusters.alternating_descent`).
+   coordinates with this descent (:func:`~morsuite.linalg.h2_clusters.alternating_descent`), from the best
+   start that stalled (else the best), their result polished on a closer surrogate (``tighter``: Newton,
+   then one more round if that does not converge) so that the chord steps start within that surrogate's
+   distance of the model's stationary point.
 2. Chord steps against the full model: its gradient (one LU per pole pair) with the surrogate's
    Hessian, until the full model's relative gradient is at most ``gtol`` or ``chord_maxit`` steps.
    They converge at the rate of the surrogate's error relative to the model's error.
@@ -26,16 +29,23 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
-from ..linalg.h2_poles import Coordinates, FullValues, ModalValues, chord_step, evaluate, second_order_of
+from ..linalg.h2_poles import (Coordinates, FullValues, ModalValues, chord_step, evaluate, optimal_residues,
+                               second_order_of)
 from ..linalg.h2_clusters import alternating_descent
 from ..linalg.h2_poles_descent import pole_descent
 from .so_h2_starts import standard_realization
 
 __all__ = ["pole_phase"]
 
+#: (k, f): the cluster Gauss-Newton of the rounds hands over to the pole descent when sqrt(J) decreased by less
+#: than the fraction f over its last k iterations (None: at its iteration cap only); docs/design/so_h2.md
+PLATEAU = (20, 5e-3)
+#: Newton iterations of the polish on the closer surrogate (and the cap of its alternation round)
+POLISH_MAXIT = 60
+
 
 def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, probe=30, finalists=2,
-               cluster_rounds=0):
+               cluster_rounds=0, tighter=None, polish_maxit=POLISH_MAXIT):
     """Run steps 1 to 3 of the module docstring.
 
     Parameters
@@ -49,6 +59,9 @@ def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
         result is the best converged one, or the best of all if none converged
     cluster_rounds : when the result has not converged on the surrogate, at most this many rounds of
         :func:`~morsuite.linalg.h2_clusters.alternating_descent` from it (0: none)
+    tighter : None, or a function returning a closer surrogate (ModalTarget); called only when the
+        rounds ran: their result is then polished against it (:func:`_polish`) before the chord steps
+    polish_maxit : Newton iterations of the polish (and the iterations of its one alternation round)
 
     Returns
     -------
@@ -97,12 +110,23 @@ def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
            "stop_reason_full": None, "relative_gradient_full": None, "descended_from": None}
     if best is None:
         return None, rec
-    label, co, ev, its, reason, hist, _ = best
     rec["cluster_record"] = []
+    if best[4] != "converged" and cluster_rounds:
+        # the rounds leave stalls at clusters, where the pole-residue metric fails: from the best start that
+        # stalled there rather than one still descending at its iteration cap (docs/design/so_h2.md, third
+        # session: at tcom(2000), r = 30, from vv (cap) the rounds end at a point they do not converge at)
+        stalled = [k for k in results if results[k][4] == "stalled"]
+        if stalled:
+            best = results[min(stalled, key=score.get)]
+    label, co, ev, its, reason, hist, _ = best
     if reason != "converged" and cluster_rounds:
-        co, ev, its_c, reason, rounds = alternating_descent(co, ev.x, tv, rounds=cluster_rounds, gtol=1e-3 * gtol)
+        co, ev, its_c, reason, rounds = alternating_descent(co, ev.x, tv, rounds=cluster_rounds, gtol=1e-3 * gtol,
+                                                            plateau=PLATEAU)
         rec["cluster_record"] = rounds
         rec["iterations_surrogate"] += its_c
+        if tighter is not None:
+            co, ev, its_p, reason, rec["polish"] = _polish(co, ev, tighter, gtol=1e-3 * gtol, maxit=polish_maxit)
+            rec["iterations_surrogate"] += its_p
     rec.update(descended_from=label, history=hist, stop_reason=reason)
     fv = FullValues(full)
     evf = evaluate(co, ev.x, fv, hessian=False)
@@ -134,3 +158,31 @@ def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
     except (InputError, np.linalg.LinAlgError) as exc:
         rec["stop_reason_full"] = f"no second-order realization: {exc}"
         return None, rec
+
+
+def _polish(co, ev, tighter, *, gtol, maxit):
+    r"""The rounds' result moved to a closer surrogate: residues re-optimised, the pole descent
+    (:func:`~morsuite.linalg.h2_poles_descent.pole_descent`) for at most ``maxit`` iterations and, if that does
+    not converge, one alternation round (:func:`~morsuite.linalg.h2_clusters.alternating_descent`). The chord
+    steps then start within the closer surrogate's distance of the model's stationary point (their rate is
+    that distance over the error). Returns ``(Coordinates, evaluation, iterations, reason, record)``
+    (on a failure, the input poles with their residues for the closer surrogate)."""
+    tv = ModalValues(tighter())
+    start = optimal_residues(co, ev.x, tv)
+    if start is None:
+        return co, ev, 0, "stalled", {"failed": "outside the domain on the closer surrogate"}
+    v0 = tv.precise(co, start.x)[0]
+    rec = {"states": int(tv.mu.size), "h2_start": float(np.sqrt(max(v0, 0.0)))}
+    try:
+        co2, ev2, its, reason, _, _ = pole_descent(co, start.x, tv, maxit=maxit, gtol=gtol)
+        if reason != "converged":
+            co2, ev2, its2, reason, rounds = alternating_descent(co2, ev2.x, tv, rounds=1, cluster_maxit=maxit,
+                                                                 pole_maxit=maxit, gtol=gtol, plateau=PLATEAU)
+            its += its2
+            rec["rounds"] = rounds
+    except (InputError, np.linalg.LinAlgError, ValueError) as exc:
+        rec["failed"] = f"{type(exc).__name__}: {exc}"
+        return co, start, 0, "stalled", rec
+    rec.update(h2=float(np.sqrt(max(tv.precise(co2, ev2.x)[0], 0.0))), iterations=its, reason=reason,
+               relative_gradient=float(ev2.rho))
+    return co2, ev2, its, reason, rec
