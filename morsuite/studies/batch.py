@@ -373,7 +373,8 @@ def _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0):
                                   {**shared.record, "started_after_s": time.perf_counter() - t0})
                     # nothing timed left to run or running: its figures may take every core
                     alone = all(x.kind == "study" for x in [*pending.values(), *running.values()])
-                    args = (u.args[0], {**u.args[1], "render_jobs": jobs if alone else 1}, part)
+                    extra = {"render_jobs": jobs, "render_cores": list(cores)} if alone else {}
+                    args = (u.args[0], {**u.args[1], **extra}, part)
                 else:
                     args = u.args + ((_rom_entries(cache, u.rom_from, results),) if u.kind == "norm_error" else ())
                 running[pool.submit(_run_unit, u.fn, args, {})] = u
@@ -426,7 +427,15 @@ def _run_study(path, kwargs, shared):
 
     cache_dir = kwargs.get("cache_dir") or Path(kwargs["out"]) / ".cache"
     study = load_spec(path, memo=SpecMemo(Cache(cache_dir)))
-    res = run(study, shared=shared, **kwargs)
+    cores = kwargs.pop("render_cores", None)
+    pinned = os.sched_getaffinity(0) if cores and hasattr(os, "sched_getaffinity") else None
+    if pinned is not None:  # its figures' processes (forked from this one) may use every core
+        os.sched_setaffinity(0, set(cores))
+    try:
+        res = run(study, shared=shared, **kwargs)
+    finally:
+        if pinned is not None:
+            os.sched_setaffinity(0, pinned)
     return {"name": study.name, "timing": res.manifest["timing"], "files": len(res.files)}
 
 
