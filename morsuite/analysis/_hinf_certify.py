@@ -114,7 +114,7 @@ def certify(sig, realization, value, w_peak, *, tol, rounds, lus, rtol, w_lo):
 
     Returns ``(value, w_peak, upper_bound or None, certified, record)``.
     """
-    t0, lu0, made0 = time.perf_counter(), sig.calls, sig.ev.lu_count
+    t0, lu0, made0 = time.perf_counter(), sig.calls, sig.ev.lu_count  # lu0: samples (one LU each without the memo)
     A, B, C, D = realization()
     t_real = time.perf_counter() - t0
     scale = max(sig.scale, value)

@@ -61,7 +61,7 @@ import scipy.linalg as sla
 from ..errors import InputError
 from .h2_orthonormal import tm_realization, tm_rho
 from .h2_poles import Coordinates, optimal_residues
-from .h2_poles_descent import _tr_step, pole_descent
+from .h2_poles_descent import _next_radius, _tr_step, pole_descent
 
 __all__ = ["Clusters", "ModalTM", "ClusterEvaluation", "cluster_evaluate", "cluster_descent", "pole_coordinates",
            "alternating_descent", "CTOL", "MAX_DEGREE"]
@@ -368,11 +368,7 @@ def cluster_descent(poles, target, *, ctol: float = CTOL, maxit: int = 200, gtol
             ratio = act / pred if pred > 0 else 0.0
             if ratio >= 1e-4 and act > -fl:
                 accepted = trial
-                step = np.linalg.norm(np.sqrt(D) * p)
-                if ratio > 0.75 and step > 0.9 * radius:
-                    radius *= 2.0
-                elif ratio < 0.25:
-                    radius = 0.25 * step
+                radius = _next_radius(radius, ratio, np.linalg.norm(np.sqrt(D) * p))
                 break
             radius = 0.25 * np.linalg.norm(np.sqrt(D) * p)
             if hessian == "sr1":

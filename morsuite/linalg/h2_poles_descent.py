@@ -26,6 +26,14 @@ def _schur(M, mask):
     return M[np.ix_(a, a)] - M[np.ix_(a, b)] @ np.linalg.solve(M[np.ix_(b, b)], M[np.ix_(b, a)])
 
 
+def _next_radius(radius, ratio, step):
+    """The trust radius after an accepted step of scaled length ``step`` whose actual over predicted
+    decrease is ``ratio``: doubled after a good step to the boundary, a quarter of the step after a poor one."""
+    if ratio > 0.75 and step > 0.9 * radius:
+        return 2.0 * radius
+    return 0.25 * step if ratio < 0.25 else radius
+
+
 def _tr_step(S, D, g, radius):
     r"""The trust-region step: :math:`\min g^Tp + \frac12p^TSp` subject to :math:`\|D^{1/2}p\| \le` radius,
     by the eigen-decomposition of the scaled :math:`S` (indefinite allowed; the hard case takes the
@@ -117,11 +125,7 @@ def varpro_descent(co: Coordinates, x, target, *, maxit: int = 300, gtol: float 
             ratio = act / pred if pred > 0 else 0.0
             if (ratio >= 1e-4 and act > -fl) or (tiny and trial.rho < ev.rho):
                 accepted = trial
-                step = np.linalg.norm(np.sqrt(D) * p)
-                if ratio > 0.75 and step > 0.9 * radius:
-                    radius *= 2.0
-                elif ratio < 0.25:
-                    radius = 0.25 * step
+                radius = _next_radius(radius, ratio, np.linalg.norm(np.sqrt(D) * p))
                 precise = pt
                 break
             radius = 0.25 * np.linalg.norm(np.sqrt(D) * p)

@@ -45,15 +45,17 @@ def warm_kernels(first: int = 0) -> float:
     solver = SaddlePointSolver(M, 0.01 * T, T, G, cache_size=0, backend="banded")
     rhs = np.linspace(1.0, 2.0, n)
     A = np.asfortranarray(T[:4, :4].toarray())
-    shifts = (0.3j, 1.7) if first % 2 == 0 else (1.7, 0.3j)
-    for s in shifts:  # the banded backend's kernels, then the projected IRKA's dense pencil, per dtype
+
+    def at(s):  # the banded backend's kernels, then the projected IRKA's dense pencil, in s's dtype
         lu = solver.factor(s)
         for b in (rhs, np.column_stack([rhs, rhs[::-1], np.ones(n)])):
             lu.solve(b)
             lu.solve(b, trans=True)
         kernels.dense_pencil(A, A, A, s, np.empty((4, 4), dtype=complex if s.imag else float, order="F"))
-        if s == shifts[0] and first % 2 == 1:
-            gram_schmidt(np.asfortranarray(np.vander(np.linspace(0.1, 1.0, n), 4)), 1e-12)
-    gram_schmidt(np.asfortranarray(np.vander(np.linspace(0.1, 1.0, n), 4)), 1e-12)
+
+    steps = [lambda: at(0.3j), lambda: at(1.7),
+             lambda: gram_schmidt(np.asfortranarray(np.vander(np.linspace(0.1, 1.0, n), 4)), 1e-12)]
+    for step in steps if first % 2 == 0 else steps[1:] + steps[:1]:  # the complex half first, or the real one
+        step()
     _WARM["done"] = True
     return time.perf_counter() - t0

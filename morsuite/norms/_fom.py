@@ -111,60 +111,61 @@ class FomResponse:
         """
         fom = self.fom
         memo = self._memo if b is None else None
-        hit = memo.get(complex(s)) if memo is not None else None
-        if hit is not None:  # the value a fresh call would return, whatever the earlier calls asked
-            T0, T, unit = hit
-            if self.refine == 0 or (need is not None and not need(T0)):
-                self.last_unit = refined_unit(0.0, 0)
-                return T0
-            if T is not None:
-                self.last_unit = unit
-                return T
+        hit = self._recall(memo, s, need)
+        if hit is not None:
+            return hit[0]
         B = fom.F if b is None else fom.F @ np.asarray(b).reshape(fom.m, -1)
         lu, x = self._first(s, B)
+        T0, T = self._values(s, lu, B, x, need)
+        self._keep(memo, s, T0, T)
+        return T0 if T is None else T
+
+    def _values(self, s, lu, B, x, need):
+        """``(T0, T)``: the LU's value of :math:`LX` and the refined one (None where ``refine`` is 0 or
+        ``need`` declines it); sets ``last_unit``."""
+        fom = self.fom
         X = x[: fom.n1]
         T0 = fom.L @ X.real + 1j * (fom.L @ X.imag)
-        T = None
         if self.refine == 0 or (need is not None and not need(T0)):
             self.last_unit = refined_unit(0.0, 0)
-        else:
-            X = self._refined(s, lu, B, x)
-            L = fom.L.astype(LD)
-            T = (L @ X.real) + 1j * (L @ X.imag).astype(CLD)
+            return T0, None
+        Xr = self._refined(s, lu, B, x)
+        L = fom.L.astype(LD)
+        return T0, (L @ Xr.real) + 1j * (L @ Xr.imag).astype(CLD)
+
+    def _recall(self, memo, s, need):
+        """The kept entry's answer as a fresh call would give it (the unrefined value where ``need``
+        declines refinement, else the refined one), as ``(value, *rest)``; None when not kept."""
+        hit = memo.get(complex(s)) if memo is not None else None
+        if hit is None:
+            return None
+        T0, T, unit, *rest = hit
+        if self.refine == 0 or (need is not None and not need(T0)):
+            self.last_unit = refined_unit(0.0, 0)
+            return (T0, *rest)
+        if T is None:  # kept unrefined, asked refined: computed again
+            return None
+        self.last_unit = unit
+        return (T, *rest)
+
+    def _keep(self, memo, s, T0, T, *rest):
         if memo is not None:
             if len(memo) >= MEMO_SIZE:
                 memo.clear()
-            memo[complex(s)] = (T0, T, self.last_unit)
-        return T0 if T is None else T
+            memo[complex(s)] = (T0, T, self.last_unit, *rest)
 
     def transfer_and_derivative(self, s, need=None):
         r""":math:`T(s)` (refined as :meth:`transfer`, with ``need``) and
         :math:`T'(s) = -Y^T(2sM + D)X` (:math:`S(s)^TY = [L^T; 0]`, double precision):
         one LU, one plain and one transposed solve (plus the refinement)."""
-        fom, memo = self.fom, self._memo_d
-        hit = memo.get(complex(s)) if memo is not None else None
-        if hit is not None:  # as in transfer: what a fresh call would return
-            T0, Tr, unit, dT = hit
-            if not self.refine or (need is not None and not need(T0)):
-                self.last_unit = refined_unit(0.0, 0)
-                return T0, dT
-            if Tr is not None:
-                self.last_unit = unit
-                return Tr, dT
+        fom = self.fom
+        hit = self._recall(self._memo_d, s, need)
+        if hit is not None:
+            return hit
         lu, x = self._first(s, fom.F)
+        T0, T = self._values(s, lu, fom.F, x, need)
         X = x[: fom.n1]
-        T0 = fom.L @ X.real + 1j * (fom.L @ X.imag)
-        Tr = None
-        if self.refine and (need is None or need(T0)):
-            Xr = self._refined(s, lu, fom.F, x)
-            L = fom.L.astype(LD)
-            Tr = (L @ Xr.real) + 1j * (L @ Xr.imag).astype(CLD)
-        else:
-            self.last_unit = refined_unit(0.0, 0)
         Y = lu.solve(fom.L.T.astype(complex), trans=True)
         dT = -(Y.T @ ((2 * s) * (fom.M @ X) + fom.D @ X))
-        if memo is not None:
-            if len(memo) >= MEMO_SIZE:
-                memo.clear()
-            memo[complex(s)] = (T0, Tr, self.last_unit, dT)
-        return (T0 if Tr is None else Tr), dT
+        self._keep(self._memo_d, s, T0, T, dT)
+        return (T0 if T is None else T), dT
