@@ -22,7 +22,10 @@ Every reducer's ``info`` carries, besides its own records:
     same reducer, or the model's cache. ``setup_reused`` is True when this call did not
     pay that shared work (then ``lu_count`` leaves ``lu_count_shared`` out and ``time_s``
     leaves ``setup_cost`` out, by parts: ``setup_cost`` maps a part's name to its time,
-    ``time_breakdown`` holds what this call paid of each part).
+    ``setup_paid`` -- or, where a reducer has none, ``time_breakdown`` -- holds what this
+    call paid of each part). A reducer whose reusable pieces are many (so-h2's BT levels and
+    surrogate models) keeps a :class:`SetupLedger`: each piece's cost when it was made,
+    and which pieces a call used and made.
 
 :func:`standalone_time` and :func:`standalone_lu_count` give the cost of reducing to
 this r alone, on a fresh reducer and a fresh model: the one definition the studies
@@ -38,7 +41,7 @@ import numpy as np
 
 from ..errors import MorsuiteError
 
-__all__ = ["STATUS", "CONVERGED_STATUSES", "check_outcome", "complete_outcome", "standalone_time",
+__all__ = ["STATUS", "CONVERGED_STATUSES", "SetupLedger", "check_outcome", "complete_outcome", "standalone_time",
            "standalone_lu_count"]
 
 #: The values of ``info["status"]`` and what each means.
@@ -148,9 +151,9 @@ def standalone_time(info: dict, wall: float | None = None) -> float:
 
     with :math:`t` = ``info["time_s"]`` (``wall`` when the record has no ``time_s``) and
     :math:`k` over the parts of the r-independent work (``setup_cost``: Gramian factors,
-    their SVD, a projector); the subtraction leaves out what this call paid of a part
-    itself (``time_breakdown``; e.g. a reused reducer that computes the SVD of a new
-    level), so nothing is counted twice. Without ``setup_reused`` it is :math:`t`.
+    their SVD, a projector, so-h2's BT levels and surrogate models); the subtraction leaves
+    out what this call paid of a part itself (``setup_paid``, else ``time_breakdown``; e.g. a
+    reused reducer that computes the SVD of a new level), so nothing is counted twice. Without ``setup_reused`` it is :math:`t`.
 
     Parameters
     ----------
@@ -167,7 +170,7 @@ def standalone_time(info: dict, wall: float | None = None) -> float:
     t = _number(info.get("time_s", wall))
     if not info.get("setup_reused"):
         return t
-    paid = info.get("time_breakdown") or {}
+    paid = info.get("setup_paid") or info.get("time_breakdown") or {}
     for key, cost in (info.get("setup_cost") or {}).items():
         t += max(0.0, _number(cost) - _number(paid.get(key, 0.0)))
     return t
@@ -194,3 +197,41 @@ def standalone_lu_count(info: dict) -> int:
     if info.get("setup_reused"):
         lus += int(info.get("lu_count_shared", info.get("lu_count_gramians")) or 0)
     return lus
+
+
+class SetupLedger:
+    """The r-independent pieces a reducer made once and reuses across calls: cost, use, making.
+
+    A reducer calls :meth:`begin` at the start of each ``reduce``, :meth:`made` when it
+    makes a piece (with the seconds it took) and :meth:`used` whenever a call relies on
+    one (made now or earlier). :meth:`parts` then gives, for a group of pieces, the two
+    numbers :func:`standalone_time` needs: the cost of every piece this call used (what a
+    fresh reducer would pay for them) and of those it made itself (what it paid).
+    Plain data; cost O(1) per record.
+    """
+
+    def __init__(self):
+        self.cost: dict = {}
+        self._used: set = set()
+        self._made: set = set()
+
+    def begin(self):
+        """Start a call: forget which pieces the previous call used and made."""
+        self._used, self._made = set(), set()
+
+    def made(self, key, seconds: float):
+        """Record that this call made piece ``key`` in ``seconds`` (and so uses it)."""
+        self.cost[key] = float(seconds)
+        self._made.add(key)
+        self._used.add(key)
+
+    def used(self, key):
+        """Record that this call relies on piece ``key`` (made before or now)."""
+        self._used.add(key)
+
+    def parts(self, group) -> tuple[float, float]:
+        """``(cost of the used pieces, cost of the pieces made by this call)`` over keys whose first
+        element is ``group``."""
+        used = [k for k in self._used if k[0] == group]
+        return (float(sum(self.cost[k] for k in used)),
+                float(sum(self.cost[k] for k in used if k in self._made)))

@@ -45,7 +45,10 @@ form beside it as ``relative_gradient_pole_residue``),
 ``polish`` (option ``cluster_polish``: the closer surrogate's states, errors before and after, iterations),
 ``relative_gradient_full``; lbfgs: ``gradient_norm``; ``lu_count`` (made by this call) with
 ``lu_breakdown`` (gramians, irka, exact) and ``lu_count_gramians``, ``time_breakdown``,
-``setup_reused``, ``setup_cost``.
+``setup_reused``, ``setup_cost`` and ``setup_paid`` (by part: ``adi``, ``bt_products``, ``bt_svd``,
+``surrogates``, ``full_target``; a reducer reused across r pays each once, and
+:func:`~morsuite.reducers.outcome.standalone_time` adds back what this call relied on but did
+not pay).
 
 Options: :attr:`SOH2.OPTIONS` (defaults recorded in ``info["options"]``). Cost: the Gramian
 factors (shared with ``bt`` through the model's cache), one dense SVD per BT level and one for
@@ -71,6 +74,7 @@ from .base import Option, Reducer, register
 from .h2_decision import decision_h2
 from .so_h2_params import PARAMETRISATIONS
 from .so_h2_siso import pole_phase
+from .outcome import SetupLedger
 from .so_h2_starts import LEVELS, STARTS, Surrogates, candidate_roms, standard_realization
 
 __all__ = ["SOH2"]
@@ -150,6 +154,7 @@ class SOH2(Reducer):
         super().__init__(fom, **options)
         self._surrogates = None
         self._full = None
+        self._ledger = SetupLedger()  # r-independent pieces (surrogate models, the full target) and their cost
         self._adi_charged = set()  # ids of the Gramian records already charged to a call (reuse across r)
 
     def _check_options(self):
@@ -178,8 +183,11 @@ class SOH2(Reducer):
 
     def _full_target(self, adi):
         if self._full is None:
+            t0 = time.perf_counter()
             n2, f2, rec, _ = norm_squared(self.fom, adi)
             self._full = FullTarget(self.fom, n2, f2)
+            self._ledger.made(("full_target",), time.perf_counter() - t0)
+        self._ledger.used(("full_target",))
         return self._full
 
     def _objective(self, target, param, counter):
@@ -228,7 +236,7 @@ class SOH2(Reducer):
             raise InputError(f"so-h2: no stable candidate start at r = {r} "
                              "(" + ", ".join(f"{k}: {v.get('dropped')}" for k, v in cands.items()) + ")")
         if self._surrogates is None:
-            self._surrogates = Surrogates(bt)
+            self._surrogates = Surrogates(bt, self._ledger)
         self._full_target(adi)  # the full model as target (made once; later steps and LU counts use it)
         sur, srec = self._surrogates.choose(r, roms, o["surrogate_tol"], o["surrogate_states"])
         unresolved = False
@@ -300,6 +308,28 @@ class SOH2(Reducer):
         rec["evaluations"] += cnt["evaluations"]
         return res.x, res.best, rec
 
+    def _setup_parts(self, gram, gram_fresh, adi_fresh, svd_before):
+        """(setup_cost, setup_paid): what a fresh reducer pays for the r-independent work this call
+        relied on, by part, and what this call paid of it (:func:`~morsuite.reducers.outcome.standalone_time`).
+
+        Parts: ``adi`` (the Gramian factors), ``bt_products`` (the factor products), ``bt_svd`` (the
+        SVDs of the BT levels and of the first-order surrogate source), ``surrogates`` (the first-order
+        surrogate models and their distances, :class:`~.so_h2_starts.Surrogates`) and ``full_target``.
+        """
+        svd_keys = set(self._labels()) - {"irka"} | {"fo"}
+        svd_times = gram["svd_times"]
+        used = [k for k in svd_keys if k in svd_times]
+        sur_cost, sur_paid = self._ledger.parts("surrogates")
+        full_cost, full_paid = self._ledger.parts("full_target")
+        cost = {"adi": gram["times"]["adi"], "bt_products": gram["times"]["products"],
+                "bt_svd": float(sum(svd_times[k] for k in used)), "surrogates": sur_cost,
+                "full_target": full_cost}
+        paid = {"adi": gram["times"]["adi"] if adi_fresh else 0.0,
+                "bt_products": gram["times"]["products"] if gram_fresh else 0.0,
+                "bt_svd": float(sum(svd_times[k] for k in used if k not in svd_before)),
+                "surrogates": sur_paid, "full_target": full_paid}
+        return cost, paid
+
     def _descent(self):
         o, fom = self.options, self.fom
         if o["descent"] != "auto":
@@ -313,12 +343,17 @@ class SOH2(Reducer):
         param_cls = PARAMETRISATIONS[o["parametrization"]]
         lu0 = self._full.lu_count if self._full is not None else 0
         self._decision_lus = {"lu": 0}  # LUs of the H2 evaluator's decisions (h2_decision.decision_h2)
+        self._ledger.begin()
+        bt0 = None if self._surrogates is None else self._surrogates.bt
+        svd_before = set(bt0._gram["svd_times"]) if bt0 is not None and bt0._gram is not None else set()
         start, roms, order, (e0, f0, _), resolved, cands, sur, srec, gram = self._start(r, adi, param_cls)
         start_rom = roms[start]
         # paid by this call only when the factors were computed for this reducer and not charged before
         # (a reducer reused across r pays them once; later calls report them as reused setup)
-        adi_fresh = bool(gram.get("adi_computed")) and id(gram) not in self._adi_charged
+        gram_fresh = id(gram) not in self._adi_charged
+        adi_fresh = bool(gram.get("adi_computed")) and gram_fresh
         self._adi_charged.add(id(gram))
+        setup_cost, setup_paid = self._setup_parts(gram, gram_fresh, adi_fresh, svd_before)
         t_ranked = time.perf_counter()
         param = param_cls(start_rom.order, fom.m, fom.p)
         theta0 = param.from_rom(start_rom)
@@ -386,7 +421,8 @@ class SOH2(Reducer):
             "time_breakdown": {"adi": gram["times"]["adi"] if adi_fresh else 0.0,
                                "starts_and_ranking": t_ranked - t0, "descent": t_desc - t_ranked,
                                "certificate": time.perf_counter() - t_desc},
-            "setup_reused": not adi_fresh, "setup_cost": {"adi": gram["times"]["adi"]},
+            "setup_cost": setup_cost, "setup_paid": setup_paid,
+            "setup_reused": any(setup_cost[k] > setup_paid[k] for k in setup_cost),
         }
         if skipped:
             self.warn(f"so-h2: {skipped}", AccuracyWarning)

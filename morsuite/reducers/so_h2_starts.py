@@ -29,6 +29,7 @@ from ..errors import ConvergenceWarning, RankWarning, StabilityWarning
 from ..linalg.h2 import modal_form
 from ..linalg.h2_gradient import ModalTarget, h2_value, second_order_realization
 from .base import make
+from .outcome import SetupLedger
 
 __all__ = ["LEVELS", "STARTS", "candidate_roms", "Surrogates", "standard_realization"]
 
@@ -82,8 +83,9 @@ class Surrogates:
     Kept on the ``so-h2`` reducer: a sweep over r reuses them.
     """
 
-    def __init__(self, bt):
+    def __init__(self, bt, ledger=None):
         self.bt = bt
+        self.ledger = ledger if ledger is not None else SetupLedger()  # cost of each model, made once
         self._targets = {}      # N (order asked) -> (ModalTarget, order returned)
         self._distance = {}     # N -> ||T_2N - T_N||
 
@@ -92,11 +94,14 @@ class Surrogates:
         Gramians' rank), made once and kept."""
         n = min(int(n), self.bt.max_order())
         if n not in self._targets:
+            t0 = time.perf_counter()
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RankWarning)  # capped: the order returned says so
                 rom = self.bt.reduce(int(n)).rom
             md = modal_form(rom.E, rom.A, rom.B, rom.C, rom.D)
             self._targets[n] = (ModalTarget(md.poles, md.B, md.C), rom, md.kappa)
+            self.ledger.made(("surrogates", "target", n), time.perf_counter() - t0)
+        self.ledger.used(("surrogates", "target", n))
         return self._targets[n]
 
     def distance(self, n):
@@ -105,11 +110,16 @@ class Surrogates:
         if n not in self._distance:
             big, rom2, _ = self.target(2 * n)
             _, rom, _ = self.target(n)
+            t0 = time.perf_counter()
             if rom.order >= rom2.order:
                 self._distance[n] = None
             else:
                 ev = h2_value(big, rom.A, rom.B, rom.C)
                 self._distance[n] = float(np.sqrt(max(ev.value, 0.0))) if ev.stable else np.inf
+            self.ledger.made(("surrogates", "distance", n), time.perf_counter() - t0)
+        else:
+            self.target(2 * n), self.target(n)  # relied on: their cost counts for this call too
+        self.ledger.used(("surrogates", "distance", n))
         return self._distance[n]
 
     def choose(self, r, candidates, tol, states=None):
