@@ -321,3 +321,20 @@ def test_without_h2_tracking_the_certificate_still_decides(tcom20):
     assert info["certificate"]["residual"] is not None
     assert not tcom20.cache  # no Gramian factors were computed
 
+
+
+def test_statuses_are_the_engines():
+    """irka-fo keeps the IRKA engine's status (reducers.outcome.STATUS): ``cap`` at maxit, ``uncertified``
+    where the engine's fixed-point test held and the certificate failed (certificate_tol below the
+    fixed point's residual), ``cycle`` on a detected cycle; never ``stalled``, which it once wrote
+    over the last two."""
+    fom = ms.models.parse(MIMO)
+    early = _reduce(fom, 6, strategy="plain", maxit=3).info
+    assert not early["engine_converged"] and not early["cycle_detected"] and early["status"] == "cap"
+    strict = _reduce(fom, 6, strategy="plain", maxit=100, certificate_tol=1e-15).info
+    assert strict["engine_converged"] and strict["certificate"]["residual"] > 1e-15
+    assert not strict["converged"] and strict["status"] == "uncertified"
+    plain = _reduce(ms.models.parse("tcom:nc=20"), 14, strategy="plain", maxit=60).info
+    assert not plain["converged"]
+    assert plain["status"] == ("cycle" if plain["cycle_detected"] else
+                               "uncertified" if plain["engine_converged"] else "cap")
