@@ -250,3 +250,26 @@ def test_hinf_search_does_not_depend_on_the_models_memo():
     assert v == v0 and d["samples"] == d0["samples"] and d["peak_frequency"] == d0["peak_frequency"]
     assert d["refinements"] == d0["refinements"]
     assert d["lu_count"] < d0["lu_count"] == d0["samples"]
+
+
+def test_details_always_carry_both_bounds():
+    """``details`` has ``lower_bound``, ``upper_bound`` and ``certified`` on every path: a certified value
+    (the dense peak between them), no certificate asked (certify_dim = 0: upper_bound None), an
+    unstable reduced model (both infinite), a feedthrough (finite), and the model's own norm."""
+    fom = ms.models.dsms(g=40)
+    rom = reduce(fom, "bt", 4)
+    value, d = ms.analysis.hinf_error(fom, rom, details=True)  # the enclosure: test_bounds_enclose_the_dense_peak
+    assert d["certified"] is True and d["lower_bound"] == value <= d["upper_bound"]
+    value, d = ms.analysis.hinf_error(fom, rom, certify_dim=0, details=True)
+    assert {"lower_bound", "upper_bound", "certified"} <= set(d)
+    assert d["upper_bound"] is None and d["certified"] is False and d["lower_bound"] == value
+    unstable = ms.rom.SecondOrderROM(np.eye(2), -0.1 * np.eye(2), np.eye(2), np.ones((2, 1)), np.ones((3, 2)))
+    with pytest.warns(ms.StabilityWarning, match="unstable"):
+        value, d = ms.analysis.hinf_error(fom, unstable, details=True)
+    assert value == d["lower_bound"] == d["upper_bound"] == np.inf and d["certified"] is True
+    feed = ms.rom.FirstOrderROM(None, -np.eye(1), np.ones((1, 1)), np.ones((3, 1)), np.ones((3, 1)))
+    value, d = ms.analysis.hinf_error(fom, feed, details=True)
+    assert np.isfinite(value) and "upper_bound" in d and d["lower_bound"] == value
+    for kw in ({}, {"certify_dim": 0}):
+        value, d = ms.analysis.hinf_norm(fom, details=True, **kw)
+        assert "upper_bound" in d and (d["upper_bound"] is None) == (not d["certified"])
