@@ -46,7 +46,9 @@ BAND_NOTE = ("max_abs_error and max_rel_error are band quantities: the maximum o
              "sigma_max(T)) on the frequencies of the grid named in the grid column.")
 NORM_NOTE = ("h2_error is the exact H2 norm of T - T_r over the whole "
              "axis (h2_rel_error: divided by ||T||_H2); h2_trusted = False marks a value whose estimated accuracy "
-             "is worse than four digits (never to be read as exact). hinf_error is the peak of sigma_max(T - T_r) "
+             "is worse than four digits (never to be read as exact); the estimate (the H2 floor) is validated "
+             "against long-double references, not a proved bound (docs/design/norms.md). "
+             "hinf_error is the peak of sigma_max(T - T_r) "
              "over the whole axis that the search found: a lower bound of the Hinf norm, exact at that peak "
              "(hinf_rel_error: divided by the peak of sigma_max(T) found, a ratio of two peaks found: neither a bound "
              "nor certified). hinf_upper_bound is "
