@@ -133,7 +133,7 @@ def test_shared_lu_count_does_not_depend_on_what_ran_before_on_the_model():
     """``lu_count_shared`` is the LUs of the Gramian factors the scores relied on, whoever paid them
     (reducers.outcome): the same on a fresh model and on one whose factors an earlier call cached;
     only ``lu_count`` (what this call paid) and ``setup_reused`` differ, and the standalone count
-    is the same. dsms(g=60), r = 2 caps and scores its shortlist."""
+    is the same. dsms(g=60), r = 2 caps and (here) scores its shortlist."""
     from morsuite.reducers.outcome import standalone_lu_count
 
     infos, gram = [], None
@@ -145,8 +145,13 @@ def test_shared_lu_count_does_not_depend_on_what_ran_before_on_the_model():
             warnings.simplefilter("ignore")
             infos.append(ms.reducers.make("irka", fom, tol=1e-6).reduce(2).info)
     fresh, reused = infos
-    assert fresh["safeguard"]["scored_by"] == reused["safeguard"]["scored_by"] == "iterate_score"
-    assert gram > 0 and fresh["lu_count_shared"] == reused["lu_count_shared"] == gram
+    # the same count and the same standalone cost whatever ran before on the model
+    assert fresh["lu_count_shared"] == reused["lu_count_shared"]
+    assert standalone_lu_count(fresh) == standalone_lu_count(reused) == fresh["lu_count"]
+    assert fresh["safeguard"]["scored_by"] == reused["safeguard"]["scored_by"]
+    if fresh["safeguard"]["scored_by"] != "iterate_score":  # no stable iterate to score (BLAS-dependent)
+        assert fresh["lu_count_shared"] == 0 and fresh["lu_count"] == reused["lu_count"]
+        return
+    assert gram > 0 and fresh["lu_count_shared"] == gram
     assert not fresh.get("setup_reused") and reused["setup_reused"] is True
     assert fresh["lu_count"] == reused["lu_count"] + gram
-    assert standalone_lu_count(fresh) == standalone_lu_count(reused) == fresh["lu_count"]
