@@ -22,6 +22,16 @@ from morsuite.linalg.dense import match_sets
 EPS = np.finfo(float).eps
 
 
+def rounding_unit(n) -> float:
+    """The rounding level of a product or orthogonalization over n terms: 10 sqrt(n) eps.
+
+    Tolerances at the rounding level are this unit times the problem's scale and condition
+    number (e.g. ``rounding_unit(n) * kappa ** 2`` for a Cholesky-QR span, ``rounding_unit(n)``
+    for the orthogonality of a reorthogonalized basis), never a fixed 1e-14: the last bits
+    differ between BLAS kernels and thread counts."""
+    return 10.0 * np.sqrt(n) * EPS
+
+
 def assert_sets_close(actual, desired, rtol=0.0, atol=0.0, what="values"):
     r"""Assert that two sets agree after an optimal one-to-one matching.
 

@@ -213,6 +213,9 @@ def test_plain_iteration_cycles_where_the_surrogate_strategy_converges():
         warnings.simplefilter("always")
         plain = ms.reducers.make("irka-fo", fom, strategy="plain", maxit=60).reduce(14)
     assert not plain.info["converged"]
+    # the engine's status, kept (test_statuses_are_the_engines)
+    assert plain.info["status"] == ("cycle" if plain.info["cycle_detected"] else
+                                    "uncertified" if plain.info["engine_converged"] else "cap")
     assert any(issubclass(w.category, ConvergenceWarning) for w in caught)
     assert plain.rom.is_stable()
     # the returned iterate is the one of smallest exact H2 error among those tracked
@@ -221,7 +224,7 @@ def test_plain_iteration_cycles_where_the_surrogate_strategy_converges():
     assert plain.info["h2_error"] <= plain.info["start"]["h2_error"]
     sur = _reduce(fom, 14)
     info = sur.info
-    assert info["converged"] and info["returned_is_last"]
+    assert info["converged"] and info["returned_is_last"] and info["status"] == "converged"
     assert info["surrogate"]["relaxed_from"] is not None  # the surrogate's plain iteration did not converge
     assert info["certificate"]["residual"] <= info["certificate"]["tol"]
     # a few full-model iterations only
@@ -321,3 +324,20 @@ def test_without_h2_tracking_the_certificate_still_decides(tcom20):
     assert info["certificate"]["residual"] is not None
     assert not tcom20.cache  # no Gramian factors were computed
 
+
+
+def test_statuses_are_the_engines():
+    """irka-fo keeps the IRKA engine's status (reducers.outcome.STATUS): ``cap`` at maxit, ``uncertified``
+    where the engine's fixed-point test held and the certificate failed (certificate_tol below the
+    fixed point's residual), ``cycle`` on a detected cycle; never ``stalled``, which it once wrote
+    over the last two."""
+    early = _reduce(ms.models.parse(MIMO), 6, strategy="plain", maxit=3).info
+    assert not early["engine_converged"] and not early["cycle_detected"] and early["status"] == "cap"
+    tcom = ms.models.parse("tcom:nc=20")
+    # the surrogate strategy's fixed point at r = 14 (converged and certified at the default tolerance:
+    # test_plain_iteration_cycles_where_the_surrogate_strategy_converges), held to a certificate_tol
+    # below its residual
+    strict = _reduce(tcom, 14, certificate_tol=1e-15).info
+    assert strict["engine_converged"] and strict["certificate"]["residual"] > 1e-15
+    assert not strict["converged"] and strict["status"] == "uncertified"
+    # cycle: test_plain_iteration_cycles_where_the_surrogate_strategy_converges

@@ -127,3 +127,31 @@ def test_measure_ranking_costs_nothing_and_unstable_iterates_score_infinity(monk
 def test_bad_shortlist_score_is_refused():
     with pytest.raises(ms.OptionError, match="shortlist_score"):
         ms.reducers.make("irka", ms.models.dsms(50), shortlist_score="hinf")
+
+
+def test_shared_lu_count_does_not_depend_on_what_ran_before_on_the_model():
+    """``lu_count_shared`` is the LUs of the Gramian factors the scores relied on, whoever paid them
+    (reducers.outcome): the same on a fresh model and on one whose factors an earlier call cached;
+    only ``lu_count`` (what this call paid) and ``setup_reused`` differ, and the standalone count
+    is the same. dsms(g=60), r = 2 caps and (here) scores its shortlist."""
+    from morsuite.reducers.outcome import standalone_lu_count
+
+    infos, gram = [], None
+    for cached in (False, True):
+        fom = ms.models.dsms(g=60)
+        if cached:
+            gram = ms.linalg.gramians.gramian_factors(fom).lu_count  # an earlier call's work
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            infos.append(ms.reducers.make("irka", fom, tol=1e-6).reduce(2).info)
+    fresh, reused = infos
+    # the same count and the same standalone cost whatever ran before on the model
+    assert fresh["lu_count_shared"] == reused["lu_count_shared"]
+    assert standalone_lu_count(fresh) == standalone_lu_count(reused) == fresh["lu_count"]
+    assert fresh["safeguard"]["scored_by"] == reused["safeguard"]["scored_by"]
+    if fresh["safeguard"]["scored_by"] != "iterate_score":  # no stable iterate to score (BLAS-dependent)
+        assert fresh["lu_count_shared"] == 0 and fresh["lu_count"] == reused["lu_count"]
+        return
+    assert gram > 0 and fresh["lu_count_shared"] == gram
+    assert not fresh.get("setup_reused") and reused["setup_reused"] is True
+    assert fresh["lu_count"] == reused["lu_count"] + gram

@@ -107,7 +107,8 @@ def test_page_shows_every_figure_and_the_summary_as_its_csv_says(results):
     summary = page.tables[1]               # tab, then the summary, then timings
     head = [c[0] for c in summary[0]]
     assert head == list(csv.columns)
-    for (_, row), cells in zip(csv.iterrows(), summary[1:]):
+    assert len(summary) - 1 == len(csv) > 0  # one HTML row per CSV row (zip below would hide a missing one)
+    for (_, row), cells in zip(csv.iterrows(), summary[1:], strict=True):
         got = dict(zip(head, cells))
         assert got["method"][0] == row.method
         h2 = got["h2_error"][0].lstrip("≈")
@@ -115,6 +116,8 @@ def test_page_shows_every_figure_and_the_summary_as_its_csv_says(results):
         # a lower bound (the peak found) is marked so; a certified value carries the certified mark
         cell = got["hinf_error"][0]
         assert cell.endswith("✓") if str(row.get("hinf_certified")) == "True" else cell.startswith("≥")
+        # the relative Hinf error is a ratio of two peaks found: no mark, whatever hinf_certified says
+        assert math.isclose(float(got["hinf_rel_error"][0]), row.hinf_rel_error, rel_tol=5e-4)
         assert got["converged"] == (("yes", "ok") if row.converged else ("no", "bad"))
     assert not csv[csv.method == "irka"].converged.iloc[0]                  # the planted flag is there
 
@@ -172,6 +175,11 @@ def test_cell_marks_planted_flags():
                                                         "title": "not accurate to four digits (h2_trusted = False)"}
     assert H.cell("hinf_error", 2.0, row)["text"] == "2 ✓"
     assert H.cell("hinf_error", 2.0, {})["text"] == "≥2"
+    # a mark only on the quantity it was established for: hinf_rel_error, a ratio of two peaks found,
+    # is neither a lower bound nor certified (certified or not); h2_trusted covers the relative error too
+    for r in (row, {"hinf_error": 2.0, "hinf_certified": False}):
+        assert H.cell("hinf_rel_error", 0.5, r) == {"text": "0.5", "cls": "num", "title": ""}
+    assert H.cell("h2_rel_error", 0.25, row)["text"] == "≈0.25"
     assert H.cell("h2_error", float("nan"), {})["cls"] == "na"
     assert H.cell("stable", False, {})["cls"] == "bad" and H.cell("growth", True, {})["cls"] == "bad"
     assert H.cell("status", "failed", {})["cls"] == "bad"

@@ -315,8 +315,9 @@ def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float
     -------
     float, or (float, dict)
         The largest peak found, a lower bound (``details``: ``lower_bound``,
-        ``upper_bound`` or None, ``certified``); ``inf`` with a
-        :class:`StabilityWarning` for an unstable reduced model.
+        ``upper_bound``, ``certified``, always present; ``upper_bound`` None where
+        no certificate was computed); ``inf`` with a :class:`StabilityWarning` for an
+        unstable reduced model (then both bounds ``inf``).
 
     Raises
     ------

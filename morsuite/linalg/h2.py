@@ -42,7 +42,8 @@ __all__ = ["Modal", "modal_form", "norm_squared", "pole_residue_squared", "EPS",
 
 EPS = np.finfo(float).eps
 #: relative forward error assumed for solves that were not refined (their error is not measured): the
-#: largest measured, 7.9e-12 (||T||^2 from unrefined LR-ADI solves on tcom(2000)), with margin
+#: largest measured, 7.9e-12 (||T||^2 from unrefined LR-ADI solves on tcom(2000)), with margin; a
+#: measured constant, so the floors that use it are estimates validated on those models, not bounds
 UNREFINED_UNIT = 1e-10
 
 
@@ -117,7 +118,9 @@ def norm_squared(fom, adi: dict):
     on the first call per model and options (``record["gramian_lu_count"]``),
     then products with the factors once, then nothing.
 
-    The floor adds three parts: the tail estimate's own error (the tail times
+    The floor is an estimate of the error, validated against long-double
+    quadratures, not a proved bound (``docs/design/norms.md``); it adds three
+    measured parts with margins: the tail estimate's own error (the tail times
     the observability residual, factor 10), the rounding of the factor
     (:math:`2\varepsilon\sqrt{\mathrm{rank}}`, measured 2e-16 to 7e-16 relative),
     and the forward error of the shifted solves, :math:`2u` relative with
@@ -142,7 +145,7 @@ def norm_squared(fom, adi: dict):
     value = raw + tail
     # the tail estimate misses about tail * (observability residual); the factor's rounding, measured
     # against long-double quadratures of |T(jw)|^2 (dsms(60), random MIMO models: 2e-16 .. 7e-16 relative,
-    # factor ranks 28 .. 258), is bounded with margin by 2 eps sqrt(rank)
+    # factor ranks 28 .. 258), is estimated with margin by 2 eps sqrt(rank) (measured, not proved)
     unit = c.solve_error if c.refine else UNREFINED_UNIT
     floor = 10.0 * tail * max(o.residual, EPS) + 2.0 * EPS * np.sqrt(max(c.rank, 1)) * value + 2.0 * unit * value
     if not gf.converged:

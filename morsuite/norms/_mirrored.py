@@ -7,7 +7,7 @@ sides: :math:`Fb_k` (the pole-residue cross term :math:`\langle T, T_r\rangle`) 
 unrefined error could matter: where the caller gives a ``budget`` (the absolute error of
 :math:`\|T - T_r\|^2` that the unrefined solves may add, a hundredth of ``rtol`` times
 the square in :func:`~morsuite.norms.h2.h2_error`), a solve whose contribution to
-:math:`t_2`, bounded with :data:`~morsuite.linalg.h2.UNREFINED_UNIT`, fits its share
+:math:`t_2`, estimated with :data:`~morsuite.linalg.h2.UNREFINED_UNIT` (a measured unit), fits its share
 of it is not refined. The refinement's long-double residual cost about 1.5 times the
 LU and its solve on tcom(2000) (``docs/design/norms.md``, "Cost", 2026-11-26); the
 pole-residue value of unrefined solves keeps the unrefined unit in its floor, so that

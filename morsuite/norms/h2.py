@@ -71,9 +71,16 @@ For a stable, strictly proper, real :math:`H`,
         returned, and two routes that disagree beyond their floors make it
         untrusted.
 
-Every value carries a floor (``details["floor"]``), a bound of its error, not
-an estimate of it (``docs/design/norms.md`` has the measurements behind each
-term). A value whose floor is worse than both ``TRUST_FACTOR * rtol`` and
+Every value carries a floor (``details["floor"]``): an estimate of its error with a
+margin, validated against long-double references, not a proved bound. Some terms are
+bounds (a quadrature's resolved error, Cauchy-Schwarz on the tail cross term); others
+are measured constants with a margin: the Gramian tail's error ``10 * tail *
+residual``, the factor's rounding :math:`2\varepsilon\sqrt{\mathrm{rank}}`, the
+unrefined solves' :data:`~morsuite.linalg.h2.UNREFINED_UNIT`. Every floor measured
+against long-double quadratures (tcom and dsms models, random MIMO models:
+``docs/design/norms.md``, ``tests/test_h2_floor.py``,
+``tests/test_h2_floor_sharpness.py``) was above its error. ``trusted`` keeps its meaning: the value
+is within its stated floor, and a value whose floor is worse than both ``TRUST_FACTOR * rtol`` and
 ``TRUST_REL`` (four significant digits) relative is flagged: an
 :class:`~morsuite.errors.AccuracyWarning` and ``details["trusted"] = False``;
 ``details["rtol_met"]`` says whether ``rtol`` itself was reached. A quadrature
@@ -264,7 +271,7 @@ def _rel(e2, floor2):
 
 def h2_error(fom, rom, *, method: str = "auto", rtol: float = 1e-8, max_nodes: int = 1500, refine: int = 1,
              adi=None, details: bool = False):
-    r"""Exact :math:`\|T - T_r\|_{\mathcal H_2}` of a reduced model, with a floor that bounds its error.
+    r"""Exact :math:`\|T - T_r\|_{\mathcal H_2}` of a reduced model, with a floor that estimates its error.
 
     The one H2 evaluator of the suite: the studies, the CLI and the reducers'
     own choices (best iterate, never worse than the start) all call it.
@@ -300,9 +307,10 @@ def h2_error(fom, rom, *, method: str = "auto", rtol: float = 1e-8, max_nodes: i
         Also return a dict: ``method`` (route used), ``lu_count`` (sparse LUs
         made by this call, LR-ADI included when it ran), ``lu_shifts`` (the
         shifts of the LUs of the routes, LR-ADI's not included), ``floor`` /
-        ``rel_floor`` (a bound of the absolute / relative error of the value),
-        ``trusted`` (the floor is within ``max(TRUST_FACTOR * rtol, TRUST_REL)``
-        relative and no two routes disagree), ``rtol_met``, ``squared`` (the
+        ``rel_floor`` (the estimated absolute / relative error of the value,
+        validated against long-double references: module docstring),
+        ``trusted`` (the floor, the value's stated accuracy, is within
+        ``max(TRUST_FACTOR * rtol, TRUST_REL)`` relative and no two routes disagree), ``rtol_met``, ``squared`` (the
         squared error as computed, before the square root), ``negative``
         (True when the computed square was negative: the value is then 0 and
         untrusted), ``nodes``, ``norm`` (:math:`\|T\|_{\mathcal H_2}`), and the

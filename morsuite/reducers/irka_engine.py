@@ -458,8 +458,15 @@ class IRKABase(Reducer):
         info["safeguard"] = {**guard.info(), "active": guard.active,
                              "scored_by": "iterate_score" if chosen[2] else "measure",
                              "scores": {str(i): v for i, v in chosen[2].items()}, **score_cost(score)}
-        info["lu_count"] += info["safeguard"]["score_lu_count"] + info["safeguard"]["score_gramian_lu_count"]
-        info.setdefault("lu_count_shared", info["safeguard"]["score_gramian_lu_count"])  # r-independent factors
+        sg = info["safeguard"]
+        info["lu_count"] += sg["score_lu_count"] + sg["score_gramian_lu_count"]
+        if "lu_count_shared" not in info:  # a variant may overrule
+            # the scores' r-independent Gramian factors, whoever paid them (reducers.outcome): the same
+            # count whatever ran before on the model; a call that found them cached reused them
+            info["lu_count_shared"] = sg["score_gramian_lu_relied"]
+            if sg["score_gramian_lu_relied"] and not sg["score_gramian_lu_count"]:
+                info["setup_reused"] = True
+                info["setup_cost"] = {"score_gramians": sg["score_gramian_time_relied"]}
         info.setdefault("status", "converged" if info["converged"] else "cycle" if cycled  # a variant may overrule
                         else "uncertified" if converged else "cap")
         return rom, info

@@ -79,7 +79,8 @@ within the values' accuracy, or within ``H2_TIE`` relative, go to the later one)
 Options: :attr:`IRKAFO.OPTIONS` (those of ``irka`` plus the ones above). Cost: the Gramian
 factors once per model (the start; ``info["lu_count_shared"]``, in ``lu_count`` when paid by this call),
 one sparse LU per real shift or conjugate pair per full-model iteration plus the certification round
-(``info["lu_count_own"]``); ``info["status"]``: converged, cap or stalled. Surrogate: its BT projection
+(``info["lu_count_own"]``); ``info["status"]``: the engine's converged, cap, cycle or uncertified (a fixed
+point whose certificate failed). Surrogate: its BT projection
 (:math:`O(n_1\,\mathrm{rank}\,N)`, cached with headroom across r: ``time_breakdown["surrogate_projection"]``,
 part of ``setup_cost``), :math:`O(Nr^2 + r^3)` per step, about the same per Newton step (closed-form
 Jacobian, :mod:`.irka_jacobian`; forward differences, :math:`r(m+p)` steps' worth, where it does not apply).
@@ -446,8 +447,8 @@ class IRKAFO(SurrogatePhase, IRKA):
         self._shared_lus = shared = int(self._start.get("lu_count_gramians", 0)) or getattr(self, "_shared_lus", 0)
         info.update(lu_count=own + paid, lu_count_own=own, lu_count_start=paid, lu_count_shared=shared,
                     setup_reused=paid == 0)
-        info["status"] = ("converged" if info["converged"] else "stalled"
-                          if info["engine_converged"] or info.get("cycle_detected") else "cap")
+        # info["status"] is the engine's (irka_engine): converged, cycle, uncertified (its fixed-point test
+        # held, the certificate failed) or cap; never overwritten here
         return rom, info
 
 

@@ -21,7 +21,7 @@ import warnings
 import numpy as np
 
 from ..errors import AccuracyWarning
-from ..linalg.gramians import ADI_DEFAULTS
+from ..linalg.gramians import ADI_DEFAULTS, cached_gramian_factors
 from ..norms.h2 import h2_error
 
 __all__ = ["ExactH2Score", "iterate_scorer", "score_cost"]
@@ -50,6 +50,9 @@ class ExactH2Score:
         Sparse LUs of the evaluations made so far (their solves at mirrored poles).
     gramian_lu_count : int
         LR-ADI LUs of the Gramian factors made by this scorer (0 when they were cached).
+    gramian_lu_relied, gramian_time_relied : int, float
+        LUs and seconds of the Gramian factors the scores relied on, whoever paid them (this
+        scorer or the model's cache): the same whatever ran before on the model (0 before any score).
     records : list of dict
         One per call: ``score`` (the H2 error), ``floor`` (its absolute error bound),
         ``h2_error``, ``trusted``, ``route``, ``lu_count``.
@@ -59,6 +62,7 @@ class ExactH2Score:
         self.norm, self.adi = norm, dict(ADI_DEFAULTS if adi is None else adi)
         self.lu_count = 0
         self.gramian_lu_count = 0
+        self.gramian_lu_relied, self.gramian_time_relied = 0, 0.0
         self.records = []
 
     def __call__(self, fom, rom) -> float:
@@ -71,6 +75,9 @@ class ExactH2Score:
             value, d = h2_error(fom, rom, adi=self.adi, details=True)
         gram = int(d.get("gramian", {}).get("gramian_lu_count", 0))
         self.gramian_lu_count += gram
+        gf = cached_gramian_factors(fom, **self.adi)  # the factors the value came from (cached by now)
+        if gf is not None:
+            self.gramian_lu_relied, self.gramian_time_relied = int(gf.lu_count), float(gf.time_s)
         self.lu_count += int(d["lu_count"]) - gram
         self.records.append({"score": float(value), "floor": float(d["floor"]), "h2_error": float(value),
                              "trusted": bool(d["trusted"]), "route": d["method"],
@@ -91,4 +98,6 @@ def score_cost(score) -> dict:
     """The LUs a scorer made (0 for a scorer that does not count them), for ``info["safeguard"]``."""
     return {"score_lu_count": int(getattr(score, "lu_count", 0)),
             "score_gramian_lu_count": int(getattr(score, "gramian_lu_count", 0)),
+            "score_gramian_lu_relied": int(getattr(score, "gramian_lu_relied", 0)),
+            "score_gramian_time_relied": float(getattr(score, "gramian_time_relied", 0.0)),
             "score_records": list(getattr(score, "records", []))}

@@ -11,7 +11,9 @@ Table cells carry the flags of the numbers they show, visibly (a phone has no ho
 
 - ``≈`` before a norm whose ``KIND_trusted`` column is False (not accurate to four digits);
 - ``≥`` before an H-infinity error that is the peak found (a lower bound) unless a
-  ``hinf_certified`` column says True, and ``✓`` after a certified value;
+  ``hinf_certified`` column says True, and ``✓`` after a certified value; both only on
+  ``hinf_error``, the quantity the search and the certificate are about: ``hinf_rel_error``
+  (a ratio of two peaks found) is neither a bound nor certified and carries no mark;
 - ``converged``, ``stable``, ``*_trusted``, ``*_certified`` as ``yes`` / ``no`` (``no`` in
   red; ``growth`` and a ``status`` other than ``ok`` in red too); ``cached`` as ``cache``.
 
@@ -79,7 +81,8 @@ def cell(column: str, value, row: dict) -> dict:
         return {"text": str(value), "cls": "", "title": ""}
     text, cls, title = _number(value, column), "num", ""
     kind = column.split("_", 1)[0]
-    if column.endswith("_error") and kind in ("h2", "hinf"):
+    # h2_trusted covers the error and the norm (h2_rel_error too); the Hinf marks only hinf_error
+    if column in ("h2_error", "h2_rel_error", "hinf_error"):
         certified = row.get(f"{kind}_certified")
         if row.get(f"{kind}_trusted") is False:
             text, cls = "≈" + text, "num untrusted"

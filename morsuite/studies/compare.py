@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 from pathlib import Path
 
 from ..errors import InputError
@@ -271,7 +272,11 @@ def compare(model, states, methods=None, band=None, input=None, out="results", n
 
     The spec is validated in full before anything is written, so a refused argument leaves
     nothing behind. The TOML goes to ``out/NAME/NAME.toml`` (atomically; file paths in it
-    relative to it); if the run itself fails, a TOML this call created is removed again.
+    relative to it), where the run reads it (its manifest records the file). If the run
+    fails (any exception, ``KeyboardInterrupt`` too), nothing of this call stays: a TOML
+    that was there before is put back as it was (atomically), one this call created is
+    removed, and so are the study folder and ``out`` if this call created them. (A process
+    killed outright during the run leaves the new TOML in place.)
     """
     from .cache import Cache
     from .memo import SpecMemo
@@ -283,13 +288,18 @@ def compare(model, states, methods=None, band=None, input=None, out="results", n
     out = Path(out)
     folder = out / spec["name"]
     path = folder / f"{spec['name']}.toml"
-    existed = path.exists()
+    old = path.read_text() if path.is_file() else None
+    created = [d for d in (folder, out) if not d.exists()]  # the study folder first: it is inside out
     folder.mkdir(parents=True, exist_ok=True)
     atomic_write_text(path, to_toml(spec, relative_to=folder))
     try:
         result = run(load_spec(path, memo=SpecMemo(Cache(out / ".cache"))), out=out, quiet=quiet)
     except BaseException:
-        if not existed:
+        if old is not None:
+            atomic_write_text(path, old)
+        else:
             path.unlink(missing_ok=True)
+        for d in created:
+            shutil.rmtree(d, ignore_errors=True)
         raise
     return result, path
