@@ -1,34 +1,32 @@
 """Benchmark ``lu-backends``: the sparse LU backends against scipy's splu, their scaling, shift-parallel IRKA.
 
 Every ratio is measured side by side in one process, the variants interleaved
-(one of each per round, ``rounds`` rounds, the order rotated each round) and the medians
-compared, so that the load of a shared machine hits all alike. Parts:
+(one of each per round or shift, the order rotated each time) and the medians
+compared, so that the load of a shared machine hits all alike. Parts
+(``MORSUITE_LU_BENCH_PARTS``, comma-separated, runs some; default all):
 
-1. ``lu``: one LU plus one solve at a shift in the band, through the model's
-   solver (assembly, equilibration, factorization, solve with [F; 0], the
-   backward-error check) with the automatic backend and with every backend forced
-   (the optional KLU and PARDISO where installed), against
-   ``scipy.sparse.linalg.splu`` (COLAMD, threshold 0.1) of the assembled matrix plus
-   its solve (assembly not timed): DSMS and TCOM at n1 = 2e5 (target: auto / splu
-   <= 1/3); also the choice of a default install (no extras) over splu, and the banded
-   backend with LAPACK's kernels (``banded-lapack``, ``MORSUITE_BAND_KERNEL=lapack``) against
-   the compiled ones (``banded_kernel_gain``).
+1. ``lu``: one LU plus one solve per shift, at three shifts in the band
+   (:func:`band_shifts`), through the model's solver (pattern analysed before; assembly,
+   equilibration, factorization, solve with [F; 0], backward-error check timed) for every
+   installed backend (SuperLU, banded on narrow bands, KLU, rslab, PARDISO where installed),
+   against ``scipy.sparse.linalg.splu`` of the assembled matrix plus its solve (assembly not
+   timed; ``MMD_AT_PLUS_A`` on fem_block, ``COLAMD`` on the chains), one thread, medians over
+   the shifts, each variant's largest backward error: fem_block(4000, 20000) (target: auto /
+   splu <= 1/5 at 20000) and DSMS, TCOM at n1 = 2e5 (target <= 1/3.5); auto within 1.2x of the
+   fastest installed backend. On fem_block(20000) SuperLU and KLU run at the middle shift only.
 2. ``scaling``: the same automatic LU + solve, and one IRKA iteration (r = 10),
    at n1 = 2e4 and 2e5 on the DSMS, the two sizes interleaved: exponent
    log(t2 / t1) / log(10) (target 1.10).
-3. ``fem``: the 3D elastic block of ``models.fem_block`` (hexahedra, one face
-   clamped; n1 = 1e4 and 2e4): LU + solve with SuperLU and PARDISO (where
-   installed; KLU measured 3.5x slower than SuperLU there, banded far slower), the
-   automatic choice against the best available and against SuperLU (target 2x).
-4. ``parallel``: IRKA at n1 = 2e5 (DSMS, r = 10, fixed 3 iterations), solver_threads
+3. ``parallel``: IRKA at n1 = 2e5 (DSMS, r = 10, fixed 3 iterations), solver_threads
    2 against 1 (target t2 / t1 <= 1/1.6); and the LU + solve of 6 shifts alone on 2
    threads against 1 (what the threads can gain without IRKA's serial dense work).
-5. ``agree``: converged IRKA ROMs (r = 10) from every backend against SuperLU's, max
+4. ``agree``: converged IRKA ROMs (r = 10) from every backend against SuperLU's, max
    relative transfer-function difference on 200 frequencies (target 1e-8), on the
-   DSMS, the TCOM and a small FEM block.
+   DSMS and the TCOM; the full model's transfer function on a small FEM block.
 
-``quick``: n1 = 2e3 / 2e4, one round, small 3D grid; not judged. Writes
-``lu-backends.json`` (through :func:`morsuite.bench.run`); measurements quoted in
+The result records the date, the load (``uptime`` before and after) and the versions of
+SciPy, NumPy, rslab, nbklu and mkl. ``quick``: smaller models, one round; not judged.
+Writes ``lu-backends.json`` (through :func:`morsuite.bench.run`); measurements quoted in
 ``docs/design/backends.md``.
 """
 
