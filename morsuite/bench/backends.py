@@ -13,7 +13,8 @@ compared, so that the load of a shared machine hits all alike. Parts
    timed; ``MMD_AT_PLUS_A`` on fem_block, ``COLAMD`` on the chains), one thread, medians over
    the shifts, each variant's largest backward error: fem_block(4000, 20000) (target: auto /
    splu <= 1/5 at 20000) and DSMS, TCOM at n1 = 2e5 (target <= 1/3.5); auto within 1.2x of the
-   fastest installed backend. On fem_block(20000) SuperLU and KLU run at the middle shift only.
+   fastest installed backend. On fem_block(20000) SuperLU runs at the middle shift only, KLU not
+   at all (46-56 s per LU there in issue 33), nor the banded LU on the wide bands.
 2. ``scaling``: the same automatic LU + solve, and one IRKA iteration (r = 10),
    at n1 = 2e4 and 2e5 on the DSMS, the two sizes interleaved: exponent
    log(t2 / t1) / log(10) (target 1.10).
@@ -274,9 +275,11 @@ def bench_lu_backends(quick: bool) -> dict:
         # 1. one LU + solve per shift, every installed backend side by side with splu
         for spec, order in (LU_PATTERNS_QUICK if quick else LU_PATTERNS) if "lu" in parts else ():
             wide = spec.startswith("fem_block")
-            names = ("superlu", *(() if wide else ("banded",)), *installed)
-            # KLU on the large 3D solids (no supernodes: 46-56 s at fem_block(20000), issue 33): the middle shift
-            slow = ("klu", "superlu") if wide and int(spec.split("=")[1]) > 10000 else ()
+            large = wide and int(spec.split("=")[1]) > 10000
+            # not run: the banded LU on wide bands (n1 (kl + ku)^2 work), KLU on the large 3D solids (no
+            # supernodes: 46-56 s per LU at fem_block(20000) in issue 33, 9x SuperLU at fem_block(4000) here)
+            names = ("superlu", *(() if wide else ("banded",)), *(b for b in installed if not (large and b == "klu")))
+            slow = ("superlu",) if large else ()  # SuperLU (COLAMD) on the large 3D solids: the middle shift
             row = lu_side_by_side(spec, order, names, slow, echo=print)
             rows.append(row)
             print({k: (round(v, 4) if isinstance(v, float) else v) for k, v in row.items() if k.startswith("t_")})
