@@ -95,8 +95,8 @@ def default_threads(backend: str) -> int:
     0.48-0.64 with the banded LU (0.70-0.79 with their solves). BLAS runs single-threaded
     inside a reduction (``reducers.base.BLAS_THREADS``), so the threads do not compete
     with BLAS threads. More than 2 was not measured. KLU through nbklu holds the GIL for
-    its numeric factorization (measured 2026-11-27: a Python loop in another thread ran 1/20
-    of its iterations during the call; so did kvxopt's, the former KLU), so threads cannot
+    its numeric factorization (measured 2026-11-27: a Python loop in another thread ran about 1/70
+    of its iterations during the call; kvxopt, the former KLU, held it too), so threads cannot
     overlap its LUs. rslab's factorizations and PARDISO's calls (ctypes) release the GIL.
     """
     if backend == "klu":
