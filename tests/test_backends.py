@@ -238,6 +238,22 @@ def test_a_missing_library_is_reported_and_auto_does_without_it(dsms50, monkeypa
     assert a["backend"] == "superlu" and a["available"]["rslab"] is False and "SuperLU" in a["reason"]
 
 
+def test_auto_does_without_rslab_when_its_analysis_fails(monkeypatch):
+    """rslab installed but failing to analyse a pattern: "auto" records why and takes SuperLU,
+    forcing rslab raises an InputError."""
+    from morsuite.linalg import backends_ext
+    _need("rslab")
+
+    def fails(pattern):
+        raise RuntimeError("analysis failed")
+    monkeypatch.setattr(backends_ext, "rslab_symbolic", fails)
+    fom = ms.models.fem_block(1500)
+    a = fom.lu_analysis()
+    assert a["backend"] == "superlu" and "analysis failed" in a["reason"]
+    with pytest.raises(ms.MorsuiteError, match="rslab"):
+        fom.new_solver(backend="rslab")
+
+
 def test_auto_choice_on_3d_patterns_is_deterministic_and_recorded():
     """fem_block(1500) (n = 1728 >= rslab_min_n): rslab where installed, the same analysis from two
     fresh models (plain data, the analysis' predicted fill recorded), and in a reducer's info."""

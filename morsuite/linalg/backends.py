@@ -245,9 +245,14 @@ def analyse(pattern, backend: str = "auto") -> dict:
         backends_ext.pardiso_ordering(pattern)
     extra = {}
     if name == "rslab":  # the analysis' prediction, for the record
-        sym = backends_ext.rslab_symbolic(pattern)
-        extra = {"predicted_factor_nnz": int(sym.factor_nnz),
-                 "predicted_flops": float(sym.estimate_memory("complex128")["factor_flops"])}
+        try:
+            sym = backends_ext.rslab_symbolic(pattern)
+            extra = {"predicted_factor_nnz": int(sym.factor_nnz),
+                     "predicted_flops": float(sym.estimate_memory("complex128")["factor_flops"])}
+        except (RuntimeError, ValueError) as exc:  # rslab could not analyse the pattern: SuperLU
+            if backend != "auto":
+                raise InputError(f"backend='rslab' cannot analyse this pattern: {exc}") from exc
+            name, reason = "superlu", f"{reason}; rslab's analysis failed ({exc}): SuperLU"
     info = {"backend": name, "requested": backend, "reason": reason, "kl": kl, "ku": ku,
             "n1": int(n1), "n2": int(n2), "nnz": int(pattern["_indices"].size), "available": av,
             "kernels": _kernels_used(name, kl, ku), **extra}
