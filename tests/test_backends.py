@@ -285,6 +285,26 @@ def test_a_tampered_factor_falls_back_to_superlu(backend, tcom20, monkeypatch):
     assert solver.stats.refactorizations == 1 and not isinstance(f.lu, cls)
 
 
+@pytest.mark.parametrize("backend", ["klu", "rslab"])
+def test_a_pole_raises_singular_shift_error(backend):
+    """An exactly singular saddle matrix (s = 0 of a mass-only model: A11 = s^2 M = 0, rank 2 n2):
+    the library reports it, SuperLU confirms, SingularShiftError (no crash, no silent answer)."""
+    _need(backend)
+    n1 = 40
+    Z = sp.csr_matrix((n1, n1))
+    G = sp.csr_matrix((np.array([1.0, -1.0]), (np.array([0, 0]), np.array([3, 7]))), shape=(1, n1))
+    rng = np.random.default_rng(3)
+    fom = ms.models.Index3Model(sp.identity(n1, format="csr"), Z, Z, G, rng.standard_normal((n1, 1)),
+                                rng.standard_normal((1, n1)), name="masses", check_constraints=False)
+    solver = fom.new_solver(backend=backend)
+    with pytest.raises(ms.errors.SingularShiftError):
+        solver.factor(0.0).solve(fom.F)
+    S = _dense(fom, 0.5j)
+    b = np.vstack([fom.F, np.zeros((1, 1))])
+    x = solver.factor(0.5j).solve(b, full=True)  # away from the pole: the dense solution
+    assert np.linalg.norm(x - np.linalg.solve(S, b)) <= 1e-12 * np.linalg.norm(x)
+
+
 def test_klu_refactor_with_too_much_growth_factors_afresh(tcom20, monkeypatch):
     """KLU refactors with the pattern's reference pivot order; where the pivot growth check fails
     (forced here: no growth accepted) the matrix is factored afresh with its own pivoting, the

@@ -158,7 +158,9 @@ class _KLUPool:
         """A new nbklu solver of the pattern: analysed, factored with ``data`` (default the magnitudes)."""
         nbklu = _nbklu()
         mag, ind, ptr = _magnitudes(self._pattern)
-        kls = nbklu.KLUSolver64Complex() if self._complex else nbklu.KLUSolver64Real()
+        # singular_as_error: a zero pivot raises (nbklu 0.3.0's default only warns, and a solve with
+        # such factors crashed the process, 2026-11-27)
+        kls = (nbklu.KLUSolver64Complex if self._complex else nbklu.KLUSolver64Real)(singular_as_error=True)
         kls.analyze(ptr.size - 1, ptr.astype(np.int64), ind.astype(np.int64))
         kls.factor(np.asarray(mag if data is None else data, dtype=complex if self._complex else float))
         return kls
@@ -209,11 +211,12 @@ class KLULU:
         self.shape = As.shape
         self._pool = klu_pool(pattern, self.dtype == np.complex128)
         data = np.asarray(As.data, dtype=self.dtype)
-        kls, self.refactored, self.rgrowth = self._pool.take(), True, 0.0
+        kls, self.refactored, self.rgrowth = None, True, 0.0
         try:
+            kls = self._pool.take()
             kls.refactor(data)
             self.rgrowth = float(kls.rgrowth(data))
-        except nbklu.KLUException:  # a zero pivot in the reference order: the member is dropped
+        except nbklu.KLUException:  # a zero pivot (magnitudes or reference order): the member is dropped
             kls = None
         if not self.rgrowth >= KLU_MIN_RGROWTH:  # the reference pivots do not suit these values
             if kls is not None:  # its pivot order is unchanged (a refactorization keeps it)
