@@ -169,22 +169,23 @@ def test_dask_executor_on_a_local_cluster():
     assert _tf_rel_diff(res.rom, ref.rom, np.logspace(-2, 0, 40)) < 1e-12
 
 
-# -- optional extras: KLU (kvxopt, GPL-3) and MKL PARDISO; skipped where not installed -----------------
-EXTRAS = ("klu", "pardiso")
+# -- library backends: KLU (nbklu) and rslab (default dependencies), MKL PARDISO (extra) ---------------
+EXTRAS = ("klu", "rslab", "pardiso")
 
 
 def _need(backend):
-    from morsuite.linalg.backends_ext import available
+    from morsuite.linalg.backends_ext import INSTALL, available
     if not available()[backend]:
-        pytest.skip(f"optional backend {backend} not installed (pip install morsuite[{backend}])")
+        pytest.skip(f"library backend {backend} not installed ({INSTALL[backend]})")
 
 
 @pytest.mark.parametrize("backend", EXTRAS)
 @pytest.mark.parametrize("which", ["dsms", "tcom", "random", "grid3d", "fem"])
-def test_optional_backends_agree_with_dense_solves(backend, which, dsms50, tcom20, small_random):
-    """KLU and PARDISO: solve and transposed solve against dense ones, real and complex shifts,
-    two factorizations alive at once (KLU shares its symbolic analysis, PARDISO one handle each;
-    PARDISO complex symmetric for the symmetric models, unsymmetric for the random one)."""
+def test_library_backends_agree_with_dense_solves(backend, which, dsms50, tcom20, small_random):
+    """KLU, rslab and PARDISO: solve and transposed solve against dense ones, real and complex shifts,
+    two factorizations alive at once (KLU's pooled solvers and rslab share the pattern's analysis,
+    PARDISO one handle each; PARDISO complex symmetric for the symmetric models, unsymmetric for the
+    random one)."""
     _need(backend)
     fom = ms.models.fem_block(300) if which == "fem" else \
         {"dsms": dsms50, "tcom": tcom20, "random": small_random, "grid3d": grid3d_model(5)}[which]
@@ -203,30 +204,142 @@ def test_optional_backends_agree_with_dense_solves(backend, which, dsms50, tcom2
         assert other.lu.mtype == (13 if which == "random" else 6)
 
 
-def test_auto_rule_with_the_extras():
+def test_auto_rule_with_the_libraries():
     """The rule from the structure and what is installed: KLU for narrow bands with a border
-    (the TCOM), PARDISO for wide bands from pardiso_min_n rows, SuperLU without the extras."""
-    none, both = {"klu": False, "pardiso": False}, {"klu": True, "pardiso": True}
+    (the TCOM), PARDISO for wide bands from pardiso_min_n rows, else rslab from rslab_min_n rows,
+    SuperLU without the libraries."""
+    none = {"klu": False, "rslab": False, "pardiso": False}
+    default = {"klu": True, "rslab": True, "pardiso": False}
+    every = {"klu": True, "rslab": True, "pardiso": True}
     assert choose(2, 2, 6, 200000, none)[0] == "banded"
-    assert choose(2, 2, 6, 200000, both)[0] == "klu"
-    assert choose(1, 1, 1, 200000, both)[0] == "banded"
+    assert choose(2, 2, 6, 200000, default)[0] == "klu"
+    assert choose(1, 1, 1, 200000, every)[0] == "banded"
     assert choose(1, 1, BAND_RULE["max_border"] + 1, 10 ** 5, none)[0] == "superlu"
-    assert choose(900, 900, 600, 10 ** 4, both)[0] == "pardiso"
+    assert choose(900, 900, 600, 10 ** 4, every)[0] == "pardiso"
+    assert choose(900, 900, 600, 10 ** 4, default)[0] == "rslab"
     assert choose(900, 900, 600, 10 ** 4, none)[0] == "superlu"
-    assert choose(900, 900, 600, BAND_RULE["pardiso_min_n"] - 1, both)[0] == "superlu"
+    assert choose(900, 900, 600, BAND_RULE["pardiso_min_n"] - 1, every)[0] == "rslab"
+    assert choose(90, 90, 60, BAND_RULE["rslab_min_n"] - 1, every)[0] == "superlu"
 
 
-def test_forcing_a_missing_extra_names_it(dsms50, monkeypatch):
+def test_a_missing_library_is_reported_and_auto_does_without_it(dsms50, monkeypatch):
+    """A library that does not import: available() says so, forcing it names its install,
+    "auto" chooses among the rest (the FEM block: SuperLU without rslab)."""
     from morsuite.linalg import backends_ext
-    monkeypatch.setattr(backends_ext, "available", lambda: {"klu": False, "pardiso": False})
+    monkeypatch.setattr(backends_ext, "_rslab", lambda: None)
+    monkeypatch.setattr(backends_ext, "_nbklu", lambda: None)
+    monkeypatch.setattr(backends_ext, "_mkl_lib", lambda: None)
+    assert backends_ext.available() == {"klu": False, "rslab": False, "pardiso": False}
     for name in EXTRAS:
-        with pytest.raises(ms.MorsuiteError, match=rf"morsuite\[{name}\]"):
+        with pytest.raises(ms.MorsuiteError, match=name):
             dsms50.lu_backend = name
-    assert ms.models.tcom(nc=20).lu_analysis()["backend"] == "banded"  # auto without the extras
+    assert ms.models.tcom(nc=20).lu_analysis()["backend"] == "banded"  # auto without KLU
+    a = ms.models.fem_block(1500).lu_analysis()
+    assert a["backend"] == "superlu" and a["available"]["rslab"] is False and "SuperLU" in a["reason"]
+
+
+def test_auto_does_without_rslab_when_its_analysis_fails(monkeypatch):
+    """rslab installed but failing to analyse a pattern: "auto" records why and takes SuperLU,
+    forcing rslab raises an InputError."""
+    from morsuite.linalg import backends_ext
+    _need("rslab")
+
+    def fails(pattern):
+        raise RuntimeError("analysis failed")
+    monkeypatch.setattr(backends_ext, "rslab_symbolic", fails)
+    fom = ms.models.fem_block(1500)
+    a = fom.lu_analysis()
+    assert a["backend"] == "superlu" and "analysis failed" in a["reason"]
+    with pytest.raises(ms.MorsuiteError, match="rslab"):
+        fom.new_solver(backend="rslab")
+
+
+def test_auto_choice_on_3d_patterns_is_deterministic_and_recorded():
+    """fem_block(1500) (n = 1728 >= rslab_min_n): rslab where installed, the same analysis from two
+    fresh models (plain data, the analysis' predicted fill recorded), and in a reducer's info."""
+    from morsuite.linalg.backends_ext import available
+    a, b = ms.models.fem_block(1500).lu_analysis(), ms.models.fem_block(1500).lu_analysis()
+    assert a == b and a["kl"] + a["ku"] > BAND_RULE["max_band"]
+    if available()["rslab"] and not available()["pardiso"]:
+        assert a["backend"] == "rslab" and "rslab" in a["reason"] and a["predicted_factor_nnz"] > a["nnz"]
+
+
+@pytest.mark.parametrize("backend", ["klu", "rslab"])
+def test_a_tampered_factor_falls_back_to_superlu(backend, tcom20, monkeypatch):
+    """A library's factorization whose solves are wrong (tampered) fails the backward-error check:
+    the solver refactors with SuperLU (counted), and the solution is the dense one."""
+    from morsuite.linalg import backends_ext
+    _need(backend)
+    cls = {"klu": backends_ext.KLULU, "rslab": backends_ext.RslabLU}[backend]
+    honest = cls.solve
+    monkeypatch.setattr(cls, "solve", lambda self, b, trans="N": 1.001 * honest(self, b, trans))
+    solver = tcom20.new_solver(backend=backend)
+    s = 0.4 + 1.3j
+    f = solver.factor(s)
+    assert isinstance(f.lu, cls)
+    for trans in (False, True):
+        x = f.solve(tcom20.F, trans=trans, full=True)
+        S = _dense(tcom20, s)
+        ref = np.linalg.solve(S.T if trans else S, np.vstack([tcom20.F, np.zeros((tcom20.n2, 1))]))
+        assert np.linalg.norm(x - ref) <= 1e-11 * np.linalg.norm(ref)
+    assert solver.stats.refactorizations == 1 and not isinstance(f.lu, cls)
+
+
+@pytest.mark.parametrize("backend", ["klu", "rslab"])
+def test_a_pole_raises_singular_shift_error(backend):
+    """An exactly singular saddle matrix (s = 0 of a mass-only model: A11 = s^2 M = 0, rank 2 n2):
+    the library reports it, SuperLU confirms, SingularShiftError (no crash, no silent answer)."""
+    _need(backend)
+    n1 = 40
+    Z = sp.csr_matrix((n1, n1))
+    G = sp.csr_matrix((np.array([1.0, -1.0]), (np.array([0, 0]), np.array([3, 7]))), shape=(1, n1))
+    rng = np.random.default_rng(3)
+    fom = ms.models.Index3Model(sp.identity(n1, format="csr"), Z, Z, G, rng.standard_normal((n1, 1)),
+                                rng.standard_normal((1, n1)), name="masses", check_constraints=False)
+    solver = fom.new_solver(backend=backend)
+    with pytest.raises(ms.errors.SingularShiftError):
+        solver.factor(0.0).solve(fom.F)
+    S = _dense(fom, 0.5j)
+    b = np.vstack([fom.F, np.zeros((1, 1))])
+    x = solver.factor(0.5j).solve(b, full=True)  # away from the pole: the dense solution
+    assert np.linalg.norm(x - np.linalg.solve(S, b)) <= 1e-12 * np.linalg.norm(x)
+
+
+def test_klu_refactor_with_too_much_growth_factors_afresh(tcom20, monkeypatch):
+    """KLU refactors with the pattern's reference pivot order; where the pivot growth check fails
+    (forced here: no growth accepted) the matrix is factored afresh with its own pivoting, the
+    same solution, no SuperLU fallback; a refactorization that passes is the default."""
+    from morsuite.linalg import backends_ext
+    _need("klu")
+    s = 0.4 + 1.3j
+    b = np.vstack([tcom20.F, np.zeros((tcom20.n2, 1))])
+    ref = np.linalg.solve(_dense(tcom20, s), b)
+    plain = tcom20.new_solver(backend="klu").factor(s)
+    assert plain.lu.refactored and plain.lu.rgrowth >= backends_ext.KLU_MIN_RGROWTH
+    monkeypatch.setattr(backends_ext, "KLU_MIN_RGROWTH", 2.0)  # rgrowth <= 1 always
+    solver = tcom20.new_solver(backend="klu")
+    f = solver.factor(s)
+    assert not f.lu.refactored
+    assert np.linalg.norm(f.solve(b, full=True) - ref) <= 1e-11 * np.linalg.norm(ref)
+    assert solver.stats.refactorizations == 0
+
+
+@pytest.mark.parametrize("backend", ["klu", "rslab"])
+def test_fem_transfer_of_the_library_backends_agrees_with_superlu(backend):
+    """The FEM block's transfer function at a few shifts in its band by KLU and rslab against
+    SuperLU's: 1e-8 relative (their backward errors are ~1e-16; the block's conditioning is mild)."""
+    _need(backend)
+    vals = {}
+    for b in ("superlu", backend):
+        fom = ms.models.fem_block(600)
+        fom.lu_backend = b
+        w = np.geomspace(fom.band[0], fom.band[1], 4)
+        vals[b] = np.array([fom.transfer(1j * x) for x in w])
+    assert np.max(np.abs(vals[backend] - vals["superlu"])) <= 1e-8 * np.max(np.abs(vals["superlu"]))
 
 
 @pytest.mark.parametrize("backend", EXTRAS)
-def test_optional_backends_roms_agree_and_are_deterministic(backend):
+def test_library_backends_roms_agree_and_are_deterministic(backend):
     """Converged IRKA ROMs with KLU or PARDISO against SuperLU's: transfer functions to 1e-8;
     and the same ROM, bit for bit, from a fresh model and after other runs on it, on 1 or 2 solver threads."""
     _need(backend)
@@ -246,10 +359,10 @@ def test_optional_backends_roms_agree_and_are_deterministic(backend):
 
 
 @pytest.mark.parametrize("backend", EXTRAS)
-def test_optional_backends_pickle_without_their_handles(backend, tcom20):
-    """A solver goes to Dask workers pickled: its cached KLU/PARDISO factorizations stay behind
-    (process handles), KLU's symbolic analysis is redone there; the copy solves the same.
-    KLU holds the GIL (kvxopt), so IRKA's automatic solver threads are 1 with it."""
+def test_library_backends_pickle_without_their_handles(backend, tcom20):
+    """A solver goes to Dask workers pickled: its cached library factorizations stay behind
+    (process handles), the pattern's analysis is redone there; the copy solves the same.
+    KLU holds the GIL (nbklu), so IRKA's automatic solver threads are 1 with it."""
     import pickle
 
     from morsuite.reducers.shift_solves import default_threads

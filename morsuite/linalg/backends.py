@@ -30,16 +30,16 @@ Backends (``backend=`` of the solver; ``"auto"`` applies :func:`choose`):
     Pivoting is confined to :math:`A_{11}`: where :math:`A_{11}` is (nearly)
     singular and S is not, the solve's backward error check fails and the solver
     refactors with SuperLU (``stats.refactorizations``).
-``"klu"``, ``"pardiso"``
-    Optional extras (KLU through ``kvxopt``, GPL-3; MKL PARDISO through ``mkl``):
-    :mod:`morsuite.linalg.backends_ext`.
+``"klu"``, ``"rslab"``, ``"pardiso"``
+    Library backends (:mod:`morsuite.linalg.backends_ext`): KLU through ``nbklu`` (BSD-3) and
+    rslab's supernodal LU (MIT), default dependencies; MKL PARDISO through ``mkl``, an extra.
 
 :func:`choose` takes ``"banded"`` when the RCM bandwidth of :math:`A_{11}` and n2
 are small (:data:`BAND_RULE`; the measurements behind it are in
 ``docs/design/backends.md``); where KLU is installed, narrow bands with a border
 of more than ``max_border_klu`` rows go to KLU; wide bands go to PARDISO where it
-is installed and the matrix has at least ``pardiso_min_n`` rows, else to
-``"superlu"``. ``MORSUITE_LU_BACKEND`` in the environment overrides ``"auto"``.
+is installed and the matrix has at least ``pardiso_min_n`` rows, else to rslab from
+``rslab_min_n`` rows, else to ``"superlu"``. ``MORSUITE_LU_BACKEND`` in the environment overrides ``"auto"``.
 """
 
 from __future__ import annotations
@@ -57,21 +57,26 @@ from scipy.sparse.csgraph import reverse_cuthill_mckee
 from ..errors import InputError, SingularShiftError
 from . import kernels, backends_ext
 
-__all__ = ["BACKENDS", "BAND_RULE", "BandedBorderLU", "analyse", "banded_structure", "choose",
+__all__ = ["BACKENDS", "BAND_RULE", "LIBRARY_BACKENDS", "BandedBorderLU", "analyse", "banded_structure", "choose",
            "factor_nnz", "permuted_pattern", "resolve_backend", "superlu_ordering"]
 
 #: the backends a solver accepts (``"auto"``: :func:`choose`)
-BACKENDS = ("auto", "superlu", "banded", "klu", "pardiso")
+BACKENDS = ("auto", "superlu", "banded", "klu", "rslab", "pardiso")
+
+#: the backends served by a library (:mod:`morsuite.linalg.backends_ext`)
+LIBRARY_BACKENDS = ("klu", "rslab", "pardiso")
 
 #: the structural rule of ``"auto"``: banded LU when the RCM half-bandwidths satisfy
 #: ``kl + ku <= max_band`` and ``n2 <= max_border`` (``max_border_klu`` where KLU is
 #: installed, which takes the narrow bands with a larger border); PARDISO, where
-#: installed, for the wide bands from ``pardiso_min_n`` rows of S on
+#: installed, for the wide bands from ``pardiso_min_n`` rows of S on, else rslab's supernodal LU from
+#: ``rslab_min_n`` rows on (2026-11-27)
 #: (docs/design/backends.md, 2026-11-25 and 2026-11-26); the banded LU runs the compiled kernels of
 #: :mod:`~morsuite.linalg.kernels` up to ``kl + ku <= numba_max_band`` and LAPACK's blocked ``?gbtrf``
 #: above (2026-11-26, second session: the unblocked kernel is 1.2x faster at kl + ku = 10, 1.45x
 #: slower at 66)
-BAND_RULE = {"max_band": 64, "max_border": 8, "max_border_klu": 1, "pardiso_min_n": 2000, "numba_max_band": 16}
+BAND_RULE = {"max_band": 64, "max_border": 8, "max_border_klu": 1, "pardiso_min_n": 2000, "rslab_min_n": 1000,
+             "numba_max_band": 16}
 
 
 def factor_nnz(lu) -> int:
@@ -92,7 +97,7 @@ def resolve_backend(backend: str) -> str:
         backend = os.environ.get("MORSUITE_LU_BACKEND", "auto") or "auto"
     if backend not in BACKENDS:
         raise InputError(f"backend must be one of {', '.join(map(repr, BACKENDS))}; got {backend!r}")
-    if backend in ("klu", "pardiso"):
+    if backend in LIBRARY_BACKENDS:
         backends_ext.require(backend)
     return backend
 
@@ -116,18 +121,20 @@ def _bandwidths(pattern, perm_c) -> tuple[int, int]:
 
 
 def choose(kl: int, ku: int, n2: int, n: int = 0, available: dict | None = None) -> tuple[str, str]:
-    """The backend of ``"auto"`` from the structure and the installed extras: (name, reason).
+    """The backend of ``"auto"`` from the structure and the installed libraries: (name, reason).
 
     With ``B = BAND_RULE`` and ``n`` the order of S:
 
     - ``kl + ku <= B["max_band"]`` (a narrow band): banded if ``n2 <= B["max_border"]``
       (``B["max_border_klu"]`` where KLU is installed), else KLU if installed, else SuperLU;
-    - a wide band: PARDISO if installed and ``n >= B["pardiso_min_n"]``, else SuperLU.
+    - a wide band (3D solids): PARDISO if installed and ``n >= B["pardiso_min_n"]``, else rslab's
+      supernodal LU if installed and ``n >= B["rslab_min_n"]``, else SuperLU.
 
     ``available``: :func:`morsuite.linalg.backends_ext.available` by default. Decided
     from the pattern (and what is installed) alone: the banded LU costs
     O(n1 (kl + ku)^2) plus n2 banded solves for the border; KLU has no border cost and
-    no supernodes; PARDISO's supernodes win on 3D solids.
+    no supernodes; supernodes (rslab, PARDISO) win on 3D solids, whose fill grows like
+    n^{4/3} and work like n^2 under nested dissection. Measurements: ``docs/design/backends.md``.
     """
     av = backends_ext.available() if available is None else available
     B = BAND_RULE
@@ -138,10 +145,12 @@ def choose(kl: int, ku: int, n2: int, n: int = 0, available: dict | None = None)
         if av.get("klu"):
             return "klu", f"RCM bandwidth kl + ku = {kl + ku} <= {B['max_band']}, n2 = {n2} > {limit}: KLU"
         return "superlu", f"n2 = {n2} above the banded border limit {limit}"
+    wide = f"RCM bandwidth kl + ku = {kl + ku} > {B['max_band']}"
     if av.get("pardiso") and n >= B["pardiso_min_n"]:
-        return "pardiso", (f"RCM bandwidth kl + ku = {kl + ku} > {B['max_band']}, "
-                           f"n = {n} >= {B['pardiso_min_n']}: PARDISO")
-    return "superlu", f"RCM bandwidth kl + ku = {kl + ku} above the banded rule {B['max_band']}"
+        return "pardiso", f"{wide}, n = {n} >= {B['pardiso_min_n']}: PARDISO"
+    if av.get("rslab") and n >= B["rslab_min_n"]:
+        return "rslab", f"{wide}, n = {n} >= {B['rslab_min_n']}: rslab's supernodal LU"
+    return "superlu", f"{wide}, n = {n}: SuperLU"
 
 
 def permuted_pattern(pattern, perm_c) -> dict:
@@ -189,23 +198,25 @@ def analyse(pattern, backend: str = "auto") -> dict:
     ----------
     pattern : dict
         ``SaddlePointSolver.pattern`` (shared by the solvers of one model).
-    backend : {"auto", "superlu", "banded", "klu", "pardiso"}
-        ``"auto"``: :func:`choose` from the RCM bandwidth of the (1,1) block, n2 and the
-        installed extras (KLU, PARDISO).
+    backend : {"auto", "superlu", "banded", "klu", "rslab", "pardiso"}
+        ``"auto"``: :func:`choose` from the RCM bandwidth of the (1,1) block, n2, the order of S
+        and the installed libraries (KLU, rslab, PARDISO).
 
     Returns
     -------
     dict
         Plain data: ``backend`` (the one used), ``requested``, ``reason``, ``kl``, ``ku``
         (RCM half-bandwidths of the (1,1) block), ``n1``, ``n2``, ``nnz``, ``available``
-        (the optional backends installed), ``kernels`` (``"numba"``: the compiled banded LU and
+        (the library backends installed), ``kernels`` (``"numba"``: the compiled banded LU and
         assembly of :mod:`~morsuite.linalg.kernels` are used; else ``"numpy/lapack"``). The banded renumbering is stored in
-        ``pattern[("ordering", "banded")]``, PARDISO's ordering and KLU's symbolic
-        analysis in ``pattern`` too (found once, from the pattern alone).
+        ``pattern[("ordering", "banded")]``, PARDISO's ordering, KLU's symbolic
+        analysis and rslab's in ``pattern`` too (found once, from the pattern alone); for rslab
+        also ``predicted_factor_nnz`` and ``predicted_flops`` (complex) of its analysis.
 
     Notes
     -----
-    Cost: one RCM ordering, O(nnz); deterministic (no values, no timing).
+    Cost: one RCM ordering, O(nnz), and the chosen library's analysis (rslab: its ordering race,
+    0.1-4 s from n1 = 4e3 to 2e4 on fem_block); deterministic (no values, no timing).
     """
     backend = resolve_backend(backend)
     key = ("analysis", backend)
@@ -232,9 +243,19 @@ def analyse(pattern, backend: str = "auto") -> dict:
         pattern[("ordering", "banded")] = perm
     if name == "pardiso":
         backends_ext.pardiso_ordering(pattern)
+    extra = {}
+    if name == "rslab":  # the analysis' prediction, for the record
+        try:
+            sym = backends_ext.rslab_symbolic(pattern)
+            extra = {"predicted_factor_nnz": int(sym.factor_nnz),
+                     "predicted_flops": float(sym.estimate_memory("complex128")["factor_flops"])}
+        except (RuntimeError, ValueError) as exc:  # rslab could not analyse the pattern: SuperLU
+            if backend != "auto":
+                raise InputError(f"backend='rslab' cannot analyse this pattern: {exc}") from exc
+            name, reason = "superlu", f"{reason}; rslab's analysis failed ({exc}): SuperLU"
     info = {"backend": name, "requested": backend, "reason": reason, "kl": kl, "ku": ku,
             "n1": int(n1), "n2": int(n2), "nnz": int(pattern["_indices"].size), "available": av,
-            "kernels": _kernels_used(name, kl, ku)}
+            "kernels": _kernels_used(name, kl, ku), **extra}
     pattern[key] = info
     return info
 

@@ -1,33 +1,41 @@
-r"""Optional sparse LU backends: KLU (``kvxopt``, GPL-3) and MKL PARDISO (``mkl``, Intel's ISSL).
+r"""Library sparse LU backends: rslab's supernodal LU, KLU (``nbklu``) and MKL PARDISO (``mkl``).
 
-Neither is in the default install (``mkl`` is under the Intel Simplified Software
-License, not GPL; ``kvxopt`` is GPL-3, so never a default dependency); each is an extra (``pip install morsuite[klu]``,
-``pip install morsuite[pardiso]``), imported only when used, and
-:func:`available` says which are there. Both factor the equilibrated saddle matrix
-:math:`A_e = D S(s) D` (natural numbering; the backend orders it) and solve with
-it or its plain transpose, with the interface of SuperLU's ``solve``;
-:class:`~morsuite.linalg.saddle_lu.SaddleLU` checks every solve's backward error
-and falls back to SuperLU as for the other backends.
+rslab (MIT, pure Rust) and nbklu (BSD-3 bindings of SuiteSparse's KLU, LGPL-2.1, linked into the
+wheel) are default dependencies; PARDISO is the ``pardiso`` extra (``mkl``: Intel Simplified
+Software License, not GPL). Each is imported only when used and :func:`available` says which
+import here: where one does not, ``"auto"`` chooses without it and forcing it raises an error
+naming its install. All factor the equilibrated saddle matrix :math:`A_e = D S(s) D` (natural
+numbering; the library orders it) and solve with it or its plain transpose, with the interface
+of SuperLU's ``solve``; :class:`~morsuite.linalg.saddle_lu.SaddleLU` checks every solve's
+backward error and falls back to SuperLU as for the other backends.
 
+``"rslab"``
+    rslab's supernodal left-looking LU (``path="lu"``) with threshold partial pivoting: its
+    analysis (MC64 matching, the fill-reducing ordering of least fill among AMD, AMF, RCM and
+    nested dissection) once per pattern from the pattern's magnitudes; per shift one numeric
+    factorization on one thread (:data:`RSLAB_SETTINGS`). The fast one on 3D solids.
 ``"klu"``
-    KLU's symbolic analysis (BTF, AMD ordering) once per pattern and value type,
-    from the pattern alone; per shift one numeric factorization. Fast on chains
-    (no supernodes, low per-column overhead), slow on 3D solids.
+    KLU through ``nbklu``: symbolic analysis (BTF, AMD) and a reference pivot order (a
+    factorization of the pattern's magnitudes) once per pattern and value type; per shift a
+    refactorization with that order (no pivot search), checked by its pivot growth, else a fresh
+    factorization with KLU's own pivoting. Fast on chains (no supernodes, low per-column
+    overhead), slow on 3D solids. (Until 2026-11-27 served by ``kvxopt``, GPL-3, an extra.)
 ``"pardiso"``
     MKL PARDISO through ctypes (``libmkl_rt``): complex symmetric (matrix type 6;
     -2 for a real shift) when M, D, K are exactly symmetric, the upper triangle with
-    Bunch-Kaufman pivoting, else unsymmetric (13 complex, 11 real); nested-dissection
+    Bunch-Kaufman pivoting (``iparm[20] = 1``), else unsymmetric (13 complex, 11 real); nested-dissection
     (METIS) ordering computed once per pattern from a matrix of the pattern's
     magnitudes and given to every factorization (``iparm[4] = 1``); per shift a
     fresh handle: analysis with that ordering and this shift's weighted matching and scaling (``iparm[10] = iparm[12] = 1``),
     numeric factorization, released when the factorization is dropped (one handle
     per live factorization). Pivot perturbation 1e-13 (1e-8 symmetric; ``iparm[9]``),
     at most two refinement steps (``iparm[7]``); PARDISO's defaults give NaN on saddle
-    matrices. One MKL thread per call (``mkl_set_num_threads_local``), so the
+    matrices. The factors' size is requested (``iparm[17] = -1``) and reported as ``nnz``.
+    One MKL thread per call (``mkl_set_num_threads_local``), so the
     factors are the same bits whatever the machine load or the solver threads.
 
 Measurements behind the choice (:func:`morsuite.linalg.backends.choose`):
-``docs/design/backends.md`` (2026-11-26).
+``docs/design/backends.md`` (2026-11-26, 2026-11-27).
 """
 
 from __future__ import annotations
@@ -44,19 +52,27 @@ import scipy.sparse as sp
 
 from ..errors import InputError, SingularShiftError
 
-__all__ = ["KLULU", "PardisoLU", "available", "klu_symbolic", "pardiso_ordering"]
+__all__ = ["INSTALL", "KLULU", "KLU_MIN_RGROWTH", "PardisoLU", "RSLAB_SETTINGS", "RslabLU", "available", "klu_pool",
+           "pardiso_ordering", "rslab_symbolic"]
 
 _LOCK = threading.Lock()
 _MKL: dict = {}
 
 
-def _klu():
+def _nbklu():
     try:
-        import kvxopt
-        from kvxopt import klu
-    except ImportError:  # the optional extra is not installed
+        import nbklu
+    except ImportError:  # not installed (a default dependency: a broken or partial install)
         return None
-    return kvxopt, klu
+    return nbklu
+
+
+def _rslab():
+    try:
+        import rslab
+    except ImportError:  # not installed (a default dependency: a broken or partial install)
+        return None
+    return rslab
 
 
 def _mkl_lib():
@@ -80,14 +96,24 @@ def _mkl_lib():
 
 
 def available() -> dict:
-    """Which optional backends can be used here: ``{"klu": bool, "pardiso": bool}``. Cost: one import / dlopen."""
-    return {"klu": _klu() is not None, "pardiso": _mkl_lib() is not None}
+    """Which library backends can be used here: ``{"rslab": bool, "klu": bool, "pardiso": bool}``.
+
+    rslab and nbklu (``"klu"``) are default dependencies, PARDISO the ``pardiso`` extra; a
+    library that does not import is reported missing and ``"auto"`` chooses without it.
+    Cost: one import / dlopen.
+    """
+    return {"rslab": _rslab() is not None, "klu": _nbklu() is not None, "pardiso": _mkl_lib() is not None}
+
+
+#: what installs each library backend
+INSTALL = {"rslab": "pip install 'rslab>=1.7,<2'", "klu": "pip install 'nbklu>=0.3,<1'",
+           "pardiso": "pip install morsuite[pardiso]"}
 
 
 def require(name: str):
-    """Raise :class:`~morsuite.errors.InputError` naming the extra if backend ``name`` is not installed."""
+    """Raise :class:`~morsuite.errors.InputError` naming the install if backend ``name`` is not there."""
     if not available().get(name, True):
-        raise InputError(f"backend={name!r} needs the optional extra: pip install morsuite[{name}]")
+        raise InputError(f"backend={name!r} needs its library: {INSTALL[name]}")
 
 
 def _magnitudes(pattern):
@@ -96,9 +122,9 @@ def _magnitudes(pattern):
     return data, pattern["_indices"], pattern["_indptr"]
 
 
-# -- KLU --------------------------------------------------------------------------------------
+# -- KLU (nbklu) and the supernodal LU (rslab) --------------------------------------------------
 class _Local:
-    """A value kept with the pattern but not pickled (kvxopt's objects are not picklable; a Dask
+    """A value kept with the pattern but not pickled (the libraries' handles are not picklable; a Dask
     worker's copy of the pattern recomputes it)."""
 
     def __init__(self, value=None):
@@ -111,60 +137,184 @@ class _Local:
         self.value = None
 
 
-def klu_symbolic(pattern, complex_: bool):
-    """KLU's symbolic analysis of the pattern for real or complex values (once per pattern and type).
-
-    Returns ``(template, symbolic)``: a kvxopt sparse matrix with the pattern (values
-    replaced per factorization under a lock) and the analysis. Deterministic: KLU's
-    BTF and AMD orderings depend on the pattern only.
-    """
-    key = ("klu", bool(complex_))
+def _stored(pattern, key, make):
+    """``pattern[key]``'s value, made by ``make()`` once per pattern (and process) under the lock."""
     with _LOCK:
         if key not in pattern or pattern[key].value is None:
-            kvxopt, klu = _klu()
-            data, ind, ptr = _magnitudes(pattern)
-            N = ptr.size - 1
-            cols = np.repeat(np.arange(N), np.diff(ptr))
-            tc = "z" if complex_ else "d"
-            A = kvxopt.spmatrix(data.astype(complex if complex_ else float).tolist(), ind.tolist(), cols.tolist(),
-                                (N, N), tc)
-            pattern[key] = _Local((A, klu.symbolic(A)))
+            pattern[key] = _Local(make())
     return pattern[key].value
 
 
-class KLULU:
-    """KLU factorization of an equilibrated saddle matrix ``As`` (CSC, the pattern's structure).
+class _KLUPool:
+    """Idle nbklu solvers of one pattern and value type, each analysed (BTF, AMD) and factored once
+    with the pattern's magnitudes: their pivot order is the reference one, found from the pattern alone."""
 
-    ``solve(b, trans)`` as SuperLU's. Cost: one KLU numeric factorization (the symbolic
-    analysis is shared by the pattern), a copy of the values into kvxopt's storage.
+    def __init__(self, pattern, complex_: bool):
+        self._pattern, self._complex = pattern, complex_
+        self._idle: list = []
+        self._lock = threading.Lock()
+
+    def fresh(self, data=None):
+        """A new nbklu solver of the pattern: analysed, factored with ``data`` (default the magnitudes)."""
+        nbklu = _nbklu()
+        mag, ind, ptr = _magnitudes(self._pattern)
+        # singular_as_error: a zero pivot raises (nbklu 0.3.0's default only warns, and a solve with
+        # such factors crashed the process, 2026-11-27)
+        kls = (nbklu.KLUSolver64Complex if self._complex else nbklu.KLUSolver64Real)(singular_as_error=True)
+        kls.analyze(ptr.size - 1, ptr.astype(np.int64), ind.astype(np.int64))
+        kls.factor(np.asarray(mag if data is None else data, dtype=complex if self._complex else float))
+        return kls
+
+    def take(self):
+        with self._lock:
+            if self._idle:
+                return self._idle.pop()
+        return self.fresh()
+
+    def give(self, kls):
+        with self._lock:
+            self._idle.append(kls)
+
+
+def klu_pool(pattern, complex_: bool) -> _KLUPool:
+    """The pool of nbklu solvers of the pattern for real or complex values (made once per pattern and type).
+
+    Every pooled solver holds KLU's symbolic analysis of the pattern and the pivot order of one
+    factorization of the pattern's magnitudes :math:`|m| + |d| + |k| + |g|` (deterministic: BTF, AMD
+    and KLU's pivoting of that matrix depend on the pattern only); :class:`KLULU` refactors new values
+    with that order. Cost of a new member: one symbolic analysis and one numeric factorization.
+    """
+    return _stored(pattern, ("klu", bool(complex_)), lambda: _KLUPool(pattern, complex_))
+
+
+#: smallest reciprocal pivot growth (KLU's ``rgrowth``) accepted from a refactorization with the
+#: reference pivot order; below it the matrix is factored afresh with its own pivoting
+KLU_MIN_RGROWTH = 1e-6
+
+
+class KLULU:
+    """KLU factorization (SuiteSparse KLU through ``nbklu``, BSD-3 wrapper) of an equilibrated saddle matrix.
+
+    ``As`` is CSC with the pattern's structure. First a refactorization with the pattern's reference
+    pivot order (:func:`klu_pool`: no pivot search, about half a factorization); its reciprocal pivot
+    growth is checked (``rgrowth`` >= :data:`KLU_MIN_RGROWTH`) and, where it is too small or a pivot
+    vanishes, the matrix is factored afresh with KLU's own pivoting (``fresh``; ``refactored``
+    False). The reference order makes the factors depend on the values only, never on which shift
+    was factored before. ``solve(b, trans)`` as SuperLU's; the backward-error check of
+    :class:`~morsuite.linalg.saddle_lu.SaddleLU` follows every solve. KLU holds the GIL (one solver
+    thread, :func:`morsuite.reducers.shift_solves.default_threads`).
     """
 
     def __init__(self, As, pattern):
-        kvxopt, klu = _klu()
-        self._kv, self._klu = kvxopt, klu
+        nbklu = _nbklu()
         self.dtype = np.complex128 if np.iscomplexobj(As.data) else np.float64
         self.shape = As.shape
-        self._A, self._sym = klu_symbolic(pattern, self.dtype == np.complex128)
-        with _LOCK:  # the template's values are this factorization's only while numeric runs
-            self._A.V = kvxopt.matrix(np.asarray(As.data, dtype=self.dtype))
+        self._pool = klu_pool(pattern, self.dtype == np.complex128)
+        data = np.asarray(As.data, dtype=self.dtype)
+        kls, self.refactored, self.rgrowth = None, True, 0.0
+        try:
+            kls = self._pool.take()
+            kls.refactor(data)
+            self.rgrowth = float(kls.rgrowth(data))
+        except nbklu.KLUException:  # a zero pivot (magnitudes or reference order): the member is dropped
+            kls = None
+        if not self.rgrowth >= KLU_MIN_RGROWTH:  # the reference pivots do not suit these values
+            if kls is not None:  # its pivot order is unchanged (a refactorization keeps it)
+                self._pool.give(kls)
             try:
-                self._num = klu.numeric(self._A, self._sym)
-            except ArithmeticError as exc:
-                raise SingularShiftError(f"KLU: the matrix is singular ({exc})") from exc
-        self.nnz = int(As.nnz)  # KLU does not report its factors' size through kvxopt: the matrix's
+                kls = self._pool.fresh(data)
+            except nbklu.KLUException as exc:
+                raise SingularShiftError(f"KLU: the matrix is singular ({exc!r})") from exc
+            self.refactored = False
+        self._kls = kls
+        self.nnz = int(As.nnz)  # nbklu does not report its factors' size cheaply: the matrix's (a lower bound)
+
+    def __reduce__(self):
+        raise TypeError("a KLU factorization is a handle of this process; it cannot be pickled")
+
+    def __del__(self):
+        kls = getattr(self, "_kls", None)
+        if kls is not None and self.refactored:  # its pivot order is still the reference one
+            self._pool.give(kls)
+            self._kls = None
 
     def solve(self, b, trans: str = "N"):
         """Solve ``A x = b`` (``trans="N"``) or ``A^T x = b`` (``"T"``); b of shape (N, k) or (N,)."""
         b = np.asarray(b)
         vec = b.ndim == 1
-        B = self._kv.matrix(np.asarray(b.reshape(b.shape[0], -1), dtype=self.dtype))
-        self._klu.solve(self._A, self._sym, self._num, B, trans=trans)
-        x = np.array(B, dtype=self.dtype)
-        return x[:, 0] if vec else x
+        B = np.array(b.reshape(b.shape[0], -1).T, dtype=self.dtype, order="C")  # nbklu: (nrhs, n) rows
+        X = self._kls.solve_(B) if trans == "N" else self._kls.tsolve_(B, 0)
+        X = np.asarray(X).reshape(B.shape).T
+        return X[:, 0] if vec else X
+
+
+#: rslab's settings of every analysis and factorization: one worker (the factor is the same bits
+#: for every thread count; one thread keeps a solver thread to one core) and the ordering race
+#: open to nested dissection at every size (the cheap orderings alone filled 1.34x more on
+#: fem_block(4000) and factored 2x slower: docs/design/backends.md, 2026-11-27)
+RSLAB_SETTINGS = {"threads": 1, "race_nd_min_n": 0, "race_nd_min_work": 0}
+
+
+def rslab_symbolic(pattern):
+    """rslab's supernodal-LU analysis of the pattern (``path="lu"``), made once per pattern.
+
+    Analysed from the matrix of the pattern's magnitudes :math:`|m| + |d| + |k| + |g|` (its MC64
+    row matching and the fill-reducing ordering -- the smallest fill of minimum degree, minimum
+    fill, RCM and nested dissection, :data:`RSLAB_SETTINGS` -- depend on the pattern only).
+    Returns the ``LuSymbolic``; its ``factor_nnz`` and ``estimate_memory()["factor_flops"]`` are the
+    predicted fill and work. Cost: the orderings' race (0.1-4 s from n1 = 4e3 to 2e4 on fem_block).
+    """
+    def make():
+        rslab = _rslab()
+        data, ind, ptr = _magnitudes(pattern)
+        N = ptr.size - 1
+        A = sp.csc_matrix((np.asarray(data, dtype=float), ind.copy(), ptr.copy()), shape=(N, N))
+        return rslab.analyze(A, path="lu", **RSLAB_SETTINGS)
+    return _stored(pattern, ("rslab",), make)
+
+
+class RslabLU:
+    r"""rslab's supernodal LU (``path="lu"``; MIT, pure Rust) of an equilibrated saddle matrix ``As``.
+
+    :math:`P_r^T A_s P_c = LU` with threshold partial pivoting (0.1) on the analysis of
+    :func:`rslab_symbolic`; one numeric factorization per shift, real or complex by the values'
+    type, on one thread. ``solve(b, trans)`` as SuperLU's (``"T"``: the plain transpose). rslab's
+    LDL^T path (Bunch-Kaufman, complex symmetric) is not used: on the saddle matrices its pivots
+    stay 1 x 1 and the zero block makes it stop ("numerically rank-deficient") unless pivots are
+    perturbed, and perturbed it was slower than the LU (docs/design/backends.md, 2026-11-27).
+    Raises :class:`~morsuite.errors.SingularShiftError` on a zero pivot (the solver then tries SuperLU).
+    """
+
+    def __init__(self, As, pattern):
+        sym = rslab_symbolic(pattern)
+        self.dtype = np.complex128 if np.iscomplexobj(As.data) else np.float64
+        self.shape = As.shape
+        try:
+            self._f = sym.factor(np.asarray(As.data, dtype=self.dtype), threads=1)
+        except RuntimeError as exc:
+            raise SingularShiftError(f"rslab LU: the matrix is singular ({exc})") from exc
+        self.nnz = int(self._f.factor_nnz)
+
+    def __reduce__(self):
+        raise TypeError("an rslab factorization is a handle of this process; it cannot be pickled")
+
+    def solve(self, b, trans: str = "N"):
+        """Solve ``A x = b`` (``trans="N"``) or ``A^T x = b`` (``"T"``); b of shape (N, k) or (N,)."""
+        b = np.asarray(b)
+        vec = b.ndim == 1
+        B = np.asarray(b.reshape(b.shape[0], -1), dtype=self.dtype)
+        if trans == "N":
+            X = self._f.solve_many(np.ascontiguousarray(B)) if B.shape[1] > 1 else \
+                self._f.solve(np.ascontiguousarray(B[:, 0]))[:, None]
+        else:
+            X = np.column_stack([self._f.solve_transpose(np.ascontiguousarray(B[:, j])) for j in range(B.shape[1])])
+        return X[:, 0] if vec else X
 
 
 # -- PARDISO ----------------------------------------------------------------------------------
 def _iparm(symmetric: bool = False) -> np.ndarray:
+    """PARDISO's parameters (0-based, MKL's C numbering); with ``iparm[0] = 1`` every entry left 0 is 0,
+    not MKL's default, hence the explicit pivoting (``iparm[20]``) and factor-size report (``iparm[17]``)."""
     ip = np.zeros(64, dtype=np.int32)
     ip[0] = 1    # iparm given (not defaults)
     ip[1] = 2    # nested dissection (METIS)
@@ -172,6 +322,8 @@ def _iparm(symmetric: bool = False) -> np.ndarray:
     ip[9] = 8 if symmetric else 13   # pivot perturbation 1e-8 (symmetric, PARDISO's default) / 1e-13
     ip[10] = 1   # scaling
     ip[12] = 1   # weighted matching (saddle matrices: the defaults give NaN)
+    ip[17] = -1  # report the factors' entries (reported only when requested: iparm[17] < 0 on input)
+    ip[20] = 1   # symmetric types: Bunch-Kaufman 1 x 1 and 2 x 2 pivots (0, left by iparm[0] = 1: 1 x 1 only)
     ip[34] = 1   # zero-based indices
     return ip
 

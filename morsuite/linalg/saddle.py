@@ -26,8 +26,8 @@ Options of :class:`SaddlePointSolver` (defaults): ``cache_size=2``,
 ``pivot_tol=0`` (off), ``rcond_tol=0`` (off), ``permc_spec="COLAMD"``,
 ``diag_pivot_thresh=0.1``, ``backward_tol=1e-10``, ``scaling="diagonal"``,
 ``ruiz_sweeps=2``, ``reuse_ordering=True``, ``backend="auto"`` (the LU:
-banded with a Schur-complement border for narrow RCM bands, SuperLU otherwise,
-chosen from the pattern alone by :mod:`morsuite.linalg.backends`; measurements
+banded with a Schur-complement border for narrow RCM bands, KLU for narrow bands
+with a larger border, rslab's supernodal LU (or PARDISO) for wide bands, chosen from the pattern alone by :mod:`morsuite.linalg.backends`; measurements
 in ``docs/design/backends.md``).
 
 Cost: one sparse LU per distinct shift, none for a cached shift or the
@@ -49,11 +49,14 @@ import scipy.sparse.linalg as spla
 
 from ..errors import InputError, SingularShiftError
 from . import kernels
-from .backends import BandedBorderLU, analyse, permuted_pattern, resolve_backend, superlu_ordering
-from .backends_ext import KLULU, PardisoLU
+from .backends import LIBRARY_BACKENDS, BandedBorderLU, analyse, permuted_pattern, resolve_backend, superlu_ordering
+from .backends_ext import KLULU, PardisoLU, RslabLU
 from .saddle_lu import SaddleLU, SolverStats, rcond_estimate
 
 __all__ = ["SaddlePointSolver", "SaddleLU", "SolverStats"]
+
+#: the factorization class of each library backend
+_LIBRARY_LU = {"klu": KLULU, "rslab": RslabLU, "pardiso": PardisoLU}
 
 
 class SaddlePointSolver:
@@ -110,13 +113,13 @@ class SaddlePointSolver:
     pattern : dict, optional
         The ``pattern`` of another solver of the same M, D, K, G (shared,
         read-only, with its stored column ordering); default: built here.
-    backend : {"auto", "superlu", "banded", "klu", "pardiso"}
+    backend : {"auto", "superlu", "banded", "klu", "rslab", "pardiso"}
         The sparse LU (:mod:`morsuite.linalg.backends`): ``"auto"`` (default)
         chooses from the pattern alone (banded LU with a Schur-complement border
         for narrow RCM bands and few constraints, KLU for narrow bands with more
-        constraints and PARDISO for wide bands where those optional extras are
-        installed, SuperLU otherwise); the analysis, done once per pattern, is in
-        ``analysis``. The banded, KLU and PARDISO backends fall back to SuperLU
+        constraints, PARDISO (an extra) or else rslab's supernodal LU for wide bands,
+        SuperLU where the library is not installed); the analysis, done once per pattern, is in
+        ``analysis``. The banded and library backends fall back to SuperLU
         wherever their solve fails the backward-error check.
 
     Notes
@@ -160,12 +163,12 @@ class SaddlePointSolver:
         backend = resolve_backend(backend)
         if backend == "banded" and scaling == "ruiz":
             raise InputError("backend='banded' needs scaling 'diagonal' or 'none' (Ruiz scales per column of S)")
-        if backend in ("klu", "pardiso") and (scaling == "ruiz" or self.pivot_tol > 0):
+        if backend in LIBRARY_BACKENDS and (scaling == "ruiz" or self.pivot_tol > 0):
             raise InputError(f"backend={backend!r} needs scaling 'diagonal' or 'none' and pivot_tol = 0")
         plain = scaling == "ruiz" or self.pivot_tol > 0  # needs SuperLU (or banded) factors
         #: the structural analysis of the pattern (plain data; ``analysis["backend"]`` is the LU used)
         self.analysis = dict(analyse(pattern, "superlu" if scaling == "ruiz" and backend == "auto" else backend))
-        if plain and self.analysis["backend"] in ("klu", "pardiso"):
+        if plain and self.analysis["backend"] in LIBRARY_BACKENDS:
             self.analysis = dict(analyse(pattern, "superlu"), requested="auto",
                                  reason="scaling='ruiz' or pivot_tol > 0 need SuperLU's factors")
         self.backend = self.analysis["backend"]
@@ -276,7 +279,7 @@ class SaddlePointSolver:
                         lu = BandedBorderLU(As.data, self.n1, self.n2, self.analysis["kl"], self.analysis["ku"],
                                             perm["banded"])
                     else:
-                        lu = (KLULU if self.backend == "klu" else PardisoLU)(As, self.pattern)
+                        lu = _LIBRARY_LU[self.backend](As, self.pattern)
                 except SingularShiftError:  # A11 singular where S need not be: SuperLU decides
                     self.stats.add(refactorizations=1)
             if lu is None:
@@ -320,7 +323,7 @@ class SaddlePointSolver:
         fallback = ((
             # the banded LU pivots within A11 only (KLU, PARDISO: own pivoting): SuperLU on the same matrix first
             lambda As=As: spla.splu(As, permc_spec="COLAMD", diag_pivot_thresh=self.diag_pivot_thresh),
-        ) if other and isinstance(lu, (BandedBorderLU, KLULU, PardisoLU)) else ()) + (
+        ) if other and isinstance(lu, (BandedBorderLU, KLULU, RslabLU, PardisoLU)) else ()) + (
             # more weight on the diagonal of the equilibrated matrix, same ordering (cheap)
             lambda As=As: spla.splu(As, permc_spec=spec, diag_pivot_thresh=min(0.01, self.diag_pivot_thresh)),
             # a fresh column ordering
@@ -355,7 +358,7 @@ class SaddlePointSolver:
         """
         if self.backend == "banded":
             return self.pattern[("ordering", "banded")]
-        if self.backend in ("klu", "pardiso"):  # they order the matrix themselves (ordering kept in the pattern)
+        if self.backend in LIBRARY_BACKENDS:  # they order the matrix themselves (ordering kept in the pattern)
             return None
         if not self._reusable():
             return None

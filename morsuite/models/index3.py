@@ -234,7 +234,7 @@ class Index3Model:
 
     @property
     def lu_backend(self) -> str:
-        """The sparse-LU backend of the model's solvers: ``"auto"`` (default), ``"superlu"``, ``"banded"``, ``"klu"``, ``"pardiso"``.
+        """The sparse-LU backend of the model's solvers: ``"auto"`` (default), ``"superlu"``, ``"banded"``, ``"klu"``, ``"rslab"``, ``"pardiso"``.
 
         ``"auto"`` chooses from the sparsity pattern alone
         (:func:`morsuite.linalg.backends.choose`); setting it forces one for every

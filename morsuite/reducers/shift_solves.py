@@ -94,10 +94,10 @@ def default_threads(backend: str) -> int:
     dsms(2e5) or tcom(2e5) on 2 threads took 0.46-0.55 of the serial time with SuperLU and
     0.48-0.64 with the banded LU (0.70-0.79 with their solves). BLAS runs single-threaded
     inside a reduction (``reducers.base.BLAS_THREADS``), so the threads do not compete
-    with BLAS threads. More than 2 was not measured. KLU through kvxopt holds the GIL for
-    its whole numeric factorization (measured 2026-11-26: a Python loop in another thread
-    stalled for the whole call), so threads cannot overlap its LUs. PARDISO's calls go
-    through ctypes, which releases the GIL.
+    with BLAS threads. More than 2 was not measured. KLU through nbklu holds the GIL for
+    its numeric factorization (measured 2026-11-27: a Python loop in another thread ran about 1/70
+    of its iterations during the call; kvxopt, the former KLU, held it too), so threads cannot
+    overlap its LUs. rslab's factorizations and PARDISO's calls (ctypes) release the GIL.
     """
     if backend == "klu":
         return 1
