@@ -132,9 +132,17 @@ def moded(results, tmp_path_factory):
     class WithModes(runner.Results):
         def __init__(self, *a, **k):
             super().__init__(*a, modes=MODES, **k)
+    pages = []
+
+    def keep(data, *a, **k):
+        pages.append(data)
+        return realize(data, *a, **k)
+    realize = runner.realize_page
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(runner, "Results", WithModes)
+        mp.setattr(runner, "realize_page", keep)
         res = run(copy / "demo.toml", out=copy / "results", quiet=True, formats=("png", "svg"))
+    res.page_data = pages[0]
     return copy, res
 
 
@@ -222,6 +230,26 @@ def test_modes_section_shows_the_planted_modes_and_poles(moded):
     assert svg.count("<path") == len(MODES["poles"][0]["real"])
     assert svg.count("<circle") == sum(len(p["real"]) for p in MODES["poles"][1:])
     assert MODES["note"] in text and "irka r = 4" in text
+
+
+def test_a_table_of_many_sizes_shows_its_largest_and_folds_the_others(moded):
+    from morsuite.studies import pages
+
+    rows = [{"method": m, "r_requested": r, "r": r, "states": r, "status": "ok", "h2_error": float(r * (i + 1))}
+            for r in (2, 4, 6, 8, 10) for i, m in enumerate(("bt", "irka"))]
+    study = moded[1].study
+    boards = pages.scoreboards(study, [{"name": "t", "title": "T", "rows": rows}])
+    assert [b["where"] for b in boards] == [f"r = {r}" for r in (2, 4, 6, 8, 10)]
+    assert [b["folded"] for b in boards] == [True] * 4 + [False]     # more than _OPEN_SIZES sizes
+    assert [b["folded"] for b in pages.scoreboards(study, [{"name": "t", "title": "T", "rows": rows[:6]}])] == \
+        [False] * 3
+    html = H.render_study({**moded[1].page_data, "scoreboards": boards})
+    p = Tables()
+    p.feed(html)
+    assert p.classes.count("scoreboard") == 5
+    fold = html[html.index('<details class="sizes">'):]
+    assert fold.index("4 more sizes of this table (r = 2, r = 4, r = 6, r = 8)") < fold.index("r = 2")
+    assert html.index("· r = 10") < html.index('<details class="sizes">')   # the largest open, before the fold
 
 
 def test_no_modes_data_no_modes_section(results):

@@ -15,6 +15,12 @@ Table cells carry the flags of the numbers they show, visibly (a phone has no ho
 - ``converged``, ``stable``, ``*_trusted``, ``*_certified`` as ``yes`` / ``no`` (``no`` in
   red; ``growth`` and a ``status`` other than ``ok`` in red too); ``cached`` as ``cache``.
 
+A study page opens with a scoreboard per size compared (:func:`scoreboard_view`: a row per
+method, a column per measure, the best value marked and the others as ratios to it, flags as
+the short marks of :data:`MARKS`), and shows a modes section (:func:`modes_view`, :func:`pole_svg`)
+when the study's data carry modes; :func:`headline` is the one-line summary on the results
+folder's page. docs/design/reports.md describes them.
+
 Cost: Jinja2's import (about 30 ms) and a render in milliseconds; the study runner renders
 only when the page's data, these templates or Jinja2's version changed
 (:mod:`morsuite.studies.pages`).
@@ -133,8 +139,9 @@ def _value(row, columns):
 
 
 def _ratio(q: float) -> str:
-    """A ratio to the best: two decimals below 10 (1.004 reads 1.00, not 1), else 3 significant digits."""
-    return f"{q:.2f}" if q < 10 else f"{q:.3g}"
+    """A ratio to the best: two decimals below 10 (1.004 reads 1.00, not 1), 3 significant digits below
+    1000, whole numbers below 10^6 (1862, not 1.86e+03), else 2 digits and an exponent."""
+    return f"{q:.2f}" if q < 10 else f"{q:.3g}" if q < 1000 else f"{q:.0f}" if q < 1e6 else f"{q:.1e}"
 
 
 def scoreboard_view(board: dict) -> dict:
@@ -307,7 +314,11 @@ def render_study(page: dict) -> str:
     import markupsafe
 
     tables = [{**t, "view": table_view(t["columns"], t["rows"])} for t in page["tables"]]
-    boards = [scoreboard_view(b) for b in page.get("scoreboards") or []]
+    boards = []  # per table: its open scoreboards and its folded ones, in page order
+    for b in page.get("scoreboards") or []:
+        if not boards or boards[-1]["table"] != b["table"]:
+            boards.append({"table": b["table"], "open": [], "folded": []})
+        boards[-1]["folded" if b.get("folded") else "open"].append(scoreboard_view(b))
     modes = page.get("modes") or {}
     poles = pole_svg(modes.get("poles"))
     if poles is not None:

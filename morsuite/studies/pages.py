@@ -113,24 +113,27 @@ def _cache_counts(artifacts) -> dict:
 _BOARD_COLUMNS = ("method", "r_requested", "r", "states", "status", "converged", "stable", "max_abs_error",
                   "h2_error", "h2_trusted", "hinf_error", "hinf_certified", "max_output_error", "time_standalone_s",
                   "time_s", "lu_count_standalone", "lu_count", "worse_than_zero")
+#: a table with more sizes than this shows only its largest size's scoreboard open, the others folded
+_OPEN_SIZES = 3
 #: scene kinds whose figure is a study's key figure (its thumbnail on the results folder's page), in preference
 _KEY_KINDS = ("sigma", "compare", "error", "error_vs_r", "pareto")
 
 
 def scoreboards(study, tables) -> list:
     """One scoreboard per size compared in each table scene of two or more methods: ``{"table", "title",
-    "where", "rows"}``, the rows those of the table (the summary's values, not recomputed) grouped as
-    the table's verdict groups them (:func:`morsuite.studies.scenes.order_groups`)."""
+    "where", "folded", "rows"}``, the rows those of the table (the summary's values, not recomputed)
+    grouped as the table's verdict groups them (:func:`morsuite.studies.scenes.order_groups`). A table of
+    more than :data:`_OPEN_SIZES` sizes shows its largest open and the others ``folded``."""
     from .scenes import order_groups
 
     out = []
     for t in tables:
         if len({row.get("method") for row in t["rows"]}) < 2:
             continue
-        for where, rows in order_groups(t["rows"]):
-            if len(rows) < 2:
-                continue
+        groups = [(where, rows) for where, rows in order_groups(t["rows"]) if len(rows) >= 2]
+        for i, (where, rows) in enumerate(groups):
             out.append({"table": t["name"], "title": t["title"], "where": where,
+                        "folded": len(groups) > _OPEN_SIZES and i < len(groups) - 1,
                         "rows": [{**{c: row.get(c) for c in _BOARD_COLUMNS},
                                   "label": study.methods[row["method"]].label if row["method"] in study.methods
                                   else row["method"]} for row in rows]})
@@ -190,7 +193,7 @@ def study_page(study, outputs, summary, manifest: dict, modes=None) -> dict:
              "norm_options": {k: v for k, v in manifest["norms"]["options"].items()
                               if k in manifest["norms"]["summary"]}}
     boards = scoreboards(study, [t for t in tables if t["name"] != summary.name])
-    heads = [h for h in (headline(b) for b in boards) if h]
+    heads = [h for h in (headline(b) for b in boards if b["table"] == boards[0]["table"]) if h]
     return plain({
         "scoreboards": boards, "headline": heads[-1] if heads else "", "key_figure": _key_figure(study, figures),
         "modes": modes or None,
