@@ -1,7 +1,9 @@
 """The study's HTML page (``OUT/NAME/index.html``) and the results folder's (``OUT/index.html``).
 
 :func:`study_page` gathers, as plain data, what a reader of a study needs on one page: its
-description, the verdicts of its tables ("which method wins, by how much, in which norm"),
+description, a scoreboard per size each table compares (:func:`scoreboards`) and a one-line
+headline, the study's key figure (the thumbnail on the results folder's page), the modes and
+poles when the study has them, the verdicts of its tables ("which method wins, by how much, in which norm"),
 the figures it drew, every table with the trusted/certified marks and convergence flags,
 the timings beside the LU counts that are their floor, and the run's facts from the
 manifest (versions, machine, scheduler, every method's options, what came from the cache).
@@ -34,7 +36,7 @@ from ..report.files import sha256_file, write_text
 from ..utils import to_plain as plain
 from .cache import source_digest
 
-__all__ = ["PAGE", "study_page", "page_key", "realize_page", "write_index", "index_entries"]
+__all__ = ["PAGE", "study_page", "scoreboards", "page_key", "realize_page", "write_index", "index_entries"]
 
 #: the page's file name in a study folder and in the results folder
 PAGE = "index.html"
