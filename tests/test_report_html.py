@@ -50,9 +50,25 @@ kind = "table"
 model = "dsms"
 methods = ["irka", "bt", "irka_fo"]
 r = 4
-r_by_method = { irka_fo = 8 }
+r_by_method = { irka_fo = 8, bt = 8 }
 norms = ["h2", "hinf"]
 """
+
+#: planted modes data in the format of docs/design/reports.md ("Modes and poles"): what the page must show
+MODES = {
+    "rows": [
+        {"model": "dsms", "method": "irka", "mode": 1, "full_frequency": 0.123456, "reduced_frequency": 0.123457,
+         "rel_frequency_error": 8.1e-6, "damping_error": 2.5e-5, "mac": 0.99998},
+        {"model": "dsms", "method": "irka_fo", "mode": 1, "full_frequency": 0.123456,
+         "reduced_frequency": 0.1236, "rel_frequency_error": 1.17e-3, "damping_error": 4e-4, "mac": None},
+        {"model": "dsms", "method": "bt", "mode": 2, "full_frequency": 0.5, "reduced_frequency": None,
+         "rel_frequency_error": None, "damping_error": None, "mac": None},
+    ],
+    "poles": [{"label": "full", "real": [-0.01, -0.02, -0.05], "imag": [0.12, 0.5, 1.3]},
+              {"label": "irka r = 4", "real": [-0.0101, -0.021], "imag": [0.1235, 0.49]},
+              {"label": "bt r = 8", "real": [-0.3], "imag": [0.0]}],
+    "note": "irka_fo has no lift V q: no MAC.",
+}
 
 
 class Tables(HTMLParser):
@@ -60,12 +76,16 @@ class Tables(HTMLParser):
 
     def __init__(self):
         super().__init__()
-        self.tables, self.imgs, self.links, self._cell = [], [], [], None
+        self.tables, self.classes, self.imgs, self.links, self._cell = [], [], [], [], None
+        self.sections = []
 
     def handle_starttag(self, tag, attrs):
         a = dict(attrs)
         if tag == "table":
             self.tables.append([])
+            self.classes.append(a.get("class") or "")
+        elif tag == "section":
+            self.sections.append(a.get("class") or a.get("id") or "")
         elif tag == "tr":
             self.tables[-1].append([])
         elif tag in ("td", "th"):
@@ -99,12 +119,164 @@ def results(tmp_path_factory):
     return tmp, res
 
 
+@pytest.fixture(scope="module")
+def moded(results, tmp_path_factory):
+    """The demo study re-run from the cache with the planted modes data handed to the page (the hook the
+    modes analysis plugs into: ``Results.modes``)."""
+    from morsuite.studies import runner
+
+    tmp, _ = results
+    copy = tmp_path_factory.mktemp("moded")
+    shutil.copytree(tmp, copy, dirs_exist_ok=True, copy_function=shutil.copy2)
+
+    class WithModes(runner.Results):
+        def __init__(self, *a, **k):
+            super().__init__(*a, modes=MODES, **k)
+    pages = []
+
+    def keep(data, *a, **k):
+        pages.append(data)
+        return realize(data, *a, **k)
+    realize = runner.realize_page
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(runner, "Results", WithModes)
+        mp.setattr(runner, "realize_page", keep)
+        res = run(copy / "demo.toml", out=copy / "results", quiet=True, formats=("png", "svg"))
+    res.page_data = pages[0]
+    return copy, res
+
+
+def _scoreboard_cells(page, table_index=0):
+    """The scoreboard's rows as {method: {heading: (text, class)}}."""
+    boards = [t for t, c in zip(page.tables, page.classes) if c == "scoreboard"]
+    head = [c[0] for c in boards[table_index][0]]
+    return {row[0][0].split()[0]: dict(zip(head, row)) for row in boards[table_index][1:]}, len(boards)
+
+
+def test_scoreboard_one_row_per_method_values_best_and_ratios_from_the_table(results):
+    tmp, res = results
+    page = parse(res.outdir / "index.html")
+    rows, n = _scoreboard_cells(page)
+    assert n == 1                                      # tab compares its three methods at 8 states
+    csv = pd.read_csv(res.outdir / "tab.csv")
+    at8 = csv[csv.states == 8].set_index("method")
+    assert sorted(rows) == sorted(at8.index) == ["bt", "irka", "irka_fo"]
+    for heading, col in (("band max", "max_abs_error"), ("H2", "h2_error"), ("H∞", "hinf_error")):
+        best = at8[col].min()
+        for method, cells in rows.items():
+            text, cls = cells[heading]
+            value = float(text.replace("≥", "").replace("≈", "").replace("✓", "").split()[0].split("×")[0]
+                          .replace("best", ""))
+            assert math.isclose(value, at8.loc[method, col], rel_tol=5e-4), (heading, method, text)
+            if at8.loc[method, col] == best:
+                assert "best" in cls and text.endswith("best")
+            else:                                      # the ratio to the best, to the digits shown
+                ratio = float(text.rsplit("×", 1)[1])
+                assert math.isclose(ratio, at8.loc[method, col] / best, rel_tol=6e-3), (heading, method, text)
+    # the planted flag: irka stopped after 2 iterations is marked "nc" beside its name, with its meaning
+    assert "nc" in rows["irka"]["method"][0].split() and not at8.loc["irka", "converged"]
+    text = (res.outdir / "index.html").read_text()
+    assert 'title="not converged: the method' in text and "<details" in text
+
+
+def test_scoreboard_view_marks_planted_flags_and_ties():
+    rows = [
+        {"method": "a", "status": "ok", "converged": True, "stable": True, "max_abs_error": 2.0, "h2_error": 1.0,
+         "h2_trusted": False, "hinf_error": 3.0, "hinf_certified": True, "time_standalone_s": 1.0, "lu_count": 0},
+        {"method": "b", "status": "ok", "converged": False, "stable": False, "max_abs_error": float("inf"),
+         "h2_error": float("inf"), "hinf_error": float("inf"), "time_s": 2.0, "lu_count": 4,
+         "worse_than_zero": "band,h2,hinf"},
+        {"method": "c", "status": "ok", "converged": True, "stable": True, "max_abs_error": 2.0, "h2_error": 4.0,
+         "h2_trusted": True, "hinf_error": 6.0, "time_standalone_s": 0.5, "lu_count": 2},
+        {"method": "d", "status": "failed"},
+    ]
+    v = H.scoreboard_view({"title": "t", "where": "r = 2", "rows": rows})
+    assert [c["heading"] for c in v["columns"]] == ["band max", "H2", "H∞", "time (s)", "LUs"]
+    a, b, c, d = v["rows"]
+    cell = {r["method"]: dict(zip([k["key"] for k in v["columns"]], r["cells"])) for r in v["rows"]}
+    assert cell["a"]["band"]["best"] and cell["c"]["band"]["best"]          # a tie: both best
+    assert [m for m, _ in cell["a"]["h2"]["marks"]] == ["≈"] and cell["a"]["h2"]["ratio"] == "best"
+    assert cell["c"]["h2"]["ratio"] == "×4.00" and cell["c"]["hinf"]["ratio"] == "×2.00"
+    assert [m for m, _ in cell["a"]["hinf"]["marks"]] == ["✓"] and [m for m, _ in cell["c"]["hinf"]["marks"]] == ["≥"]
+    assert [m for m, _ in b["marks"]] == ["nc", "unst"] and cell["b"]["h2"]["text"] == "∞"
+    assert cell["b"]["h2"]["ratio"] == "" and "zero" in [m for m, _ in cell["b"]["band"]["marks"]]
+    assert cell["b"]["time"]["text"] == "2" and cell["b"]["time"]["ratio"] == "×4.00"   # time_s when no standalone
+    assert cell["a"]["lus"]["best"] and cell["c"]["lus"]["ratio"] == ""       # best 0: no ratio
+    assert [m for m, _ in d["marks"]] == ["fail"] and all(x["text"] == "" for x in d["cells"])
+    assert all(m in H.MARKS for r in v["rows"] for m, _ in r["marks"])
+    assert H.headline({"where": "r = 2", "rows": rows}) == \
+        "r = 2: a has the smallest H2 error, 4.00x below c (not accurate to four digits)"
+    assert H.headline({"where": "r = 2", "rows": rows[1:2]}) == ""
+
+
+def test_modes_section_shows_the_planted_modes_and_poles(moded):
+    tmp, res = moded
+    page = parse(res.outdir / "index.html")
+    text = (res.outdir / "index.html").read_text()
+    assert "modes" in page.sections
+    modes = [t for t, c in zip(page.tables, page.classes) if c == "modes"]
+    assert len(modes) == 1
+    head = [c[0] for c in modes[0][0]]
+    assert head == list(H.MODES_COLUMNS)
+    body = [dict(zip(head, [c[0] for c in row])) for row in modes[0][1:]]
+    assert [r["method"] for r in body] == [r["method"] for r in MODES["rows"]]
+    for got, want in zip(body, MODES["rows"]):
+        for col in ("full_frequency", "reduced_frequency", "mac"):
+            if want[col] is not None:
+                assert math.isclose(float(got[col]), want[col], rel_tol=5e-4)
+    assert body[1]["mac"] == "no lift" and body[2]["reduced_frequency"] == "missing"
+    # the pole figure: one cross per full-model pole, one ring per reduced-model pole
+    svg = text[text.index('<svg class="poles"'):text.index("</svg>")]
+    assert svg.count("<path") == len(MODES["poles"][0]["real"])
+    assert svg.count("<circle") == sum(len(p["real"]) for p in MODES["poles"][1:])
+    assert MODES["note"] in text and "irka r = 4" in text
+
+
+def test_a_table_of_many_sizes_shows_its_largest_and_folds_the_others(moded):
+    from morsuite.studies import pages
+
+    rows = [{"method": m, "r_requested": r, "r": r, "states": r, "status": "ok", "h2_error": float(r * (i + 1))}
+            for r in (2, 4, 6, 8, 10) for i, m in enumerate(("bt", "irka"))]
+    study = moded[1].study
+    boards = pages.scoreboards(study, [{"name": "t", "title": "T", "rows": rows}])
+    assert [b["where"] for b in boards] == [f"r = {r}" for r in (2, 4, 6, 8, 10)]
+    assert [b["folded"] for b in boards] == [True] * 4 + [False]     # more than _OPEN_SIZES sizes
+    assert [b["folded"] for b in pages.scoreboards(study, [{"name": "t", "title": "T", "rows": rows[:6]}])] == \
+        [False] * 3
+    html = H.render_study({**moded[1].page_data, "scoreboards": boards})
+    p = Tables()
+    p.feed(html)
+    assert p.classes.count("scoreboard") == 5
+    fold = html[html.index('<details class="sizes">'):]
+    assert fold.index("4 more sizes of this table (r = 2, r = 4, r = 6, r = 8)") < fold.index("r = 2")
+    assert html.index("· r = 10") < html.index('<details class="sizes">')   # the largest open, before the fold
+
+
+def test_no_modes_data_no_modes_section(results):
+    tmp, res = results
+    page = parse(res.outdir / "index.html")
+    assert "modes" not in page.sections and "modes" not in page.classes and "<svg" not in \
+        (res.outdir / "index.html").read_text()
+    assert H.modes_view(None) is None and H.modes_view({"rows": []}) is None and H.pole_svg([]) is None
+
+
+def test_results_index_has_thumbnail_headline_and_folded_description(results):
+    tmp, res = results
+    path = tmp / "results" / "index.html"
+    page = parse(path)
+    text = path.read_text()
+    assert page.imgs == ["demo/err.png"] and (tmp / "results" / "demo" / "err.png").is_file()
+    assert "8 states: " in text and "has the smallest H2 error" in text
+    assert "<details><summary>description</summary><p>A quick comparison.</p></details>" in text
+
+
 def test_page_shows_every_figure_and_the_summary_as_its_csv_says(results):
     tmp, res = results
     page = parse(res.outdir / "index.html")
     assert sorted(page.imgs) == ["err.png"] and (res.outdir / "err.png").is_file()
     csv = pd.read_csv(res.outdir / "summary.csv")
-    summary = page.tables[1]               # tab, then the summary, then timings
+    plain_tables = [t for t, c in zip(page.tables, page.classes) if not c]
+    summary = plain_tables[1]              # tab, then the summary, then timings
     head = [c[0] for c in summary[0]]
     assert head == list(csv.columns)
     assert len(summary) - 1 == len(csv) > 0  # one HTML row per CSV row (zip below would hide a missing one)
@@ -202,21 +374,36 @@ CHROMIUM = find_chromium()
 
 @pytest.mark.skipif(CHROMIUM is None, reason="no Chromium found (Debian: apt-get install chromium; or set "
                                              "MORSUITE_CHROMIUM): the page is not checked in a browser")
-@pytest.mark.parametrize("width,height,mobile", [(1280, 900, False), (390, 844, True)])
-def test_page_renders_in_headless_chromium(results, width, height, mobile):
+@pytest.mark.parametrize("width,height,mobile", [(1280, 900, False), (400, 800, True), (390, 844, True)])
+def test_page_renders_in_headless_chromium(results, moded, width, height, mobile):
     from PIL import Image
 
     tmp, res = results
     with Browser(CHROMIUM) as b:
-        for page in (res.outdir / "index.html", tmp / "results" / "index.html"):
+        for page in (res.outdir / "index.html", tmp / "results" / "index.html", moded[1].outdir / "index.html"):
             b.open(page.as_uri(), width, height, mobile)
             images = b.evaluate("[...document.images].map(i => [i.getAttribute('src'), i.complete, i.naturalWidth])")
             assert all(done and w > 0 for _, done, w in images), images
             assert b.errors() == []
             # nothing wider than the screen: wide tables scroll inside their box
             assert b.evaluate("document.documentElement.scrollWidth") <= width
+            # nothing but what a scroll box holds reaches past the viewport (the box itself does not)
+            wide = b.evaluate("[...document.querySelectorAll('body *')].filter(e => "
+                              "e.getBoundingClientRect().right > window.innerWidth + 0.5 && "
+                              "!(e.parentElement && e.parentElement.closest('.scroll')))"
+                              ".map(e => e.tagName + '.' + e.className)")
+            assert wide == [], wide
+            modes = b.evaluate("[document.querySelectorAll('section.modes table.modes tbody tr').length, "
+                               "document.querySelectorAll('section.modes svg.poles').length]")
+            assert modes == ([len(MODES["rows"]), 1] if moded[0] in page.parents else [0, 0])
+            if page.parent.name == "demo":
+                n = b.evaluate("[...document.querySelectorAll('table.scoreboard')].map(t => t.tBodies[0].rows.length)")
+                assert n == [3]
+                if width >= 1280:  # the scoreboard shows whole, without a sideways scroll of its own
+                    assert b.evaluate("[...document.querySelectorAll('table.scoreboard')].every(t => "
+                                      "t.parentElement.scrollWidth <= t.parentElement.clientWidth)")
             shot = Image.open(io.BytesIO(b.screenshot())).convert("L")
             px = np.asarray(shot, dtype=float)
             assert px.shape[1] == width and px.shape[0] >= height // 2
             assert (px < 200).mean() > 0.01 and px.std() > 10, "the screenshot is blank"
-            shot.save(tmp / f"{page.parent.name}_{width}.png")   # to look at by hand
+            shot.save(page.parent / f"shot_{width}.png")   # to look at by hand

@@ -17,6 +17,12 @@ Table cells carry the flags of the numbers they show, visibly (a phone has no ho
 - ``converged``, ``stable``, ``*_trusted``, ``*_certified`` as ``yes`` / ``no`` (``no`` in
   red; ``growth`` and a ``status`` other than ``ok`` in red too); ``cached`` as ``cache``.
 
+A study page opens with a scoreboard per size compared (:func:`scoreboard_view`: a row per
+method, a column per measure, the best value marked and the others as ratios to it, flags as
+the short marks of :data:`MARKS`), and shows a modes section (:func:`modes_view`, :func:`pole_svg`)
+when the study's data carry modes; :func:`headline` is the one-line summary on the results
+folder's page. docs/design/reports.md describes them.
+
 Cost: Jinja2's import (about 30 ms) and a render in milliseconds; the study runner renders
 only when the page's data, these templates or Jinja2's version changed
 (:mod:`morsuite.studies.pages`).
@@ -30,7 +36,8 @@ import math
 from numbers import Integral, Real
 from pathlib import Path
 
-__all__ = ["TEMPLATES", "template_digest", "cell", "table_view", "render_study", "render_index"]
+__all__ = ["TEMPLATES", "template_digest", "cell", "table_view", "MARKS", "SCOREBOARD_MEASURES", "scoreboard_view",
+           "headline", "modes_view", "pole_svg", "render_study", "render_index"]
 
 #: the folder of the page templates (package data)
 TEMPLATES = Path(__file__).resolve().parent / "templates"
@@ -100,6 +107,200 @@ def table_view(columns, rows) -> dict:
     return {"columns": columns, "rows": [[cell(c, row.get(c), row) for c in columns] for row in rows]}
 
 
+#: the scoreboard's short marks and what each means (shown on hover and in the page's legend)
+MARKS = {
+    "nc": "not converged: the method's own optimality or fixed-point test failed; its best iterate is shown",
+    "≈": "not trusted: the H2 value is not accurate to four digits (h2_trusted = False)",
+    "≥": "lower bound: the peak of sigma_max(T - T_r) found; the H-infinity error is at least this",
+    "✓": "certified: the H-infinity error lies between this value and the level-set test's upper bound",
+    "unst": "unstable reduced model: its norms are infinite",
+    "zero": "worse than zero: the error is at or above the full model's own norm, which the zero model T_r = 0 "
+            "achieves",
+    "fail": "the reduction failed: no values (the notes say why)",
+}
+#: the scoreboard's columns: (key, heading, what it is, the summary columns it reads, first present wins,
+#: the name of the norm in ``worse_than_zero``)
+SCOREBOARD_MEASURES = (
+    ("band", "band max", "max over the band's grid of sigma_max(T - T_r) (max_abs_error)", ("max_abs_error",), "band"),
+    ("h2", "H2", "||T - T_r||_H2, exact over the whole axis (h2_error)", ("h2_error",), "h2"),
+    ("hinf", "H∞", "||T - T_r||_Hinf over the whole axis (hinf_error)", ("hinf_error",), "hinf"),
+    ("output", "y(t) max", "max_t ||y(t) - y_r(t)||_2 of the time scene (max_output_error)", ("max_output_error",),
+     "max_output"),
+    ("time", "time (s)", "the reduction at this size alone (time_standalone_s; time_s if not recorded)",
+     ("time_standalone_s", "time_s"), None),
+    ("lus", "LUs", "sparse LUs of the reduction at this size alone (lu_count_standalone; lu_count if not recorded)",
+     ("lu_count_standalone", "lu_count"), None),
+)
+
+
+def _value(row, columns):
+    for c in columns:
+        v = row.get(c)
+        if not _missing(v) and not isinstance(v, bool) and isinstance(v, Real):
+            return c, v
+    return columns[0], None
+
+
+def _ratio(q: float) -> str:
+    """A ratio to the best: two decimals below 10 (1.004 reads 1.00, not 1), 3 significant digits below
+    1000, whole numbers below 10^6 (1862, not 1.86e+03), else 2 digits and an exponent."""
+    return f"{q:.2f}" if q < 10 else f"{q:.3g}" if q < 1000 else f"{q:.0f}" if q < 1e6 else f"{q:.1e}"
+
+
+def scoreboard_view(board: dict) -> dict:
+    """The view of one scoreboard: ``board`` is ``{"title", "where", "rows"}`` with summary rows (dicts of
+    the summary's columns and ``label``, the method's label), as :func:`morsuite.studies.pages.study_page`
+    gathers them.
+
+    Returns ``{"title", "where", "columns": [{"key", "heading", "title"}], "rows": [{"method", "label",
+    "size", "marks": [(mark, meaning)], "cells": [{"text", "ratio", "best", "marks", "title"}]}]}``: a
+    column per measure of :data:`SCOREBOARD_MEASURES` that some row has; per column the smallest finite
+    value is the best (``best`` True, ties all best), every other finite value carries its ratio to the
+    best (``×1.34``; none when the best is 0); marks of :data:`MARKS` on the row (``nc``, ``unst``,
+    ``fail``) and on values (``≈``, ``≥``, ``✓``, ``zero``). Nothing is computed but the ratios.
+    """
+    rows = board["rows"]
+    present = [m for m in SCOREBOARD_MEASURES if any(_value(r, m[3])[1] is not None for r in rows)]
+    best = {}
+    for key, _, _, cols, _ in present:
+        vals = [v for r in rows for v in [_value(r, cols)[1]] if v is not None and math.isfinite(v)]
+        best[key] = min(vals) if vals else None
+    out = []
+    for r in rows:
+        failed = r.get("status") not in (None, "ok")
+        marks = [m for m, bad in (("fail", failed), ("nc", not failed and r.get("converged") is False),
+                                  ("unst", not failed and r.get("stable") is False)) if bad]
+        zero = set(filter(None, str(r.get("worse_than_zero") or "").split(",")))
+        cells = []
+        for key, _, _, cols, norm in present:
+            col, v = _value(r, cols)
+            if v is None or failed:
+                cells.append({"text": "", "ratio": "", "best": False, "marks": [], "title": "not computed"})
+                continue
+            text = _number(v, col)
+            vmarks = []
+            if key == "h2" and r.get("h2_trusted") is False:
+                vmarks.append("≈")
+            if key == "hinf":
+                vmarks.append("✓" if r.get("hinf_certified") is True else "≥")
+            if norm in zero:
+                vmarks.append("zero")
+            b = best[key]
+            is_best = b is not None and math.isfinite(v) and v == b
+            ratio = "best" if is_best else (f"×{_ratio(v / b)}" if b and math.isfinite(v) else "")
+            title = f"{col} = {v!r}" + "".join(f"; {m}: {MARKS[m]}" for m in vmarks)
+            cells.append({"text": text, "ratio": ratio, "best": is_best,
+                          "marks": [(m, MARKS[m]) for m in vmarks], "title": title})
+        size = f"r = {r.get('r') if r.get('r') is not None else r.get('r_requested')}" + (
+            f", {r['states']} states" if r.get("states") is not None else "")
+        out.append({"method": r["method"], "label": r.get("label") or r["method"], "size": size,
+                    "marks": [(m, MARKS[m]) for m in marks], "cells": cells})
+    return {"title": board["title"], "where": board["where"],
+            "columns": [{"key": k, "heading": h, "title": t} for k, h, t, _, _ in present], "rows": out}
+
+
+def headline(board: dict) -> str:
+    """One sentence from a scoreboard: who has the smallest H2 error (else band max, else H-infinity) and
+    by how much below the next, e.g. ``"60 states: irka_fo has the smallest H2 error, 1.34x below so_h2"``
+    (methods by their aliases, as the scoreboard's rows name them);
+    "" when fewer than two methods have that value."""
+    for key, name, cols in (("h2", "H2 error", ("h2_error",)), ("band", "band max error", ("max_abs_error",)),
+                            ("hinf", "H∞ error found", ("hinf_error",))):
+        vals = sorted((v, r["method"]) for r in board["rows"]
+                      if r.get("status") in (None, "ok") for v in [_value(r, cols)[1]]
+                      if v is not None and math.isfinite(v))
+        if len(vals) < 2:
+            continue
+        (b, who), (second, nxt) = vals[0], vals[1]
+        by = ("tied with " if second == b else f"{_ratio(second / b)}x below " if b > 0 else "zero; next ") + nxt
+        flag = " (not accurate to four digits)" if key == "h2" and any(
+            r.get("h2_trusted") is False for r in board["rows"]) else ""
+        return f"{board['where']}: {who} has the smallest {name}, {by}{flag}"
+    return ""
+
+
+#: the modes table's columns (see docs/design/reports.md, "Modes and poles")
+MODES_COLUMNS = ("model", "method", "mode", "full_frequency", "reduced_frequency", "rel_frequency_error",
+                 "damping_error", "mac")
+
+
+def modes_view(modes) -> dict | None:
+    """The modes table of a page (None when the study has no modes data): ``modes["rows"]`` are dicts
+    with the keys of :data:`MODES_COLUMNS` (``mac`` None: the method has no lift, shown as "no lift";
+    ``reduced_frequency`` None: the mode is missing from the reduced model)."""
+    if not modes or not modes.get("rows"):
+        return None
+    view = table_view([c for c in MODES_COLUMNS if any(c in r for r in modes["rows"])], modes["rows"])
+    for row, raw in zip(view["rows"], modes["rows"]):
+        for c, name in zip(row, view["columns"]):
+            if name == "mac" and raw.get("method") and _missing(raw.get("mac")):
+                c.update(text="no lift", cls="na", title="the method has no lift V q: no mode shapes to compare")
+            elif name == "reduced_frequency" and _missing(raw.get(name)):
+                c.update(text="missing", cls="bad", title="no mode of the reduced model matches this one")
+    return view
+
+
+_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22")
+
+
+def pole_svg(poles) -> dict | None:
+    """The pole figure as inline SVG (no file, no drawing library: microseconds per pole) and its legend.
+
+    ``poles``: a list of ``{"label", "real": [...], "imag": [...]}`` (the full model's first, drawn as
+    black crosses; each reduced model's as coloured rings), the poles of the upper half plane.
+    Axes: real part (horizontal) and imaginary part, rad/s (vertical), linear, from the data's range.
+    Returns ``{"svg", "legend": [(label, colour)]}``, or None without poles.
+    """
+    pts = [(float(x), float(y)) for p in poles or [] for x, y in zip(p["real"], p["imag"])
+           if math.isfinite(float(x)) and math.isfinite(float(y))]
+    if not pts:
+        return None
+    w, h, left, bottom, pad = 640, 400, 70, 40, 12
+    x0, x1 = min(min(x for x, _ in pts), 0.0), max(max(x for x, _ in pts), 0.0)
+    y0, y1 = min(min(y for _, y in pts), 0.0), max(y for _, y in pts)
+    x0, x1 = (x0 - 0.05 * (x1 - x0 or 1), x1 + 0.05 * (x1 - x0 or 1))
+    y1 = y1 + 0.05 * (y1 - y0 or 1)
+
+    def sx(x):
+        return left + (x - x0) / (x1 - x0) * (w - left - pad)
+
+    def sy(y):
+        return h - bottom - (y - y0) / (y1 - y0) * (h - bottom - pad)
+
+    parts = [f'<svg class="poles" viewBox="0 0 {w} {h}" role="img" aria-label="poles">',
+             f'<rect x="{left}" y="{pad}" width="{w - left - pad}" height="{h - bottom - pad}" fill="#fff" '
+             f'stroke="#999"/>',
+             f'<line x1="{sx(0):.1f}" y1="{pad}" x2="{sx(0):.1f}" y2="{h - bottom}" stroke="#bbb" '
+             f'stroke-dasharray="4 3"/>']
+    for t in range(5):
+        xv, yv = x0 + (x1 - x0) * t / 4, y0 + (y1 - y0) * t / 4
+        anchor = ("start", "middle", "middle", "middle", "end")[t]
+        parts.append(f'<text x="{sx(xv):.1f}" y="{h - bottom + 16}" font-size="12" text-anchor="{anchor}">'
+                     f'{xv:.3g}</text>')
+        parts.append(f'<text x="{left - 6}" y="{sy(yv) + 4:.1f}" font-size="12" text-anchor="end">{yv:.3g}</text>')
+    parts.append(f'<text x="{(left + w) / 2:.0f}" y="{h - 6}" font-size="13" text-anchor="middle">real part '
+                 f'(1/s)</text>')
+    parts.append(f'<text x="14" y="{(h - bottom) / 2:.0f}" font-size="13" text-anchor="middle" '
+                 f'transform="rotate(-90 14 {(h - bottom) / 2:.0f})">imaginary part (rad/s)</text>')
+    legend = []
+    for i, p in enumerate(poles):
+        full = i == 0
+        colour = "#000" if full else _COLOURS[(i - 1) % len(_COLOURS)]
+        legend.append((p["label"], colour))
+        for x, y in zip(p["real"], p["imag"]):
+            x, y = float(x), float(y)
+            if not (math.isfinite(x) and math.isfinite(y)):
+                continue
+            if full:
+                parts.append(f'<path d="M{sx(x) - 5:.1f},{sy(y) - 5:.1f}l10,10m0,-10l-10,10" stroke="{colour}" '
+                             f'stroke-width="1.5"/>')
+            else:
+                parts.append(f'<circle cx="{sx(x):.1f}" cy="{sy(y):.1f}" r="{3 + 1.5 * ((i - 1) % 4)}" fill="none" '
+                             f'stroke="{colour}" stroke-width="1.3"/>')
+    parts.append("</svg>")
+    return {"svg": "".join(parts), "legend": legend}
+
+
 @functools.lru_cache(maxsize=1)
 def _environment():
     import jinja2
@@ -113,8 +314,21 @@ def render_study(page: dict) -> str:
     """The HTML of one study's page from its plain data ``page`` (see
     :func:`morsuite.studies.pages.study_page` for the keys); tables are shown with
     :func:`table_view`."""
+    import markupsafe
+
     tables = [{**t, "view": table_view(t["columns"], t["rows"])} for t in page["tables"]]
-    return _environment().get_template("study.html.j2").render(page=page, tables=tables)
+    boards = []  # per table: its open scoreboards and its folded ones, in page order
+    for b in page.get("scoreboards") or []:
+        if not boards or boards[-1]["table"] != b["table"]:
+            boards.append({"table": b["table"], "open": [], "folded": []})
+        boards[-1]["folded" if b.get("folded") else "open"].append(scoreboard_view(b))
+    modes = page.get("modes") or {}
+    poles = pole_svg(modes.get("poles"))
+    if poles is not None:
+        poles["svg"] = markupsafe.Markup(poles["svg"])  # built here from numbers and escaped labels only
+    return _environment().get_template("study.html.j2").render(
+        page=page, tables=tables, boards=boards, marks=MARKS, modes=modes_view(modes), poles=poles,
+        modes_note=modes.get("note") or "")
 
 
 def render_index(index: dict) -> str:

@@ -4,7 +4,8 @@
 compared at equal first-order states (a second-order reduced model of order r has 2r
 states; a first-order one at N states runs at r = N), the frequency band of the model or,
 for a model file, a decade beyond its undamped eigenfrequencies, the exact H2 and
-H-infinity errors of every reduction, a verdict table per number of states, an error
+H-infinity errors of every reduction, a verdict table per number of states, a Bode
+magnitude figure (sigma_max of the full model and of every reduced model) and an error
 figure per number of states, error and time against states when several are asked for,
 and a time-domain scene when an input is given. :func:`compare` validates it (nothing
 is written when an argument is wrong: the error names it), writes it as TOML into the
@@ -155,6 +156,9 @@ def compare_spec(model: str, states, methods=None, band=None, input=None, name=N
         spec["scenes"].append({"name": f"table_{n}", "kind": "table", "model": "model", "grid": "band",
                                "methods": aliases, "r": r, **extra, "norms": ["h2", "hinf"],
                                "title": f"{fom.name}: {n} states"})
+        spec["scenes"].append({"name": f"bode_{n}", "kind": "sigma", "model": "model", "grid": "band",
+                               "methods": aliases, "r": r, **extra,
+                               "title": f"{fom.name}: sigma_max of the full and reduced models at {n} states"})
         spec["scenes"].append({"name": f"error_{n}", "kind": "error", "model": "model", "grid": "band",
                                "methods": aliases, "r": r, **extra,
                                "title": f"{fom.name}: absolute error at {n} states"})

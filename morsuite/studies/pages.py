@@ -1,7 +1,9 @@
 """The study's HTML page (``OUT/NAME/index.html``) and the results folder's (``OUT/index.html``).
 
 :func:`study_page` gathers, as plain data, what a reader of a study needs on one page: its
-description, the verdicts of its tables ("which method wins, by how much, in which norm"),
+description, a scoreboard per size each table compares (:func:`scoreboards`) and a one-line
+headline, the study's key figure (the thumbnail on the results folder's page), the modes and
+poles when the study has them, the verdicts of its tables ("which method wins, by how much, in which norm"),
 the figures it drew, every table with the trusted/certified marks and convergence flags,
 the timings beside the LU counts that are their floor, and the run's facts from the
 manifest (versions, machine, scheduler, every method's options, what came from the cache).
@@ -34,7 +36,7 @@ from ..report.files import sha256_file, write_text
 from ..utils import to_plain as plain
 from .cache import source_digest
 
-__all__ = ["PAGE", "study_page", "page_key", "realize_page", "write_index", "index_entries"]
+__all__ = ["PAGE", "study_page", "scoreboards", "page_key", "realize_page", "write_index", "index_entries"]
 
 #: the page's file name in a study folder and in the results folder
 PAGE = "index.html"
@@ -109,13 +111,59 @@ def _cache_counts(artifacts) -> dict:
     return {"reused": reused, "computed": total - reused, "total": total, "kinds": kinds}
 
 
-def study_page(study, outputs, summary, manifest: dict) -> dict:
+#: the summary columns a scoreboard row carries (what :func:`morsuite.report.html.scoreboard_view` reads)
+_BOARD_COLUMNS = ("method", "r_requested", "r", "states", "status", "converged", "stable", "max_abs_error",
+                  "h2_error", "h2_trusted", "hinf_error", "hinf_certified", "max_output_error", "time_standalone_s",
+                  "time_s", "lu_count_standalone", "lu_count", "worse_than_zero")
+#: a table with more sizes than this shows only its largest size's scoreboard open, the others folded
+_OPEN_SIZES = 3
+#: scene kinds whose figure is a study's key figure (its thumbnail on the results folder's page), in preference
+_KEY_KINDS = ("sigma", "compare", "error", "error_vs_r", "pareto")
+
+
+def scoreboards(study, tables) -> list:
+    """One scoreboard per size compared in each table scene of two or more methods: ``{"table", "title",
+    "where", "folded", "rows"}``, the rows those of the table (the summary's values, not recomputed)
+    grouped as the table's verdict groups them (:func:`morsuite.studies.scenes.order_groups`). A table of
+    more than :data:`_OPEN_SIZES` sizes shows its largest open and the others ``folded``."""
+    from .scenes import order_groups
+
+    out = []
+    for t in tables:
+        if len({row.get("method") for row in t["rows"]}) < 2:
+            continue
+        groups = [(where, rows) for where, rows in order_groups(t["rows"]) if len(rows) >= 2]
+        for i, (where, rows) in enumerate(groups):
+            out.append({"table": t["name"], "title": t["title"], "where": where,
+                        "folded": len(groups) > _OPEN_SIZES and i < len(groups) - 1,
+                        "rows": [{**{c: row.get(c) for c in _BOARD_COLUMNS},
+                                  "label": study.methods[row["method"]].label if row["method"] in study.methods
+                                  else row["method"]} for row in rows]})
+    return out
+
+
+def _key_figure(study, figures):
+    """The figure a reader looks at first: the last of the first scene kind of :data:`_KEY_KINDS` that
+    drew one (for ``morsuite compare``: the Bode magnitude plot at the most states), else the first."""
+    kind = {s.name: s.kind for s in study.scenes}
+    for k in _KEY_KINDS:
+        hits = [f for f in figures if kind.get(f["name"]) == k]
+        if hits:
+            return hits[-1]["src"]
+    return figures[0]["src"] if figures else None
+
+
+def study_page(study, outputs, summary, manifest: dict, modes=None) -> dict:
     """The plain data of a study's page.
 
     ``outputs``: ``(item, record)`` pairs of the run's figures and tables in scene order
     (``item`` a FigureData or TableData, ``record`` its :func:`~morsuite.studies.outputs.realize` record);
-    ``summary``: the summary TableData; ``manifest``: the run's manifest (its facts).
+    ``summary``: the summary TableData; ``manifest``: the run's manifest (its facts); ``modes``: the
+    study's modes and poles (``{"rows", "poles", "note"}``, docs/design/reports.md "Modes and poles"),
+    or None (then the page has no modes section).
     """
+    from ..report.html import headline
+
     figures, tables, verdicts = [], [], []
     for item, rec in outputs + [(summary, None)]:
         files = sorted((rec or {}).get("files") or [])
@@ -146,7 +194,11 @@ def study_page(study, outputs, summary, manifest: dict) -> dict:
              "cache": _cache_counts(manifest["artifacts"]), "norms": manifest["norms"]["summary"],
              "norm_options": {k: v for k, v in manifest["norms"]["options"].items()
                               if k in manifest["norms"]["summary"]}}
+    boards = scoreboards(study, [t for t in tables if t["name"] != summary.name])
+    heads = [h for h in (headline(b) for b in boards if b["table"] == boards[0]["table"]) if h]
     return plain({
+        "scoreboards": boards, "headline": heads[-1] if heads else "", "key_figure": _key_figure(study, figures),
+        "modes": modes or None,
         "study": study.name, "title": study.title, "description": study.description,
         "spec": study.path.name if study.path is not None else None,
         "models": models, "grids": grids, "methods": methods, "verdicts": verdicts, "flags": _flags(summary.rows),
@@ -179,7 +231,8 @@ def realize_page(data: dict, outdir: Path, previous: dict | None, rerender: bool
     return {"id": "page/index", "kind": "page", "scene": None, "model": None, "reducer": None, "key": key, "reused": reused, "cached": reused,
             "files": {PAGE: after}, "rendered": [] if reused else [PAGE],
             "changed": [PAGE] if after != before else [], "flags": data["flags"],
-            "verdicts": [v["text"] for v in data["verdicts"]], "time_s": time.perf_counter() - t0}
+            "verdicts": [v["text"] for v in data["verdicts"]], "headline": data.get("headline") or "",
+            "key_figure": data.get("key_figure"), "time_s": time.perf_counter() - t0}
 
 
 def index_entries(root: Path) -> list:
@@ -201,7 +254,9 @@ def index_entries(root: Path) -> list:
                     "reductions": sum(1 for a in arts if a.get("kind") == "reduction"),
                     "figures": sum(1 for a in arts if a.get("kind") == "figure" and a.get("files")),
                     "tables": sum(1 for a in arts if a.get("kind") == "table"),
-                    "flags": "; ".join(page.get("flags") or []),
+                    "flags": "; ".join(page.get("flags") or []), "headline": page.get("headline") or "",
+                    "thumbnail": f"{d.name}/{page['key_figure']}" if page.get("key_figure") and
+                    (d / page["key_figure"]).is_file() else None,
                     "verdicts": " ".join(page.get("verdicts") or [])[:600]})
     return out
 

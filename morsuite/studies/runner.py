@@ -228,7 +228,7 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
         manifest["shared_compute"] = {k: v for k, v in shared.record.items() if k != "log"}
         # the shared phase's time before this study's own run started (all of it when run after it)
         manifest["timing"]["shared_compute_s"] = shared.record.get("started_after_s", shared.record.get("wall_s"))
-    _page(study, shown, summary, manifest, outdir, old, files, rerender)
+    _page(study, shown, summary, manifest, outdir, old, files, rerender, res.modes)
     keep = {str(p.relative_to(outdir)) for p in files} | {"manifest.json"}
     _remove_stale(outdir, old, keep)
     atomic_write_text(outdir / "manifest.json", json.dumps(strict_json(plain(manifest)), indent=1, allow_nan=False))
@@ -243,10 +243,11 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
     return RunResult(study, outdir, manifest, summary, files, notes)
 
 
-def _page(study, shown, summary, manifest, outdir, old, files, rerender):
-    """Write (or reuse) the study's ``index.html`` and record it in the manifest (kind ``page``)."""
+def _page(study, shown, summary, manifest, outdir, old, files, rerender, modes=None):
+    """Write (or reuse) the study's ``index.html`` and record it in the manifest (kind ``page``); ``modes``:
+    the study's modes and poles for the page (``Results.modes``), or None."""
     prev = next((a for a in old.get("artifacts") or [] if isinstance(a, dict) and a.get("kind") == "page"), None)
-    rec = realize_page(study_page(study, shown, summary, manifest), outdir, prev, rerender)
+    rec = realize_page(study_page(study, shown, summary, manifest, modes), outdir, prev, rerender)
     manifest["artifacts"].append(rec)
     manifest["reused" if rec["reused"] else "computed"].append(rec["id"])
     manifest["files"] = sorted(manifest["files"] + [PAGE])

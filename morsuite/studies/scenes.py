@@ -67,7 +67,7 @@ from .norm_options import NORM_MEASURES
 from .time_figures import time_figures
 
 __all__ = ["KINDS", "COMMON_KEYS", "Kind", "TableData", "needs", "build", "output_names", "MEASURES", "AXES",
-           "TIMES", "MAX_POINTS"]
+           "TIMES", "MAX_POINTS", "order_groups"]
 
 _orders_text = orders_text  # its old name here
 
@@ -339,9 +339,24 @@ def _hsv_scene(scene, study, res):
 VERDICT_COLUMNS = ("max_abs_error", "max_rel_error", "h2_error", "hinf_error", "max_output_error", "l2_output_error")
 
 
-def _requested_states(row):
-    """First-order states asked for: r_requested times the ROM's states per order (1 or 2)."""
-    return row["r_requested"] * (row["states"] // row["r"]) if row.get("r") else None
+def order_groups(rows) -> list:
+    """The table's rows grouped by the size they are compared at: ``[(where, rows), ...]`` in
+    increasing size, ``where`` reading ``"r = 4"``, or ``"8 states"`` when the rows' ROMs differ in
+    states per order (first-order beside second-order: compared at equal requested first-order
+    states). A row whose reduction failed (no ``r``) joins the group of its ``r_requested``, or of its
+    requested states when a row of the same method gives its states per order (else it is left out).
+    Used by the verdict and by the page's scoreboard, so both compare the same rows."""
+    by_states = len({row["states"] // row["r"] for row in rows if row.get("r")}) > 1
+    if not by_states:
+        def group(row):
+            return row["r_requested"]
+    else:
+        per = {row["method"]: row["states"] // row["r"] for row in rows if row.get("r")}
+
+        def group(row):
+            return row["r_requested"] * per[row["method"]] if row["method"] in per else None
+    keys = sorted({group(row) for row in rows if group(row) is not None})
+    return [(f"{k} states" if by_states else f"r = {k}", [row for row in rows if group(row) == k]) for k in keys]
 
 
 def _verdict(rows, study) -> str:
@@ -352,11 +367,8 @@ def _verdict(rows, study) -> str:
     lines = []
     ok = [row for row in rows if row["status"] == "ok"]
     by_states = len({row["states"] // row["r"] for row in ok if row.get("r")}) > 1
-    group = _requested_states if by_states else (lambda row: row["r_requested"])
     orders = []
-    for r in sorted({group(row) for row in ok}):
-        at = [row for row in ok if group(row) == r]
-        where = f"{r} states" if by_states else f"r = {r}"
+    for where, at in order_groups(ok):
         orders.append(f"{where}: " + ", ".join(f"{row['method']} r = {row['r_requested']}" for row in at))
         for col in VERDICT_COLUMNS:
             vals = [(row[col], row["method"]) for row in at if isinstance(row.get(col), float) and row[col] == row[col]]
