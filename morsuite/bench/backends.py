@@ -233,6 +233,13 @@ def lu_side_by_side(spec: str, splu_order: str, backends, slow=(), echo=None) ->
     return row
 
 
+def _side_by_side_line(row: dict, names) -> str:
+    """One printed line of part ``lu``: per variant the median seconds, the ratio to splu, the backward error."""
+    cells = [f"{k} {row[f't_{k}']:.3g} s ({row[f't_{k}'] / row['t_splu']:.3f}, berr {row[f'berr_{k}']:.0e})"
+             for k in names if f"t_{k}" in row]
+    return f"{row['model']} (auto {row['auto']}): " + " | ".join(cells)
+
+
 def _load() -> dict:
     """The load averages (1, 5, 15 min) and ``uptime``'s line, for the record."""
     import subprocess
@@ -282,7 +289,7 @@ def bench_lu_backends(quick: bool) -> dict:
             slow = ("superlu",) if large else ()  # SuperLU (COLAMD) on the large 3D solids: the middle shift
             row = lu_side_by_side(spec, order, names, slow, echo=print)
             rows.append(row)
-            print({k: (round(v, 4) if isinstance(v, float) else v) for k, v in row.items() if k.startswith("t_")})
+            print(_side_by_side_line(row, ("splu", *names)))
             judge(f"lu {spec}: auto ({row['auto']}) / splu {order}", row[f"{row['auto']}_over_splu"],
                   (1 / 5 if wide else 1 / 3.5) if not spec.endswith("=4000") else None,
                   f"one LU + solve through the solver (assembly, scaling, check included) over splu {order} + "
