@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import math
 import time
+from numbers import Integral
 
 import numpy as np
 import scipy.linalg as sla
@@ -99,6 +100,12 @@ class Modal(Reducer):
     def max_order(self) -> int:
         """Largest admissible r: :math:`n_1 - n_2 - 1` (Lanczos cannot return every mode)."""
         return self.fom.order - 1
+
+    def _validate_r(self, r):
+        if isinstance(r, Integral) and not isinstance(r, (bool, np.bool_)) and r > self.max_order():
+            raise InputError(f"r = {r} exceeds the most modes shift-invert Lanczos can return (n1 - n2 - 1 = "
+                             f"{self.max_order()}) for modal")
+        return super()._validate_r(r)
 
     def _band(self):
         b = self.options["band"]
@@ -172,7 +179,12 @@ class Modal(Reducer):
     def _reduce(self, r):
         fom, o = self.fom, self.options
         t0 = time.perf_counter()
-        m_static = fom.m if o["static_correction"] else 0
+        if self._solver is None:
+            self._solver = fom.new_solver()
+        static_fresh = o["static_correction"] and self._static is None
+        st = self._static_response() if o["static_correction"] else None
+        m_static = st["X0"].shape[1] if st is not None else 0  # 0 when K is singular on ker G (warned)
+        t1 = time.perf_counter()
         if r < m_static:
             raise InputError(f"r = {r} is smaller than the m = {m_static} static-correction columns of modal; "
                              "use r >= m or static_correction=False")
@@ -181,15 +193,12 @@ class Modal(Reducer):
         need = min(need, fom.order - 1)
         grown = self._compute_modes(max(need, 1))
         modes = self._modes
-        t1 = time.perf_counter()
-        static_fresh = o["static_correction"] and self._static is None
-        st = self._static_response() if o["static_correction"] else None
         t2 = time.perf_counter()
         chosen = self._order(modes, r)[:k]
         chosen = chosen[np.argsort(modes["omega"][chosen], kind="stable")]
         Phi = modes["shapes"][:, chosen]
         V, n_static = Phi, 0
-        if st is not None and st["X0"].shape[1]:
+        if m_static:
             Xs = _static_block(fom, Phi, st["X0"], o["static_tol"])
             n_static = Xs.shape[1]
             V = np.hstack([Phi, Xs])
@@ -203,7 +212,7 @@ class Modal(Reducer):
         paid = (modes["info"]["lu_count"] if grown else 0) + (lus_static if static_fresh else 0)
         shared = lus_modes + lus_static
         covered = bool(modes["info"]["covered"])
-        if n_static < m_static and st is not None and st["X0"].shape[1]:
+        if n_static < m_static:
             self.warn(f"modal: {m_static - n_static} static column(s) lie in the span of the modes (below "
                       f"static_tol = {o['static_tol']:g}); the reduced order is {rom.order}, not {r}")
         info = {
@@ -214,7 +223,7 @@ class Modal(Reducer):
             "lu_count": int(paid), "lu_count_shared": int(shared),
             "setup_reused": paid < shared,  # this call did not pay the r-independent LUs
             "setup_cost": {"modes": modes["time"], "static": st["time"] if st is not None else 0.0},
-            "time_breakdown": {"modes": t1 - t0 if grown else 0.0, "static": t2 - t1 if static_fresh else 0.0,
+            "time_breakdown": {"static": t1 - t0 if static_fresh else 0.0, "modes": t2 - t1 if grown else 0.0,
                                "projection": t3 - t2},
         }
         if o["selection"] == "dominance":
