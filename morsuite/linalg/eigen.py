@@ -162,10 +162,9 @@ def _start_vector(n, dtype=float):
     return v.astype(dtype)
 
 
-def _modes_at(system, solver, sigma, k, tol, maxiter):
+def _modes_at(system, lu, sigma, k, tol, maxiter):
     """Lanczos run for the k eigenvalues nearest sigma: (lam, shapes, multipliers, residuals, solves)."""
     n1, n2 = system.n1, system.n2
-    lu = solver.factor(coeffs=(-sigma, 0.0, 1.0))  # K - sigma M bordered, one LU (cached on the solver)
     count = [0]
 
     def opinv(b):
@@ -202,7 +201,7 @@ def _modes_at(system, solver, sigma, k, tol, maxiter):
 
 @_one_blas_thread
 def constrained_modes(system, k=None, band=None, *, sigma=None, tol: float = 0.0, maxiter: int | None = None,
-                      solver=None, k_max: int | None = None, within_band: bool = True):
+                      solver=None, factorization=None, k_max: int | None = None, within_band: bool = True):
     r"""Undamped constrained modes by shift-invert Lanczos with one saddle-point LU (module docstring).
 
     Parameters
@@ -227,8 +226,11 @@ def constrained_modes(system, k=None, band=None, *, sigma=None, tol: float = 0.0
     maxiter : int, optional
         ARPACK's restart cap (default ``max(1000, 10 k)``).
     solver : SaddlePointSolver, optional
-        The solver whose cache and counters are used (a reducer passes its own);
+        The solver that factors :math:`K - \sigma M` bordered (its counters count the LU);
         default a fresh one of the system (``new_solver``).
+    factorization : SaddleLU, optional
+        That factorization, made earlier (``solver.factor(coeffs=(-sigma, 0, 1))``, e.g. kept by a
+        reducer across calls): no LU is made here.
     k_max : int, optional
         Cap of k when covering a band (default :math:`n_1 - n_2 - 1`).
     within_band : bool
@@ -274,14 +276,22 @@ def constrained_modes(system, k=None, band=None, *, sigma=None, tol: float = 0.0
                          f"return for this model")
     k_max = limit if k_max is None else min(limit, _positive_int("k_max", k_max))
     maxiter_ = maxiter
-    solver = new_solver(system) if solver is None else solver
-    before = solver.stats.copy()
+    if factorization is not None:
+        if tuple(complex(c) for c in factorization.coeffs) != (complex(-sigma), 0j, 1 + 0j):
+            raise InputError(f"factorization is of the coefficients {factorization.coeffs}, not of K - sigma M "
+                             f"with sigma = {sigma:g} (coeffs (-sigma, 0, 1))")
+        lu, lus = factorization, 0
+    else:
+        solver = new_solver(system) if solver is None else solver
+        before = solver.stats.copy()
+        lu = solver.factor(coeffs=(-sigma, 0.0, 1.0))  # K - sigma M bordered: the one LU
+        lus = solver.stats.since(before)["factorizations"]
     solves = 0
     covered = True
     kk = min(k_max, k) if k is not None else min(8, k_max)
     while True:
         mi = maxiter_ if maxiter_ is not None else max(1000, 10 * kk)
-        lam, Phi, mu, res, n = _modes_at(system, solver, sigma, kk, tol, mi)
+        lam, Phi, mu, res, n = _modes_at(system, lu, sigma, kk, tol, mi)
         solves += n
         if band is None:
             break
@@ -302,7 +312,6 @@ def constrained_modes(system, k=None, band=None, *, sigma=None, tol: float = 0.0
             raise InputError(f"band {tuple(band)} holds no mode of the model (nearest: "
                              f"{omega[np.argmin(np.abs(omega - w1))]:.6g} rad/s)")
         lam, Phi, mu, res, omega = lam[keep], Phi[:, keep], mu[:, keep], res[keep], omega[keep]
-    lus = solver.stats.since(before)["factorizations"]
     info = {"sigma": sigma, "lu_count": int(lus), "solves": int(solves), "k_computed": int(kk),
             "covered": bool(covered), "time_s": time.perf_counter() - t0,
             "max_residual": float(res.max()) if res.size else 0.0}

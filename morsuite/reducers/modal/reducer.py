@@ -85,6 +85,8 @@ class Modal(Reducer):
     def __init__(self, fom, **options):
         super().__init__(fom, **options)
         self._solver = None
+        self._lus = {}  # sigma -> the LU of K - sigma M bordered, kept across calls
+        self._lu_total = 0  # every LU this reducer made (the r-independent work's)
         self._modes = None  # the computed pool: omega, shapes, residuals, info, time
         self._static = None  # X0 and its cost
 
@@ -118,6 +120,12 @@ class Modal(Reducer):
         return self._band()[0] ** 2 if self.options["selection"] == "band" else 0.0
 
     # -- r-independent work, kept on the reducer --------------------------
+    def _factor(self, sigma):
+        """The LU of [[K - sigma M, G^T], [G, 0]], made once per sigma and kept."""
+        if sigma not in self._lus:
+            self._lus[sigma] = self._solver.factor(coeffs=(-sigma, 0.0, 1.0))
+        return self._lus[sigma]
+
     def _compute_modes(self, k_needed):
         """The pool of modes (at least k_needed, or every one in the band), computed or grown."""
         sel, fom = self.options["selection"], self.fom
@@ -126,27 +134,24 @@ class Modal(Reducer):
             return False
         limit = fom.order - 1
         k = min(limit, max(k_needed, 2 * have["omega"].size if have else k_needed))
-        if self._solver is None:
-            self._solver = fom.new_solver()
         sigma = self._sigma() if have is None else have["sigma"]
-        kw = {"sigma": sigma, "tol": self.options["tol"], "solver": self._solver}
-        if sel == "band":
-            kw.update(band=self._band(), within_band=False)
         t0 = time.perf_counter()
         try:
-            res = constrained_modes(fom, k=max(k, 1), **kw)
+            lu = self._factor(sigma)
         except SingularShiftError:
             if self.options["sigma"] is not None:
                 raise
             # K singular on ker G (rigid-body modes): a shift below the spectrum
-            sigma = -(self._band()[0] or 1.0) ** 2
-            self.warn(f"modal: K - sigma M is singular at sigma = {kw['sigma']:g} (rigid-body modes?); shift "
-                      f"moved to sigma = {sigma:g}")
-            kw["sigma"] = sigma
-            res = constrained_modes(fom, k=max(k, 1), **kw)
-        elapsed = time.perf_counter() - t0
-        self._modes = {"omega": res.omega, "shapes": res.shapes, "residuals": res.residuals, "sigma": kw["sigma"],
-                       "info": res.info, "time": elapsed, "lus": (have["lus"] if have else 0) + res.info["lu_count"]}
+            old, sigma = sigma, -(self._band()[0] or 1.0) ** 2
+            self.warn(f"modal: K - sigma M is singular at sigma = {old:g} (rigid-body modes?); shift moved to "
+                      f"sigma = {sigma:g}")
+            lu = self._factor(sigma)
+        kw = {"sigma": sigma, "tol": self.options["tol"], "factorization": lu}
+        if sel == "band":
+            kw.update(band=self._band(), within_band=False)
+        res = constrained_modes(fom, k=max(k, 1), **kw)
+        self._modes = {"omega": res.omega, "shapes": res.shapes, "residuals": res.residuals, "sigma": sigma,
+                       "info": res.info, "time": time.perf_counter() - t0}
         if sel == "dominance":
             self._modes["dominance"] = dominance(res.omega, res.shapes, fom.D, fom.F, fom.L, self._band())
         return True
@@ -155,14 +160,12 @@ class Modal(Reducer):
         """X0 = [I 0] S(0)^{-1} [F; 0], or None when K is singular on ker G (warned)."""
         if self._static is None:
             t0 = time.perf_counter()
-            before = self._solver.stats.copy()
             try:
-                X0 = self._solver.factor(coeffs=(0.0, 0.0, 1.0)).solve(self.fom.F)
+                X0 = self._factor(0.0).solve(self.fom.F)
             except SingularShiftError:
                 self.warn("modal: K is singular on ker G (rigid-body modes): T(0) is not finite, no static correction")
                 X0 = np.zeros((self.fom.n1, 0))
-            self._static = {"X0": np.real(X0), "time": time.perf_counter() - t0,
-                            "lus": self._solver.stats.since(before)["factorizations"]}
+            self._static = {"X0": np.real(X0), "time": time.perf_counter() - t0}
         return self._static
 
     # -- reduction ------------------------------------------------------------
@@ -180,7 +183,8 @@ class Modal(Reducer):
         fom, o = self.fom, self.options
         t0 = time.perf_counter()
         if self._solver is None:
-            self._solver = fom.new_solver()
+            self._solver = fom.new_solver(cache_size=0)  # the reducer keeps its LUs itself (_factor)
+        before = self._solver.stats.copy()
         static_fresh = o["static_correction"] and self._static is None
         st = self._static_response() if o["static_correction"] else None
         m_static = st["X0"].shape[1] if st is not None else 0  # 0 when K is singular on ker G (warned)
@@ -207,10 +211,9 @@ class Modal(Reducer):
         Mr, Kr, Dr = sym(V.T @ MV), sym(V.T @ KV), sym(V.T @ (fom.D @ V))
         rom = SecondOrderROM(Mr, Dr, Kr, V.T @ fom.F, fom.L @ V, basis=V)
         t3 = time.perf_counter()
-        lus_modes = modes["lus"]
-        lus_static = st["lus"] if st is not None else 0
-        paid = (modes["info"]["lu_count"] if grown else 0) + (lus_static if static_fresh else 0)
-        shared = lus_modes + lus_static
+        paid = self._solver.stats.since(before)["factorizations"]
+        self._lu_total += paid
+        shared = self._lu_total
         covered = bool(modes["info"]["covered"])
         if n_static < m_static:
             self.warn(f"modal: {m_static - n_static} static column(s) lie in the span of the modes (below "
