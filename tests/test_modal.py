@@ -31,6 +31,7 @@ MODELS = {
     "dsms": lambda: ms.models.dsms(g=100),
     "tcom": lambda: ms.models.tcom(nc=40),
     "fem_block": lambda: ms.models.fem_block(400),
+    "fem_beam": lambda: ms.models.fem_beam(12, 2, 2),
     "mimo": lambda: ms.models.random_constrained(n1=60, n2=3, m=2, p=3, seed=1),
 }
 
