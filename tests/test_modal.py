@@ -11,16 +11,9 @@ import scipy.linalg as sla
 
 import morsuite as ms
 from morsuite.errors import InputError, OptionError
-from support import assert_sets_close
+from support import assert_sets_close, dense_modes
 
 RTOL = 1e-10
-
-
-def dense_modes(fom):
-    """Undamped constrained eigenpairs from a null-space basis Z of G: eigh(Z^T K Z, Z^T M Z)."""
-    Z = sla.null_space(fom.G.toarray()) if fom.n2 else np.eye(fom.n1)
-    lam, Y = sla.eigh(Z.T @ (fom.K @ Z), Z.T @ (fom.M @ Z))
-    return np.sign(lam) * np.sqrt(np.abs(lam)), Z @ Y
 
 
 def undamped(rom):

@@ -10,8 +10,7 @@ import scipy.linalg as sla
 import morsuite as ms
 from morsuite.errors import InputError, ShapeError
 from morsuite.linalg.eigen import constrained_modes, damped_poles
-from support import assert_sets_close
-from test_modal import dense_modes
+from support import assert_sets_close, dense_modes
 
 
 @pytest.fixture(scope="module")

@@ -163,6 +163,8 @@ def match_modes(full: PolesResult, reduced: PolesResult, band=None, *, tol: floa
     Cost: O(n_full n_rom) plus the assignment.
     """
     b = _band(band if band is not None else full.info.get("band"))
+    if b is None:
+        raise InputError("band is needed: give band=(w1, w2) (full carries none)")
     if not (isinstance(tol, (int, float)) and tol > 0):
         raise InputError(f"tol must be a positive number; got {tol!r}")
     fi = np.flatnonzero((full.frequencies >= b[0]) & (full.frequencies <= b[1]))

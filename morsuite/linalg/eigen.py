@@ -40,8 +40,10 @@ shift-invert Arnoldi (``scipy.sparse.linalg.eigs``) on
 mapped to 0) costs one complex LU per shift :math:`\sigma = j\omega` in the band.
 
 Cost: :func:`constrained_modes`, one real LU (kept when a band needs a larger k: only the
-Lanczos run is repeated) and about 2k to 4k solves; :func:`damped_poles`, one complex LU per shift (a few) and the solves of
-Arnoldi. Design note: ``docs/design/modal.md``.
+Lanczos run is repeated) and about 3k to 5k solves; :func:`damped_poles`, one complex LU
+per shift (a few) and the solves of Arnoldi. Both run with one BLAS thread (ARPACK's dense
+work is small; BLAS threads beside the sparse solves only add synchronisation). Design
+note: ``docs/design/modal.md``.
 """
 
 from __future__ import annotations
@@ -128,9 +130,7 @@ class PolesResult:
 
 
 def _one_blas_thread(fn):
-    """Run ``fn`` with one BLAS thread: ARPACK's dense work on ncv x ncv matrices is small, and BLAS
-    threads next to the sparse solves only add synchronisation (dsms(100), 96 poles: 20 s against
-    2.3 s on a loaded 2-core machine, 2026-11-27)."""
+    """Run ``fn`` with one BLAS thread (measured in docs/design/modal.md)."""
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         with blas_threads(1):
@@ -253,7 +253,7 @@ def constrained_modes(system, k=None, band=None, *, sigma=None, tol: float = 0.0
         If :math:`\sigma` is an eigenvalue (e.g. 0 for a free-floating model).
 
     Cost: one sparse LU of order :math:`n_1 + n_2` (none when ``solver`` holds it), the
-    Lanczos solves (about 2k to 4k), k more for the refinement, and O(n1 k²) dense work.
+    Lanczos solves (about 2k to 4k), k more for the refinement, and O(n1 k^2) dense work.
     """
     check_system(system, "system")
     t0 = time.perf_counter()
@@ -318,12 +318,13 @@ def constrained_modes(system, k=None, band=None, *, sigma=None, tol: float = 0.0
     return ModesResult(omega=omega, eigenvalues=lam, shapes=Phi, multipliers=mu, residuals=res, info=info)
 
 
-def _first_order_op(system, lu, sigma):
-    r"""(A - sigma E)^{-1} E on [x; v] (2 n1): one saddle solve with S(sigma) per application."""
+def _first_order_op(system, lu, sigma, count):
+    r"""(A - sigma E)^{-1} E on [x; v] (2 n1): one saddle solve with S(sigma) per application (counted)."""
     n1 = system.n1
     M, D = system.M, system.D
 
     def matvec(w):
+        count[0] += 1
         w = np.asarray(w).ravel()
         v1, v2 = w[:n1], w[n1:]
         rhs = -(M @ v2) - (D @ v1) - sigma * (M @ v1)
@@ -414,11 +415,11 @@ def damped_poles(system, band, *, k: int | None = None, shifts=None, n_shifts: i
         parts = [(w1, w2)] * shifts.size
     solver = new_solver(system) if solver is None else solver
     before = solver.stats.copy()
-    found, covered, solves = [], True, 0
+    found, covered, count = [], True, [0]
     for sigma, (a, b) in zip(shifts, parts):
         sigma = complex(sigma)
         lu = solver.factor(sigma)
-        OP = _first_order_op(system, lu, sigma)
+        OP = _first_order_op(system, lu, sigma, count)
         need = max(abs(1j * a - sigma), abs(1j * b - sigma))
         kk = min(k, limit, max_poles)
         while True:
@@ -430,7 +431,6 @@ def damped_poles(system, band, *, k: int | None = None, shifts=None, n_shifts: i
                 theta, W = exc.eigenvalues, exc.eigenvectors
                 warnings.warn(f"damped_poles: ARPACK converged {theta.size} of {kk} poles at shift {sigma}",
                               ConvergenceWarning, stacklevel=2)
-            solves += 2 * ncv
             ok = np.abs(theta) > 0
             lam = sigma + 1.0 / theta[ok]
             W = W[:, ok]
@@ -448,7 +448,7 @@ def damped_poles(system, band, *, k: int | None = None, shifts=None, n_shifts: i
         # multipliers for the residual: S(sigma)[x'; z'] = [-(lam M + D + sigma M) x; 0], z = (lam - sigma) z'
         rhs = -(system.M @ X) * (lam + sigma)[None, :] - system.D @ X
         Z = lu.solve(rhs, full=True)[n1:] * (lam - sigma)[None, :]
-        solves += X.shape[1]
+        count[0] += X.shape[1]
         found.append((lam, X, Z))
     lam = np.concatenate([f[0] for f in found])
     X = np.hstack([f[1] for f in found])
@@ -473,7 +473,7 @@ def damped_poles(system, band, *, k: int | None = None, shifts=None, n_shifts: i
     damping = -lam.real / np.where(freq > 0, freq, 1.0)
     lus = solver.stats.since(before)["factorizations"]
     info = {"band": [w1, w2], "shifts": [complex(s) for s in shifts], "lu_count": int(lus),
-            "solves": int(solves), "covered": bool(covered), "time_s": time.perf_counter() - t0,
+            "solves": int(count[0]), "covered": bool(covered), "time_s": time.perf_counter() - t0,
             "max_residual": float(res.max()) if res.size else 0.0}
     return PolesResult(poles=lam, shapes=X, frequencies=freq, damping=damping,
                        in_band=(freq >= w1) & (freq <= w2), residuals=res, info=info)

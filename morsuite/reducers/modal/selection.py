@@ -24,7 +24,8 @@ def lowest_order(omega) -> np.ndarray:
 
 
 def band_order(omega, band, sigma) -> np.ndarray:
-    r"""Indices: the modes with :math:`w_1 \le \omega \le w_2` ascending, then the rest by :math:`|\omega^2 - \sigma|`."""
+    r"""Indices: the modes with :math:`w_1 \le \omega \le w_2` ascending, then the rest by
+    :math:`|\omega^2 - \sigma|`."""
     omega = np.asarray(omega)
     w1, w2 = band
     inside = (omega >= w1) & (omega <= w2)
