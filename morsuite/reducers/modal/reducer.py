@@ -157,7 +157,7 @@ class Modal(Reducer):
         return True
 
     def _static_response(self):
-        """X0 = [I 0] S(0)^{-1} [F; 0], or None when K is singular on ker G (warned)."""
+        """X0 = [I 0] S(0)^{-1} [F; 0] (no columns when K is singular on ker G: warned, and said in info)."""
         if self._static is None:
             t0 = time.perf_counter()
             try:
@@ -221,6 +221,7 @@ class Modal(Reducer):
         info = {
             "selection": o["selection"], "sigma": modes["sigma"], "modes": int(k), "static_columns": int(n_static),
             "omega": modes["omega"][chosen], "modes_computed": int(modes["omega"].size),
+            "static_dropped": bool(o["static_correction"] and not m_static),  # K singular on ker G
             "max_residual": float(modes["residuals"][chosen].max()) if k else 0.0,
             "converged": covered, "status": "direct" if covered else "cap",
             "lu_count": int(paid), "lu_count_shared": int(shared),
