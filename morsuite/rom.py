@@ -89,12 +89,18 @@ class _ROMBase:
 
 
 class SecondOrderROM(_ROMBase):
-    r"""Dense second-order model :math:`\hat M \ddot x + \hat D \dot x + \hat K x = \hat F u`, :math:`y = \hat L x`."""
+    r"""Dense second-order model :math:`\hat M \ddot x + \hat D \dot x + \hat K x = \hat F u`, :math:`y = \hat L x`.
+
+    ``basis``, optional: the n1 x r matrix V of a projection-based reduced model (its
+    positions lift to the full model's as :math:`x \approx Vq`; used for mode-shape
+    comparisons such as :func:`morsuite.analysis.modes.mac`). None (default) where the
+    reducer does not give it; it is not written by :meth:`save`.
+    """
 
     kind = "second-order"
     _fields = ("M", "D", "K", "F", "L")
 
-    def __init__(self, M, D, K, F, L):
+    def __init__(self, M, D, K, F, L, *, basis=None):
         self.M = _mat("M", M)
         r = self.M.shape[0]
         if self.M.shape != (r, r):
@@ -109,6 +115,12 @@ class SecondOrderROM(_ROMBase):
             raise ShapeError(f"matrix F has {self.F.shape[0]} rows; expected {r}")
         if self.L.shape[1] != r:
             raise ShapeError(f"matrix L has {self.L.shape[1]} columns; expected {r}")
+        if basis is not None:
+            basis = np.asarray(basis)
+            if basis.ndim != 2 or basis.shape[1] != r:
+                raise ShapeError(f"basis has shape {basis.shape}; expected (n1, {r})")
+        #: the lift V (n1 x r) of a projection-based model, or None
+        self.basis = basis
 
     @property
     def order(self) -> int:

@@ -115,3 +115,11 @@ def eig_tolerance(A, E=None, factor=10.0, balance=False):
     norm_e = 0.0 if E is None else np.linalg.norm(Em, 2)
     tol = factor * EPS * kappa * (np.linalg.norm(A, 2) + np.abs(lam) * norm_e)
     return lam, tol
+
+
+def dense_modes(fom):
+    """Undamped constrained eigenpairs of a small model from a dense null-space basis Z of G:
+    eigh(Z^T K Z, Z^T M Z); frequencies sign(lam) sqrt(|lam|), shapes Z Y (M-orthonormal)."""
+    Z = sla.null_space(fom.G.toarray()) if fom.n2 else np.eye(fom.n1)
+    lam, Y = sla.eigh(Z.T @ (fom.K @ Z), Z.T @ (fom.M @ Z))
+    return np.sign(lam) * np.sqrt(np.abs(lam)), Z @ Y

@@ -296,28 +296,14 @@ def fem_block(n1: int = 20000, *, aspect=(1.0, 1.0, 1.0), E: float = 1.0, nu: fl
 def eigenfrequencies(model: Index3Model, k: int = 6, *, sigma: float = 0.0):
     r"""The ``k`` lowest undamped angular eigenfrequencies of a constrained model.
 
-    Solves :math:`K x + G^T z = \omega^2 M x`, :math:`G x = 0` by shift-invert
-    Arnoldi (ARPACK) on the saddle-point matrix: the operator
-    :math:`x \mapsto [I\ 0]\,[[K - \sigma M, G^T], [G, 0]]^{-1} [M x; 0]` has
-    eigenvalues :math:`1/(\omega^2 - \sigma)` on the constrained space and 0 off
-    it; no null-space basis is formed. Cost: one sparse LU of order n1 + n2
-    plus about 2k-4k solves. Returns the sorted :math:`\omega_j` (rad/s).
+    Solves :math:`K x + G^T z = \omega^2 M x`, :math:`G x = 0` by shift-invert Lanczos on the
+    saddle-point matrix (:func:`morsuite.linalg.eigen.constrained_modes`, which also returns
+    the mode shapes): no null-space basis is formed. Cost: one sparse LU of order n1 + n2
+    plus about 3k-5k solves. Returns the sorted :math:`\omega_j` (rad/s).
     """
-    import scipy.sparse as sp
-    import scipy.sparse.linalg as spla
+    from ..linalg.eigen import constrained_modes
+
     k = _int("k", k)
     if k >= model.order - 1:
         raise InputError(f"k must be < n1 - n2 - 1 = {model.order - 1}; got {k}")
-    n1, n2 = model.n1, model.n2
-    S = sp.bmat([[model.K - sigma * model.M, model.G.T], [model.G, None]], format="csc")
-    lu = spla.splu(S)
-
-    def op(x):
-        rhs = np.concatenate([model.M @ np.ravel(x), np.zeros(n2)])
-        return lu.solve(rhs)[:n1]
-
-    A = spla.LinearOperator((n1, n1), matvec=op, dtype=float)
-    v0 = np.ones(n1)  # a fixed start vector: the result does not depend on a random seed
-    mu = spla.eigs(A, k=k, which="LM", v0=v0, return_eigenvectors=False, tol=1e-12)
-    lam = sigma + 1.0 / mu.real
-    return np.sort(np.sqrt(np.abs(lam)))
+    return np.sort(np.abs(constrained_modes(model, k=k, sigma=sigma).omega))

@@ -30,10 +30,11 @@ import numpy as np
 import scipy.sparse as sp
 
 import morsuite as ms
+from morsuite.linalg.eigen import constrained_modes
 
 from ..errors import (FileFormatError, InputError, MemoryBudgetError, ModelError, OptionError, ShapeError,
                       SingularShiftError, SpecError)
-from .refused_inputs import (DATA_FILE, _hdf5, _irka, _lradi, _mat_without, _model, _mtx_set, _nan_rom,
+from .refused_inputs import (DATA_FILE, _hdf5, _irka, _lradi, _modal, _mat_without, _model, _mtx_set, _nan_rom,
                              _npz_without, _other_io_rom, _parts, _pole_model, _rom, _sim, _small, _spec,
                              _time_spec, _write)
 
@@ -253,6 +254,20 @@ _ROWS = [
     ("projected-memory", "option", "irka-projected over its memory budget",
      lambda t, d: ms.reducers.make("irka-projected", ms.models.dsms(2000), memory_budget_gib=0.01), MemoryBudgetError,
      r"would need about .* GiB .* above the budget memory_budget_gib = 0\.01"),
+    ("modal-selection", "option", "modal(selection='highest')", lambda t, d: _modal(selection="highest"),
+     OptionError, r"The 'selection' parameter of Modal must be one of 'lowest', 'band', 'dominance'"),
+    ("modal-band", "option", "modal(band=[2, 1]) (an empty band)", lambda t, d: _modal(band=[2.0, 1.0]),
+     InputError, r"The 'band' parameter of Modal must be \(w1, w2\) with 0 <= w1 < w2.*empty"),
+    ("modal-r-order", "argument", "modal reduce(r) with r > n1 - n2 - 1", lambda t, d: _modal().reduce(19),
+     InputError, r"r = 19 exceeds .* \(n1 - n2 - 1 = 18\) for modal"),
+    ("modal-r-static", "argument", "modal reduce(r) with r < m static columns",
+     lambda t, d: _modal(ms.models.random_constrained(n1=12, n2=2, m=3, p=2, seed=0)).reduce(2), InputError,
+     r"r = 2 is smaller than the m = 3 static-correction columns of modal"),
+    ("modes-band", "argument", "constrained_modes(band=(1, 1)) (an empty band)",
+     lambda t, d: constrained_modes(_small(), band=(1.0, 1.0)), InputError,
+     r"band must satisfy 0 <= w1 < w2 .*the band is empty"),
+    ("modes-k", "argument", "constrained_modes(k > n1 - n2 - 1)", lambda t, d: constrained_modes(_small(), k=19),
+     InputError, r"k = 19 exceeds n1 - n2 - 1 = 18"),
     # -- reduced models and analysis -----------------------------------------------------------------
     ("rom-nan", "matrix", "SecondOrderROM with a NaN in K",
      lambda t, d: ms.rom.SecondOrderROM(np.eye(2), np.eye(2), np.full((2, 2), np.nan), np.ones(2), np.ones(2)),

@@ -43,6 +43,10 @@ def _irka(**options):
     return ms.reducers.make("irka", _small(), **options)
 
 
+def _modal(fom=None, **options):
+    return ms.reducers.make("modal", fom if fom is not None else _small(), **options)
+
+
 _SPEC = {"name": "t", "models": {"d": "dsms:g=20"}, "methods": {"irka": {}},
          "scenes": [{"name": "s", "kind": "error", "model": "d", "r": 2}]}
 

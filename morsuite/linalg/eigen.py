@@ -1,0 +1,479 @@
+r"""Eigenmodes of a constrained second-order system by shift-invert Lanczos/Arnoldi on saddle solves.
+
+Two problems, both solved without a null-space basis of G, without :math:`\Pi` and without
+any n1 x n1 dense matrix; every operator application is one solve with one sparse LU of a
+bordered (saddle-point) matrix made by :class:`~morsuite.linalg.saddle.SaddlePointSolver`.
+
+**Undamped constrained modes** (:func:`constrained_modes`):
+
+.. math::
+
+    K\varphi + G^T\mu = \omega^2 M\varphi,\qquad G\varphi = 0 .
+
+With the saddle matrix :math:`S_\sigma = [[K - \sigma M, G^T], [G, 0]]` factored once, the
+operator :math:`x \mapsto [I\ 0]\,S_\sigma^{-1}[Mx; 0]` equals
+:math:`Z(Z^T(K-\sigma M)Z)^{-1}Z^TMx` for any basis Z of :math:`\ker G`: it is self-adjoint
+in the M-inner product, maps into :math:`\ker G`, and has the eigenvalues
+:math:`1/(\omega_j^2 - \sigma)` on the constrained space and 0 on its M-complement. ARPACK's
+symmetric shift-invert mode (``scipy.sparse.linalg.eigsh`` with ``M``, ``sigma`` and
+``OPinv``, mode "normal") runs Lanczos on it in the M-inner product. Each Ritz vector then
+gets one step of inverse iteration (one more solve: it also returns the multiplier
+:math:`\mu`), and a Rayleigh-Ritz step on the refined vectors gives M-orthonormal shapes
+(:math:`\Phi^TM\Phi = I`, :math:`\Phi^TK\Phi = \Omega^2` to rounding) in :math:`\ker G` to
+the solves' accuracy. The residuals :math:`\|K\varphi + G^T\mu - \omega^2M\varphi\| /
+(\|K\varphi\| + \omega^2\|M\varphi\|)` are computed from sparse products and reported.
+
+**Damped poles** (:func:`damped_poles`): the finite eigenvalues of the constrained quadratic
+problem
+
+.. math::
+
+    (\lambda^2 M + \lambda D + K)x + G^Tz = 0,\qquad Gx = 0,
+
+from the first-order pencil :math:`(A, E)` of size :math:`2n_1+n_2` (``E = blkdiag(I, M,
+0)``, ``A = [[0, I, 0], [-K, -D, -G^T], [G, 0, 0]]``). A solve with :math:`A - \sigma E`
+reduces to one saddle solve with :math:`S(\sigma) = [[\sigma^2M + \sigma D + K, G^T], [G,
+0]]`: for :math:`(A-\sigma E)[x; v; z] = [b_1; b_2; 0]`,
+:math:`S(\sigma)[x; z] = [-b_2 - (D + \sigma M)b_1; 0]` and :math:`v = b_1 + \sigma x`. So
+shift-invert Arnoldi (``scipy.sparse.linalg.eigs``) on
+:math:`(A-\sigma E)^{-1}E` (eigenvalues :math:`1/(\lambda - \sigma)`, infinite eigenvalues
+mapped to 0) costs one complex LU per shift :math:`\sigma = j\omega` in the band.
+
+Cost: :func:`constrained_modes`, one real LU (kept when a band needs a larger k: only the
+Lanczos run is repeated) and about 3k to 5k solves; :func:`damped_poles`, one complex LU
+per shift (a few) and the solves of Arnoldi. Both run with one BLAS thread (ARPACK's dense
+work is small; BLAS threads beside the sparse solves only add synchronisation). Design
+note: ``docs/design/modal.md``.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse.linalg as spla
+
+from ..errors import ConvergenceWarning, InputError
+from ..utils import blas_threads
+from .system import check_system, new_solver
+
+__all__ = ["ModesResult", "PolesResult", "constrained_modes", "damped_poles"]
+
+
+@dataclass
+class ModesResult:
+    r"""Undamped constrained modes: :math:`K\varphi_j + G^T\mu_j = \omega_j^2 M\varphi_j`, :math:`G\varphi_j = 0`.
+
+    Attributes
+    ----------
+    omega : ndarray (k,)
+        Angular eigenfrequencies :math:`\omega_j = \sqrt{\lambda_j}` (rad/s), ascending
+        (a negative :math:`\lambda_j`, from an indefinite K, gives :math:`-\sqrt{-\lambda_j}`).
+    eigenvalues : ndarray (k,)
+        :math:`\lambda_j = \omega_j^2`.
+    shapes : ndarray (n1, k)
+        Mode shapes, M-orthonormal: :math:`\Phi^TM\Phi = I`, :math:`G\Phi = 0`.
+    multipliers : ndarray (n2, k)
+        The Lagrange multipliers :math:`\mu_j`.
+    residuals : ndarray (k,)
+        Relative residuals :math:`\|K\varphi + G^T\mu - \omega^2M\varphi\| / (\|K\varphi\| + |\omega^2|\|M\varphi\|)`.
+    info : dict
+        Plain data: ``sigma``, ``lu_count``, ``solves``, ``k_computed``, ``covered`` (band
+        selection: the band is known to hold no other mode), ``time_s``, ``max_residual``.
+    """
+
+    omega: np.ndarray
+    eigenvalues: np.ndarray
+    shapes: np.ndarray
+    multipliers: np.ndarray
+    residuals: np.ndarray
+    info: dict = field(default_factory=dict)
+
+
+@dataclass
+class PolesResult:
+    r"""Poles of the constrained quadratic problem :math:`(\lambda^2M + \lambda D + K)x + G^Tz = 0`, :math:`Gx = 0`.
+
+    One entry per conjugate pair (the member with :math:`\operatorname{Im}\lambda \ge 0`), sorted
+    by natural frequency.
+
+    Attributes
+    ----------
+    poles : ndarray (k,) complex
+    shapes : ndarray (n1, k) complex
+        Right mode shapes x, unit 2-norm.
+    frequencies : ndarray (k,)
+        Natural frequencies :math:`|\lambda|` (rad/s).
+    damping : ndarray (k,)
+        Damping ratios :math:`-\operatorname{Re}\lambda / |\lambda|`.
+    in_band : ndarray (k,) of bool
+        :math:`w_1 \le |\lambda| \le w_2`.
+    residuals : ndarray (k,)
+        :math:`\|(\lambda^2M + \lambda D + K)x + G^Tz\| / ((|\lambda|^2\|M\|_1 + |\lambda|\|D\|_1 + \|K\|_1)\|x\|)`.
+    info : dict
+        Plain data: ``band``, ``shifts``, ``lu_count``, ``solves``, ``covered`` (every shift's disk
+        reached past its part of the band), ``time_s``, ``max_residual``.
+    """
+
+    poles: np.ndarray
+    shapes: np.ndarray
+    frequencies: np.ndarray
+    damping: np.ndarray
+    in_band: np.ndarray
+    residuals: np.ndarray
+    info: dict = field(default_factory=dict)
+
+
+def _one_blas_thread(fn):
+    """Run ``fn`` with one BLAS thread (measured in docs/design/modal.md)."""
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with blas_threads(1):
+            return fn(*args, **kwargs)
+    return wrapper
+
+
+def _positive_int(name, value, allow_none=True):
+    if value is None and allow_none:
+        return None
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise InputError(f"{name} must be a positive integer; got {value!r}")
+    return int(value)
+
+
+def _band(band, name="band"):
+    try:
+        w1, w2 = (float(w) for w in band)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{name} must be a pair (w1, w2) of frequencies in rad/s; got {band!r}") from exc
+    if not (math.isfinite(w1) and math.isfinite(w2) and 0 <= w1 < w2):
+        raise InputError(f"{name} must satisfy 0 <= w1 < w2 (finite, rad/s); got {band!r}: the band is empty")
+    return w1, w2
+
+
+def _start_vector(n, dtype=float):
+    """A fixed, deterministic start vector (no random seed in the result)."""
+    v = 1.0 + 0.5 * np.cos(np.arange(n) * 0.7)
+    return v.astype(dtype)
+
+
+def _modes_at(system, lu, sigma, k, tol, maxiter):
+    """Lanczos run for the k eigenvalues nearest sigma: (lam, shapes, multipliers, residuals, solves)."""
+    n1, n2 = system.n1, system.n2
+    count = [0]
+
+    def opinv(b):
+        count[0] += 1
+        return lu.solve(np.asarray(b, dtype=float).ravel())
+
+    OP = spla.LinearOperator((n1, n1), matvec=opinv, dtype=float)
+    ncv = min(n1 - n2, max(2 * k + 1, k + 20))
+    try:
+        lam, X = spla.eigsh(system.K, k=k, M=system.M, sigma=sigma, which="LM", OPinv=OP, mode="normal",
+                            v0=_start_vector(n1), ncv=ncv, tol=tol, maxiter=maxiter)
+    except spla.ArpackNoConvergence as exc:
+        lam, X = exc.eigenvalues, exc.eigenvectors
+        warnings.warn(f"constrained_modes: ARPACK converged {lam.size} of {k} modes at sigma = {sigma:g}",
+                      ConvergenceWarning, stacklevel=3)
+    # one step of inverse iteration: (K - sigma M) Y + G^T N = M X, G Y = 0
+    W = lu.solve(system.M @ X, full=True)
+    count[0] += X.shape[1]
+    Y, N = W[:n1], W[n1:]
+    # Rayleigh-Ritz on the refined vectors: M-orthonormal shapes, Phi^T K Phi diagonal
+    Kr, Mr = Y.T @ (system.K @ Y), Y.T @ (system.M @ Y)
+    lam, C = sla.eigh(0.5 * (Kr + Kr.T), 0.5 * (Mr + Mr.T))
+    Phi = Y @ C
+    # multipliers: (K - sigma M) y + G^T n = M x with y = x / (lam - sigma) gives K y + G^T n = lam M y,
+    # so n is y's multiplier (to the accuracy of the pair; the residual below is measured, not assumed)
+    mu = N @ C
+    R = system.K @ Phi - (system.M @ Phi) * lam[None, :]
+    if n2:
+        R = R + system.G.T @ mu
+    scale = np.linalg.norm(system.K @ Phi, axis=0) + np.abs(lam) * np.linalg.norm(system.M @ Phi, axis=0)
+    res = np.linalg.norm(R, axis=0) / np.where(scale > 0, scale, 1.0)
+    return lam, Phi, mu, res, count[0]
+
+
+@_one_blas_thread
+def constrained_modes(system, k=None, band=None, *, sigma=None, tol: float = 0.0, maxiter: int | None = None,
+                      solver=None, factorization=None, k_max: int | None = None, within_band: bool = True):
+    r"""Undamped constrained modes by shift-invert Lanczos with one saddle-point LU (module docstring).
+
+    Parameters
+    ----------
+    system : ConstrainedSystem
+        The model (``Index3Model`` or anything with M, D, K, G, F, L, n1, n2, m, p); only
+        M, K and G are used (D is not: the bordered matrix is :math:`K - \sigma M`).
+    k : int, optional
+        Number of modes: the k eigenvalues nearest :math:`\sigma` (with the default
+        :math:`\sigma`, the lowest k). At most :math:`n_1 - n_2 - 1` (Lanczos cannot return
+        every mode of the constrained space).
+    band : (w1, w2), optional
+        Return every mode with :math:`w_1 \le \omega \le w_2` instead: k starts at ``k`` (or 8)
+        and doubles until the modes found reach past both ends of the band (every mode
+        nearer :math:`\sigma` has then been found), capped at ``k_max``.
+    sigma : float, optional
+        Shift (rad²/s²), a point of :math:`\omega^2` where K - sigma M is nonsingular on
+        :math:`\ker G`. Default 0 for ``k`` (the lowest modes; a free-floating model
+        needs a negative shift) and :math:`w_1^2` for ``band``.
+    tol : float
+        ARPACK's relative accuracy of the Ritz values (default 0: machine precision).
+    maxiter : int, optional
+        ARPACK's restart cap (default ``max(1000, 10 k)``).
+    solver : SaddlePointSolver, optional
+        The solver that factors :math:`K - \sigma M` bordered (its counters count the LU);
+        default a fresh one of the system (``new_solver``).
+    factorization : SaddleLU, optional
+        That factorization, made earlier (``solver.factor(coeffs=(-sigma, 0, 1))``, e.g. kept by a
+        reducer across calls): no LU is made here.
+    k_max : int, optional
+        Cap of k when covering a band (default :math:`n_1 - n_2 - 1`).
+    within_band : bool
+        With ``band``: return only the modes in the band (default), or every mode computed
+        (those in the band and at least ``k`` nearest :math:`\sigma`, for a caller that wants
+        the band's neighbours too).
+
+    Returns
+    -------
+    ModesResult
+        Frequencies ascending, M-orthonormal shapes, multipliers, residuals and ``info``
+        (``lu_count``: LUs this call made; ``solves``; ``sigma``; ``covered``).
+
+    Raises
+    ------
+    InputError
+        If neither or both of k and band are given, k exceeds :math:`n_1 - n_2 - 1`, the band
+        is empty (:math:`w_2 \le w_1`) or holds no mode, or sigma is not finite.
+    SingularShiftError
+        If :math:`\sigma` is an eigenvalue (e.g. 0 for a free-floating model).
+
+    Cost: one sparse LU of order :math:`n_1 + n_2` (none when ``solver`` holds it), the
+    Lanczos solves (about 2k to 4k), k more for the refinement, and O(n1 k^2) dense work.
+    """
+    check_system(system, "system")
+    t0 = time.perf_counter()
+    k = _positive_int("k", k)
+    if k is None and band is None:
+        raise InputError("constrained_modes needs k (the lowest k modes) or band (every mode in the band)")
+    limit = system.n1 - system.n2 - 1
+    if limit < 1:
+        raise InputError(f"the constrained space has dimension n1 - n2 = {system.n1 - system.n2}: too small "
+                         "for shift-invert Lanczos")
+    if band is not None:
+        w1, w2 = _band(band)
+    if sigma is None:
+        sigma = 0.0 if band is None else w1 * w1
+    sigma = float(sigma)
+    if not math.isfinite(sigma):
+        raise InputError(f"sigma must be finite; got {sigma}")
+    if k is not None and k > limit:
+        raise InputError(f"k = {k} exceeds n1 - n2 - 1 = {limit}, the most modes shift-invert Lanczos can "
+                         f"return for this model")
+    k_max = limit if k_max is None else min(limit, _positive_int("k_max", k_max))
+    maxiter_ = maxiter
+    if factorization is not None:
+        if tuple(complex(c) for c in factorization.coeffs) != (complex(-sigma), 0j, 1 + 0j):
+            raise InputError(f"factorization is of the coefficients {factorization.coeffs}, not of K - sigma M "
+                             f"with sigma = {sigma:g} (coeffs (-sigma, 0, 1))")
+        lu, lus = factorization, 0
+    else:
+        solver = new_solver(system) if solver is None else solver
+        before = solver.stats.copy()
+        lu = solver.factor(coeffs=(-sigma, 0.0, 1.0))  # K - sigma M bordered: the one LU
+        lus = solver.stats.since(before)["factorizations"]
+    solves = 0
+    covered = True
+    kk = min(k_max, k) if k is not None else min(8, k_max)
+    while True:
+        mi = maxiter_ if maxiter_ is not None else max(1000, 10 * kk)
+        lam, Phi, mu, res, n = _modes_at(system, lu, sigma, kk, tol, mi)
+        solves += n
+        if band is None:
+            break
+        reach = np.max(np.abs(lam - sigma)) if lam.size else 0.0
+        need = max(abs(sigma - w1 * w1), abs(w2 * w2 - sigma))
+        if (reach > need and (k is None or lam.size >= k)) or lam.size >= limit:
+            break
+        if kk >= k_max:
+            covered = False
+            warnings.warn(f"constrained_modes: k_max = {k_max} modes nearest sigma = {sigma:g} do not reach past "
+                          f"the band {band}; modes in the band may be missing", ConvergenceWarning, stacklevel=2)
+            break
+        kk = min(k_max, 2 * kk)
+    omega = np.sign(lam) * np.sqrt(np.abs(lam))
+    if band is not None and within_band:
+        keep = (omega >= w1) & (omega <= w2)
+        if not np.any(keep):
+            raise InputError(f"band {tuple(band)} holds no mode of the model (nearest: "
+                             f"{omega[np.argmin(np.abs(omega - w1))]:.6g} rad/s)")
+        lam, Phi, mu, res, omega = lam[keep], Phi[:, keep], mu[:, keep], res[keep], omega[keep]
+    info = {"sigma": sigma, "lu_count": int(lus), "solves": int(solves), "k_computed": int(kk),
+            "covered": bool(covered), "time_s": time.perf_counter() - t0,
+            "max_residual": float(res.max()) if res.size else 0.0}
+    return ModesResult(omega=omega, eigenvalues=lam, shapes=Phi, multipliers=mu, residuals=res, info=info)
+
+
+def _first_order_op(system, lu, sigma, count):
+    r"""(A - sigma E)^{-1} E on [x; v] (2 n1): one saddle solve with S(sigma) per application (counted)."""
+    n1 = system.n1
+    M, D = system.M, system.D
+
+    def matvec(w):
+        count[0] += 1
+        w = np.asarray(w).ravel()
+        v1, v2 = w[:n1], w[n1:]
+        rhs = -(M @ v2) - (D @ v1) - sigma * (M @ v1)
+        x = lu.solve(rhs)
+        return np.concatenate([x, v1 + sigma * x])
+
+    return spla.LinearOperator((2 * n1, 2 * n1), matvec=matvec, dtype=complex)
+
+
+def _default_shifts(w1, w2, n_shifts):
+    lo = max(w1, w2 * 1e-6)
+    edges = np.geomspace(lo, w2, n_shifts + 1)
+    centres = np.sqrt(edges[:-1] * edges[1:])
+    return 1j * centres, edges
+
+
+def _distinct(lam, X, rtol=1e-8, stol=1e-6):
+    """Indices of the distinct eigenpairs: a pair is dropped when its pole is within ``rtol`` of kept
+    ones and its (unit) shape lies in the span of theirs to ``stol`` (a multiple pole keeps as many
+    pairs as its eigenspace has dimensions; the same pole from two shifts is kept once)."""
+    keep = []
+    for i, li in enumerate(lam):
+        near = [j for j in keep if abs(li - lam[j]) <= rtol * max(abs(li), 1e-300)]
+        if near:
+            Q, _ = np.linalg.qr(X[:, near])
+            if np.linalg.norm(X[:, i] - Q @ (Q.conj().T @ X[:, i])) <= stol:
+                continue
+        keep.append(i)
+    return keep
+
+
+@_one_blas_thread
+def damped_poles(system, band, *, k: int | None = None, shifts=None, n_shifts: int | None = None,
+                 max_poles: int = 200, tol: float = 0.0, solver=None):
+    r"""Poles of the full constrained model in and near a band, by shift-invert Arnoldi (module docstring).
+
+    Parameters
+    ----------
+    system : ConstrainedSystem
+        The model.
+    band : (w1, w2)
+        Frequencies in rad/s, :math:`0 \le w_1 < w_2`.
+    k : int, optional
+        Poles requested per shift at the start (default 6); doubled until the disk of the
+        poles found around the shift reaches past the shift's part of the band
+        (:math:`[e_i, e_{i+1}]` of a geometric split of the band), capped at ``max_poles``.
+    shifts : sequence of complex, optional
+        The shifts :math:`\sigma_i`; default ``n_shifts`` points :math:`j\omega` at the
+        geometric centres of equal log-parts of the band.
+    n_shifts : int, optional
+        Default ``max(1, ceil(log10(w2 / w1)))`` (one shift per decade), at most 6.
+    max_poles : int
+        Cap of the poles computed per shift (default 200).
+    tol : float
+        ARPACK's relative accuracy (default 0: machine precision).
+    solver : SaddlePointSolver, optional
+        Solver to use (default a fresh one of the system).
+
+    Returns
+    -------
+    PolesResult
+        Every distinct pole found (one per conjugate pair), with shapes, natural frequencies,
+        damping ratios, ``in_band`` flags, residuals and ``info`` (``lu_count``: one per shift).
+
+    Raises
+    ------
+    InputError
+        If the band is empty or a shift is not finite.
+
+    Cost: one complex sparse LU per shift, and per shift the Arnoldi solves (about 2k per
+    run, a run per doubling of k) and one more solve per pole (its multiplier, for the residual).
+    """
+    check_system(system, "system")
+    t0 = time.perf_counter()
+    w1, w2 = _band(band)
+    k = _positive_int("k", k) or 6
+    max_poles = _positive_int("max_poles", max_poles, allow_none=False)
+    n1 = system.n1
+    limit = 2 * (n1 - system.n2) - 1
+    if shifts is None:
+        ns = _positive_int("n_shifts", n_shifts) or min(6, max(1, math.ceil(math.log10(w2 / max(w1, w2 * 1e-6)))))
+        shifts, edges = _default_shifts(w1, w2, ns)
+        parts = [(edges[i], edges[i + 1]) for i in range(ns)]
+    else:
+        shifts = np.atleast_1d(np.asarray(shifts, dtype=complex))
+        if shifts.size == 0 or not np.all(np.isfinite(shifts)):
+            raise InputError(f"shifts must be finite complex numbers; got {shifts!r}")
+        parts = [(w1, w2)] * shifts.size
+    solver = new_solver(system) if solver is None else solver
+    before = solver.stats.copy()
+    found, covered, count = [], True, [0]
+    for sigma, (a, b) in zip(shifts, parts):
+        sigma = complex(sigma)
+        lu = solver.factor(sigma)
+        OP = _first_order_op(system, lu, sigma, count)
+        need = max(abs(1j * a - sigma), abs(1j * b - sigma))
+        kk = min(k, limit, max_poles)
+        while True:
+            ncv = min(2 * n1, max(2 * kk + 1, kk + 20))
+            try:
+                theta, W = spla.eigs(OP, k=kk, which="LM", v0=_start_vector(2 * n1, complex), ncv=ncv, tol=tol,
+                                     maxiter=max(1000, 10 * kk))
+            except spla.ArpackNoConvergence as exc:
+                theta, W = exc.eigenvalues, exc.eigenvectors
+                warnings.warn(f"damped_poles: ARPACK converged {theta.size} of {kk} poles at shift {sigma}",
+                              ConvergenceWarning, stacklevel=2)
+            ok = np.abs(theta) > 0
+            lam = sigma + 1.0 / theta[ok]
+            W = W[:, ok]
+            reach = np.max(np.abs(lam - sigma)) if lam.size else 0.0
+            if reach > need or kk >= limit:
+                break
+            if kk >= max_poles:
+                covered = False
+                warnings.warn(f"damped_poles: max_poles = {max_poles} poles nearest the shift {sigma:.4g} do not "
+                              f"reach past its part of the band ({a:.4g}, {b:.4g}); poles may be missing",
+                              ConvergenceWarning, stacklevel=2)
+                break
+            kk = min(limit, max_poles, 2 * kk)
+        X = W[:n1]
+        # multipliers for the residual: S(sigma)[x'; z'] = [-(lam M + D + sigma M) x; 0], z = (lam - sigma) z'
+        rhs = -(system.M @ X) * (lam + sigma)[None, :] - system.D @ X
+        Z = lu.solve(rhs, full=True)[n1:] * (lam - sigma)[None, :]
+        count[0] += X.shape[1]
+        found.append((lam, X, Z))
+    lam = np.concatenate([f[0] for f in found])
+    X = np.hstack([f[1] for f in found])
+    Z = np.hstack([f[2] for f in found])
+    # one per conjugate pair (real data: the conjugate of a pole is a pole with the conjugate
+    # shape), then merge the duplicates that two shifts, or both members of a pair, gave
+    lower = lam.imag < 0
+    lam, X, Z = np.where(lower, lam.conj(), lam), np.where(lower, X.conj(), X), np.where(lower, Z.conj(), Z)
+    order = np.argsort(np.abs(lam), kind="stable")
+    lam, X, Z = lam[order], X[:, order], Z[:, order]
+    nx = np.linalg.norm(X, axis=0)
+    X, Z = X / nx, Z / nx
+    keep = _distinct(lam, X)
+    lam, X, Z = lam[keep], X[:, keep], Z[:, keep]
+    R = system.K @ X + (system.D @ X) * lam + (system.M @ X) * lam ** 2
+    if system.n2:
+        R = R + system.G.T @ Z
+    norms = [spla.norm(A, 1) for A in (system.M, system.D, system.K)]
+    scale = np.abs(lam) ** 2 * norms[0] + np.abs(lam) * norms[1] + norms[2]
+    res = np.linalg.norm(R, axis=0) / scale
+    freq = np.abs(lam)
+    damping = -lam.real / np.where(freq > 0, freq, 1.0)
+    lus = solver.stats.since(before)["factorizations"]
+    info = {"band": [w1, w2], "shifts": [complex(s) for s in shifts], "lu_count": int(lus),
+            "solves": int(count[0]), "covered": bool(covered), "time_s": time.perf_counter() - t0,
+            "max_residual": float(res.max()) if res.size else 0.0}
+    return PolesResult(poles=lam, shapes=X, frequencies=freq, damping=damping,
+                       in_band=(freq >= w1) & (freq <= w2), residuals=res, info=info)

@@ -1,0 +1,151 @@
+"""The ``modal`` reducer against dense references: the undamped constrained eigenfrequencies from a
+null-space basis of G, the static response T(0), the structure of the projection."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+import scipy.linalg as sla
+
+import morsuite as ms
+from morsuite.errors import InputError, OptionError
+from support import assert_sets_close, dense_modes
+
+RTOL = 1e-10
+
+
+def undamped(rom):
+    return np.sqrt(sla.eigvalsh(rom.K, rom.M))
+
+
+MODELS = {
+    "dsms": lambda: ms.models.dsms(g=100),
+    "tcom": lambda: ms.models.tcom(nc=40),
+    "fem_block": lambda: ms.models.fem_block(400),
+    "fem_beam": lambda: ms.models.fem_beam(12, 2, 2),
+    "mimo": lambda: ms.models.random_constrained(n1=60, n2=3, m=2, p=3, seed=1),
+}
+
+
+@pytest.fixture(scope="module", params=sorted(MODELS))
+def case(request):
+    fom = MODELS[request.param]()
+    return fom, dense_modes(fom)
+
+
+def _contains(found, expected, rtol, what):
+    """Each expected value has a found one within rtol (matched by tolerance, not by position)."""
+    found = np.asarray(found)
+    for w in np.asarray(expected):
+        d = np.min(np.abs(found - w)) / w
+        assert d <= rtol, f"{what}: {w!r} not found within {rtol:g} (nearest at relative {d:.2e})"
+
+
+def test_lowest_modes_equal_the_dense_reference(case):
+    fom, (w_ref, _) = case
+    r = 10
+    res = ms.reducers.make("modal", fom, static_correction=False).reduce(r)
+    rom = res.rom
+    assert rom.order == r and res.info["modes"] == r and res.info["static_columns"] == 0
+    assert_sets_close(undamped(rom), w_ref[:r], rtol=RTOL, what="undamped eigenfrequencies")
+    assert_sets_close(res.info["omega"], w_ref[:r], rtol=RTOL, what="info omega")
+    V = rom.basis
+    assert np.abs(V.T @ (fom.M @ V) - np.eye(r)).max() < 1e-12
+    assert np.abs(rom.K - np.diag(np.diag(rom.K))).max() < 1e-10 * np.abs(rom.K).max()
+    assert np.abs(fom.G @ V).max() < 1e-10 * np.abs(V).max() * max(1.0, abs(fom.G).max())
+    assert res.info["lu_count"] == 1 and res.info["converged"] and res.info["max_residual"] < 1e-10
+
+
+def test_static_correction_matches_T0_and_keeps_the_modes(case):
+    fom, (w_ref, _) = case
+    red = ms.reducers.make("modal", fom, static_correction=True)
+    T0 = fom.transfer(0.0)
+    for r in (6, 12):
+        res = red.reduce(r)
+        rom = res.rom
+        k = r - fom.m
+        assert res.info["static_columns"] == fom.m and res.info["modes"] == k
+        assert np.abs(rom.transfer(0.0) - T0).max() <= RTOL * np.abs(T0).max()
+        _contains(undamped(rom), w_ref[:k], RTOL, "modes kept beside the static block")
+        V = rom.basis
+        assert np.abs(V.T @ (fom.M @ V) - np.eye(rom.order)).max() < 1e-10
+        assert np.abs(rom.K - np.diag(np.diag(rom.K))).max() < 1e-9 * np.abs(rom.K).max()
+    # the second call reused the modes' LU and the static solve
+    assert res.info["lu_count"] == 0 and res.info["setup_reused"] and res.info["lu_count_shared"] >= 1
+
+
+def test_band_selection_takes_every_mode_in_the_band():
+    fom = ms.models.tcom(nc=40)
+    w_ref, _ = dense_modes(fom)
+    band = (0.5 * (w_ref[3] + w_ref[4]), 0.5 * (w_ref[9] + w_ref[10]))  # modes 4..9 inside
+    res = ms.reducers.make("modal", fom, selection="band", band=list(band), static_correction=False).reduce(6)
+    assert_sets_close(res.info["omega"], w_ref[4:10], rtol=RTOL, what="band modes")
+    res8 = ms.reducers.make("modal", fom, selection="band", band=list(band), static_correction=False).reduce(8)
+    _contains(res8.info["omega"], w_ref[4:10], RTOL, "band modes first")
+
+
+def test_dominance_selection_against_dense_dominance():
+    fom = ms.models.dsms(g=100)
+    w_ref, Y = dense_modes(fom)
+    r, pool = 5, 2.0
+    res = ms.reducers.make("modal", fom, selection="dominance", static_correction=False, pool=pool).reduce(r)
+    # independent dominance from the dense modes (M-normalised by eigh): the r largest among the pool
+    n = int(np.ceil(pool * r))
+    Yp, wp = Y[:, :n], w_ref[:n]
+    zeta = np.einsum("ij,ij->j", Yp, fom.D @ Yp) / (2 * wp)
+    w = np.clip(wp, *fom.band)
+    d = np.linalg.norm(fom.L @ Yp, axis=0) * np.linalg.norm(fom.F.T @ Yp, axis=0) / \
+        np.abs(wp ** 2 - w ** 2 + 2j * zeta * wp * w)
+    top = np.argsort(-d)[:r]
+    gap = np.sort(d)[::-1]
+    assert gap[r - 1] > 1.01 * gap[r], "the test needs a clear r-th dominance"
+    assert_sets_close(res.info["omega"], wp[top], rtol=RTOL, what="dominant modes")
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_make_reduce_compare_like(name):
+    fom = MODELS[name]()
+    red = ms.reducers.make("modal", fom)
+    for r in (4, 8):
+        res = red.reduce(r)
+        assert res.rom.order == r and res.info["stable"] and res.info["status"] == "direct"
+        assert res.info["r"] == r and res.info["states"] == 2 * r
+        H = fom.freqresp([fom.band[0], np.sqrt(fom.band[0] * fom.band[1])])
+        assert np.all(np.isfinite(res.rom.freqresp([fom.band[0]])))
+        assert H.shape[1:] == res.rom.freqresp([1.0]).shape[1:]
+
+
+def test_bad_input_is_refused_naming_the_argument():
+    fom = ms.models.dsms(g=20)
+    with pytest.raises(OptionError, match="'selection' parameter of Modal"):
+        ms.reducers.make("modal", fom, selection="highest")
+    with pytest.raises(InputError, match="'band' parameter of Modal.*empty"):
+        ms.reducers.make("modal", fom, band=[1.0, 0.5])
+    with pytest.raises(InputError, match=r"r = 19 exceeds .*n1 - n2 - 1 = 18"):
+        ms.reducers.make("modal", fom).reduce(19)
+    with pytest.raises(OptionError, match="unknown option"):
+        ms.reducers.make("modal", fom, modes=3)
+    mimo = MODELS["mimo"]()
+    with pytest.raises(InputError, match="r = 1 is smaller than the m = 2 static-correction columns"):
+        ms.reducers.make("modal", mimo).reduce(1)
+
+
+def test_free_floating_model_moves_the_shift_and_drops_the_static_correction():
+    import scipy.sparse as sp
+    n = 30
+    K = sp.diags([-np.ones(n - 1), 2 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1], format="lil")
+    K[0, 0] = K[n - 1, n - 1] = 1.0  # free-free chain: one rigid-body mode
+    K = K.tocsr()
+    M = sp.identity(n, format="csr")
+    G = sp.csr_matrix(([1.0, -1.0], ([0, 0], [3, 4])), shape=(1, n))  # a tie, not a clamp
+    F = np.zeros((n, 1)); F[0] = 1.0
+    fom = ms.models.Index3Model(M, 0.01 * K, K, G, F, F.T, band=(0.01, 2.0))
+    w_ref, _ = dense_modes(fom)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        res = ms.reducers.make("modal", fom).reduce(5)
+    assert any("rigid-body" in str(w.message) for w in rec)
+    assert res.info["static_columns"] == 0 and res.info["sigma"] < 0 and res.info["static_dropped"]
+    assert_sets_close(res.info["omega"], w_ref[:5], rtol=1e-8, atol=1e-7, what="modes with a rigid-body mode")

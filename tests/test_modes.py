@@ -1,0 +1,167 @@
+"""linalg.eigen and analysis.modes against dense references: constrained undamped modes (null space
+of G), damped poles (QZ of the dense first-order realization), MAC, matching, structure checks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.linalg as sla
+
+import morsuite as ms
+from morsuite.errors import InputError, ShapeError
+from morsuite.linalg.eigen import constrained_modes, damped_poles
+from support import assert_sets_close, dense_modes
+
+
+@pytest.fixture(scope="module")
+def block():
+    return ms.models.fem_block(400)  # Rayleigh damping: the damped shapes are the undamped ones
+
+
+@pytest.fixture(scope="module")
+def tcom():
+    return ms.models.tcom(nc=40)
+
+
+def dense_poles(fom):
+    """Finite eigenvalues (Im >= 0) of the dense first-order realization (E, A) of size 2 n1 + n2."""
+    E, A, _, _ = fom.first_order()
+    lam = sla.eigvals(A.toarray(), E.toarray())
+    lam = lam[np.isfinite(lam)]
+    return lam[lam.imag >= 0]
+
+
+@pytest.mark.parametrize("name", ["dsms", "tcom", "block"])
+def test_constrained_modes_against_the_null_space_reference(name, block, tcom):
+    fom = {"dsms": ms.models.dsms(g=100), "tcom": tcom, "block": block}[name]
+    w_ref, _ = dense_modes(fom)
+    res = constrained_modes(fom, k=12)
+    assert_sets_close(res.omega, w_ref[:12], rtol=1e-10, what="lowest constrained modes")
+    Phi = res.shapes
+    assert np.abs(Phi.T @ (fom.M @ Phi) - np.eye(12)).max() < 1e-12
+    assert np.abs(fom.G @ Phi).max() < 1e-12 * np.abs(Phi).max() * max(1.0, abs(fom.G).max())
+    assert res.residuals.max() < 1e-11 and res.info["lu_count"] == 1
+    # every mode of a band, and nothing else
+    band = (0.5 * (w_ref[5] + w_ref[6]), 0.5 * (w_ref[20] + w_ref[21]))
+    rb = constrained_modes(fom, band=band)
+    assert rb.info["covered"] and rb.info["lu_count"] == 1
+    assert_sets_close(rb.omega, w_ref[6:21], rtol=1e-10, what="band modes")
+
+
+def test_constrained_modes_refuses_bad_input(tcom):
+    with pytest.raises(InputError, match=r"k = 116 exceeds n1 - n2 - 1 = 114"):
+        constrained_modes(tcom, k=116)
+    with pytest.raises(InputError, match="band must satisfy 0 <= w1 < w2.*empty"):
+        constrained_modes(tcom, band=(2.0, 1.0))
+    with pytest.raises(InputError, match="holds no mode"):
+        constrained_modes(tcom, band=(1e3, 2e3))
+    with pytest.raises(InputError, match="needs k .* or band"):
+        constrained_modes(tcom)
+    with pytest.raises(InputError, match="k must be a positive integer"):
+        constrained_modes(tcom, k=0)
+
+
+@pytest.mark.parametrize("name", ["tcom", "block", "dsms"])
+def test_damped_poles_against_the_dense_first_order_realization(name, block, tcom):
+    fom, band = {"tcom": (tcom, (0.05, 1.0)), "block": (block, (0.5, 3.0)),
+                 "dsms": (ms.models.dsms(g=60), (0.1, 0.2))}[name]
+    res = damped_poles(fom, band)
+    ref = dense_poles(fom)
+    f = np.abs(ref)
+    inside = ref[(f >= band[0]) & (f <= band[1])]
+    got = res.poles[res.in_band]
+    # the dense poles in the band, every one found (matched by tolerance: tcom and the block
+    # have double poles, each kept once per dimension of its eigenspace)
+    assert_sets_close(got, inside, rtol=1e-8, what="damped poles in the band")
+    assert res.residuals.max() < 1e-12
+    assert res.info["covered"] and res.info["lu_count"] == len(res.info["shifts"])
+    assert np.allclose(res.damping, -res.poles.real / np.abs(res.poles))
+    with pytest.raises(InputError, match="band must satisfy"):
+        damped_poles(fom, (1.0, 1.0))
+
+
+def test_model_modes_is_memoised_and_matches_a_modal_rom(block):
+    band = (0.5, 3.0)
+    full = ms.analysis.model_modes(block, band)
+    assert ms.analysis.model_modes(block, band) is full
+    rom = ms.reducers.make("modal", block, static_correction=False).reduce(14).rom
+    red = ms.analysis.rom_modes(rom, band)
+    table = ms.analysis.match_modes(full, red, band)
+    matched = table[table.status == "matched"]
+    # Rayleigh damping keeps the modal ROM's poles those of the full model
+    assert len(matched) == int(full.in_band.sum()) and (table.status == "spurious").sum() == 0
+    assert matched.rel_freq_error.max() < 1e-8 and matched.damping_error.abs().max() < 1e-8
+    # MAC of the lifted shapes against the full model's: 1 on the simple modes (a double pole's shapes
+    # are any basis of its eigenspace: there the full model's shapes lie in the span of the ROM's)
+    f = full.frequencies[matched.full_index]
+    simple = np.array([np.sum(np.abs(full.frequencies - x) < 1e-6 * x) == 1 for x in f])
+    assert simple.sum() >= 4
+    A = ms.analysis.mac(full.shapes[:, matched.full_index[simple]], red.shapes[:, matched.rom_index[simple]])
+    assert np.abs(np.diag(A) - 1).max() < 1e-8
+    double = matched[~simple]
+    for x in np.unique(np.round(full.frequencies[double.full_index], 8)):
+        i = double.full_index[np.isclose(full.frequencies[double.full_index], x, rtol=1e-6)]
+        j = double.rom_index[np.isclose(full.frequencies[double.full_index], x, rtol=1e-6)]
+        Q, _ = np.linalg.qr(red.shapes[:, j])
+        X = full.shapes[:, i]
+        assert np.linalg.norm(X - Q @ (Q.conj().T @ X)) < 1e-8
+
+
+def test_match_modes_reports_missing_and_spurious(tcom):
+    band = (0.05, 1.0)
+    full = ms.analysis.model_modes(tcom, band)
+    rom = ms.reducers.make("modal", tcom, static_correction=False).reduce(3).rom
+    red = ms.analysis.rom_modes(rom, band)
+    # a spurious pole: the reduced poles moved by 20 %
+    moved = ms.linalg.eigen.PolesResult(red.poles * 1.2, red.shapes, red.frequencies * 1.2, red.damping,
+                                        red.in_band, red.residuals, red.info)
+    t = ms.analysis.match_modes(full, moved, band)
+    n_in = int(full.in_band.sum())
+    assert (t.status == "missing").sum() == n_in and (t.status == "spurious").sum() == np.sum(
+        (moved.frequencies >= band[0]) & (moved.frequencies <= band[1]))
+    t0 = ms.analysis.match_modes(full, red, band)
+    assert (t0.status == "matched").sum() == np.sum(red.in_band) and (t0.status == "missing").sum() == n_in - np.sum(
+        red.in_band)
+    with pytest.raises(InputError, match="tol must be a positive number"):
+        ms.analysis.match_modes(full, red, band, tol=0)
+
+
+def test_mac_against_its_formula():
+    rng = np.random.default_rng(3)
+    n = 20
+    X = rng.standard_normal((n, n))
+    M = X @ X.T + n * np.eye(n)
+    _, Phi = sla.eigh(np.diag(np.arange(1.0, n + 1)) + 0.1 * (X + X.T), M)
+    assert np.abs(ms.analysis.mac(Phi, Phi, M) - np.eye(n)).max() < 1e-12  # M-orthogonal modes
+    A = rng.standard_normal((n, 3)) + 1j * rng.standard_normal((n, 3))
+    B = rng.standard_normal((n, 4))
+    ref = np.array([[abs(np.vdot(a, b)) ** 2 / (np.vdot(a, a).real * np.vdot(b, b)) for b in B.T] for a in A.T])
+    assert np.allclose(ms.analysis.mac(A, B), ref, rtol=1e-13, atol=0)
+    assert np.allclose(ms.analysis.mac(A * (2 - 3j), B * -4.0), ref, rtol=1e-12, atol=0)  # scale invariant
+    with pytest.raises(ShapeError, match="same n"):
+        ms.analysis.mac(A, B[:-1])
+
+
+def test_rom_modes_of_a_first_order_rom_has_no_lift(tcom):
+    rom = ms.reducers.make("bt", tcom).reduce(6).rom
+    m = ms.analysis.rom_modes(rom)
+    assert m.shapes is None and not m.info["lift"]
+    assert_sets_close(m.poles, rom.poles()[rom.poles().imag >= 0], rtol=1e-12, what="first-order poles")
+
+
+def test_structure_checks(block):
+    rom = ms.reducers.make("modal", block).reduce(8).rom
+    ok = ms.analysis.structure_checks(rom, block, omega=np.geomspace(0.1, 3, 8))
+    assert ok["ok"] and ok["M_spd"] and ok["K_spd"] and ok["D_psd"] and ok["stable"] and ok["beats_zero"]
+    K = rom.K.copy()
+    K[0, 0] = -K[0, 0]  # an indefinite stiffness: unstable and not positive definite
+    bad = ms.rom.SecondOrderROM(rom.M, rom.D, K, rom.F, rom.L)
+    chk = ms.analysis.structure_checks(bad)
+    assert not chk["K_spd"] and not chk["stable"] and not chk["ok"] and chk["beats_zero"] is None
+    M = rom.M.copy()
+    M[0, 1] += 1e-3  # asymmetric mass
+    assert not ms.analysis.structure_checks(ms.rom.SecondOrderROM(M, rom.D, rom.K, rom.F, rom.L))["M_spd"]
+    D = rom.D - 2 * np.abs(rom.D).max() * np.eye(rom.order)  # negative damping
+    assert not ms.analysis.structure_checks(ms.rom.SecondOrderROM(rom.M, D, rom.K, rom.F, rom.L))["D_psd"]
+    zero = ms.rom.SecondOrderROM(rom.M, rom.D, rom.K, 0 * rom.F, rom.L)
+    assert ms.analysis.structure_checks(zero, block, omega=np.geomspace(0.1, 3, 8))["beats_zero"] is False
