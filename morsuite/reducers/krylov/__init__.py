@@ -45,7 +45,8 @@ so r columns hold about r/m levels; ``"tangential"`` one direction per point,
 the directions given or random unit vectors from ``seed`` (``info["directions"]``).
 
 Options (:attr:`Krylov.OPTIONS`, recorded in ``info["options"]``): ``points``
-("auto": the real point :math:`s_0 = \omega_1`, the band's lower edge; "band":
+("auto": the real point :math:`s_0 = \sqrt{\omega_1\omega_2}`, the band's geometric
+mean; "band":
 ``npoints`` (3) points :math:`i\omega_k` log-uniform over the band; or a list),
 ``sided`` ("one"), ``directions`` ("block"), ``right_directions`` /
 ``left_directions`` (None), ``seed`` (0), ``orth_tol`` (1e-10, deflation),
