@@ -107,6 +107,19 @@ def test_two_sided_matches_right_plus_left_levels(models, name):
     assert err.max() <= TOL, err
 
 
+def test_an_ill_conditioned_two_sided_model_is_flagged(models):
+    # dsms(40), 3 outputs, two-sided at r = 12: W^T A(s0) V is nearly singular (condition ~1e15 measured)
+    fom, ref = models["dsms"]
+    with pytest.warns(ms.errors.AccuracyWarning, match="condition"):
+        res = ms.reducers.make("krylov", fom, sided="two").reduce(12)
+    row = res.info["moments"][0]
+    s0 = np.sqrt(fom.band[0] * fom.band[1])
+    lhs = s0 * s0 * res.rom.M + s0 * res.rom.D + res.rom.K
+    assert row["condition"] == pytest.approx(np.linalg.cond(lhs), rel=1e-6) and row["condition"] > 1e8
+    # the record says what the moments are worth: the error stays within a few condition * eps
+    assert moment_errors(ref, res.rom, s0, row["moments"]).max() <= 100 * row["condition"] * np.finfo(float).eps
+
+
 def test_two_sided_at_several_points(models):
     fom, ref = models["tcom"]
     _, res = _reduce(fom, 12, sided="two", points="band")

@@ -21,6 +21,9 @@ __all__ = ["Krylov", "expansion_points"]
 
 #: ``info["kernel_residual"]`` above this (relative) is warned about (AccuracyWarning)
 KERNEL_WARN = 1e-8
+#: a reduced matrix A_r(s0) with a condition number above this is warned about (AccuracyWarning): its
+#: moments then hold to less than about 1e-8 relative
+COND_WARN = 1e8
 
 
 def expansion_points(points, npoints: int, band) -> np.ndarray:
@@ -297,7 +300,15 @@ class Krylov(Reducer):
             if not one:
                 row["left_levels"] = matched["left"][i]
             row["moments"] = sum(m[i] for m in matched.values())
+            # the moments of the reduced model come from solves with A_r(s0): accurate to about cond * eps
+            row["condition"] = float(np.linalg.cond(s * s * Mr + s * Dr + Kr)) if r_used else 1.0
             moments.append(row)
+        worst = max(row["condition"] for row in moments)
+        if worst > COND_WARN:
+            self.warn(f"krylov: the reduced matrix s0^2 M_r + s0 D_r + K_r has condition {worst:.1e} at an expansion "
+                      f"point: its matched moments hold to about {worst * np.finfo(float).eps:.0e} relative only"
+                      + ("; two-sided bases can make W^T V nearly singular (try sided='one' or another r)"
+                         if not one else ""), AccuracyWarning)
         nlu = len(state["lus"])
         basis_now = sum(s.seconds - before[k][0] for k, s in sides.items())
         info = {
