@@ -22,27 +22,35 @@ import warnings
 from . import benchmark
 from .floor import median_run, run_against_floor, upper_half
 
-__all__ = ["bench_krylov", "SETTINGS"]
+__all__ = ["bench_krylov", "SETTINGS", "PLANS"]
 
 #: the settings timed: name -> reducer options
 SETTINGS = {"one point, one-sided": {}, "band (3 points), one-sided": {"points": "band"},
             "one point, two-sided": {"sided": "two"}}
 
 
+#: the plans: model, r, repeats and the settings timed
+PLANS = {"full": {"spec": "fem_block:n1=20000", "r": 20, "repeats": 3, "settings": list(SETTINGS)},
+         "quick": {"spec": "fem_block:n1=2000", "r": 10, "repeats": 1, "settings": list(SETTINGS)}}
+
+
 @benchmark("krylov")
-def bench_krylov(quick: bool) -> dict:
-    """krylov at r = 20 on fem_block(20000) (three settings): wall time over one bare LU + solves per point."""
+def bench_krylov(quick: bool, *, plan: dict | None = None) -> dict:
+    """krylov at r = 20 on fem_block(20000) (three settings): wall time over one bare LU + solves per point.
+
+    ``plan`` (keys of :data:`PLANS`' entries) replaces the plan ``quick`` picks, e.g.
+    ``{"settings": ["one point, one-sided"], "repeats": 1}`` on a loaded machine, where one
+    LU of fem_block(20000) took 178 s (2026-11-27).
+    """
     from .. import models, reducers
 
-    spec, r, repeats = "fem_block:n1=20000", 20, 3
-    if quick:
-        spec, r, repeats = "fem_block:n1=2000", 10, 1
+    plan = {**PLANS["quick" if quick else "full"], **(plan or {})}
+    spec, r, repeats = plan["spec"], plan["r"], plan["repeats"]
     fom = models.parse(spec)
-    with warnings.catch_warnings():  # the pattern, its ordering and the kernels' compile: not the runs' time
-        warnings.simplefilter("ignore")
-        reducers.make("krylov", fom).reduce(2)
+    fom.new_solver()._ordering()  # the pattern and its column ordering (once per model): not the runs' time
     rows, ratios = [], {}
-    for label, opts in SETTINGS.items():
+    for label in plan["settings"]:
+        opts = SETTINGS[label]
         keep = {}
 
         def run():
