@@ -12,7 +12,6 @@ import pytest
 import scipy.linalg as sla
 
 import morsuite as ms
-from morsuite.linalg.saddle import SaddlePointSolver
 from morsuite.reducers.base import as_complex
 from morsuite.stress.refused_inputs import _pole_model
 from morsuite.utils import blas_threads
@@ -186,38 +185,25 @@ def test_two_sided_instability_is_flagged():
 
 
 # -- cost: LUs and reuse -------------------------------------------------------------------------
-@pytest.fixture
-def factor_calls(monkeypatch):
-    calls = []
-    original = SaddlePointSolver.factor
-
-    def counted(self, *args, **kwargs):
-        calls.append(args)
-        return original(self, *args, **kwargs)
-
-    monkeypatch.setattr(SaddlePointSolver, "factor", counted)
-    return calls
-
-
-def test_one_lu_per_distinct_point_conjugates_shared(factor_calls):
+def test_one_lu_per_distinct_point_conjugates_shared(count_factorizations):
     fom = ms.models.tcom(nc=20)
-    factor_calls.clear()  # (the model's constructor may factor)
+    count_factorizations.clear()  # (the model's constructor may factor)
     pts = [0.5, 1j, -1j, 0.5, 2 + 1j, 2 - 1j]
     red, res = _reduce(fom, 12, points=pts, sided="two")
-    assert len(factor_calls) == 3 == res.info["lu_count"] == res.info["lu_count_shared"]
+    assert len(count_factorizations) == 3 == res.info["lu_count"] == res.info["lu_count_shared"]
     assert as_complex(res.info["points"]).tolist() == [0.5, 1j, 2 + 1j]
-    assert res.info["solves"] == res.info["solver_stats"]["solves"] - len(factor_calls)  # (one check per LU)
+    assert res.info["solves"] == res.info["solver_stats"]["solves"] - len(count_factorizations)  # (one check per LU)
 
 
-def test_a_sweep_over_r_pays_the_lus_once(factor_calls):
+def test_a_sweep_over_r_pays_the_lus_once(count_factorizations):
     fom = ms.models.tcom(nc=20)
-    factor_calls.clear()
+    count_factorizations.clear()
     red, first = _reduce(fom, 6, points="band")
-    n = len(factor_calls)
+    n = len(count_factorizations)
     assert n == 3 and first.info["lu_count"] == 3 and not first.info["setup_reused"]
     big = red.reduce(14)
     small = red.reduce(4)
-    assert len(factor_calls) == n
+    assert len(count_factorizations) == n
     for res in (big, small):
         assert res.info["lu_count"] == 0 and res.info["lu_count_shared"] == 3 and res.info["setup_reused"]
     assert small.info["solves"] == 0 and big.info["solves"] > 0
@@ -277,3 +263,12 @@ def test_bad_r_and_a_pole_are_refused():
             red.reduce(r)
     with pytest.raises(ms.errors.SingularShiftError, match=r"'points'.*points\[0\] = 1.0 is .*a pole"):
         ms.reducers.make("krylov", _pole_model(), points=[1.0]).reduce(2)
+
+
+def test_the_benchmark_runs_and_reports_its_ratio():
+    from morsuite.bench.krylov import bench_krylov
+
+    res = bench_krylov(True, plan={"spec": "fem_block:n1=300", "r": 4, "settings": ["one point, one-sided"]})
+    row = res["rows"][0]
+    assert row["lu_count"] == 1 and row["reuse_lu_count"] == 0 and row["solves"] == 4
+    assert row["ratio"] == pytest.approx(row["time_s"] / row["floor_s"], rel=1e-12) and row["ratio"] > 0
