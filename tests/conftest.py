@@ -14,6 +14,7 @@ import scipy.io as sio
 import scipy.sparse as sp
 
 import morsuite as ms
+from morsuite.linalg.saddle import SaddlePointSolver
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
 
@@ -97,3 +98,17 @@ def dsms6000_freq():
     fom = ms.models.dsms(6000)
     omega = ms.analysis.freq_grid(fom.band, 200)
     return fom, omega, fom.freqresp(omega)
+
+
+@pytest.fixture
+def count_factorizations(monkeypatch):
+    """Counts every call of SaddlePointSolver.factor (cache_size=0 in the reducers: each is an LU)."""
+    calls = []
+    original = SaddlePointSolver.factor
+
+    def counted(self, *args, **kwargs):
+        calls.append(args)
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(SaddlePointSolver, "factor", counted)
+    return calls

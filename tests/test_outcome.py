@@ -12,7 +12,6 @@ import pytest
 
 import morsuite as ms
 from morsuite.cli import main
-from morsuite.linalg.saddle import SaddlePointSolver
 from morsuite.reducers import outcome
 from morsuite.reducers.base import Reducer
 from morsuite.reducers.outcome import (CONVERGED_STATUSES, STATUS, check_outcome, standalone_lu_count,
@@ -103,21 +102,7 @@ def test_base_class_refuses_an_inconsistent_record(info, match):
         fake.reduce(2)
 
 
-# -- lu_count: every LU paid, counted independently ----------------------------------------------
-@pytest.fixture
-def count_factorizations(monkeypatch):
-    """Counts every call of SaddlePointSolver.factor (cache_size=0 in the reducers: each is an LU)."""
-    calls = []
-    original = SaddlePointSolver.factor
-
-    def counted(self, *args, **kwargs):
-        calls.append(args)
-        return original(self, *args, **kwargs)
-
-    monkeypatch.setattr(SaddlePointSolver, "factor", counted)
-    return calls
-
-
+# -- lu_count: every LU paid, counted independently (count_factorizations: conftest) -------------
 SPARSE = [n for n in ms.reducers.available() if n != "irka-projected"]  # (dense LUs: counted below)
 
 

@@ -7,5 +7,6 @@ from .bt import BT  # noqa: F401  (registers "bt")
 from .irka_fo import IRKAFO  # noqa: F401  (registers "irka-fo")
 from .so_h2 import SOH2  # noqa: F401  (registers "so-h2")
 from .modal import Modal  # noqa: F401  (registers "modal")
+from .krylov import Krylov  # noqa: F401  (registers "krylov")
 
 __all__ = ["Option", "Reducer", "Reduction", "make", "available", "register", "get_class", "IRKA"]
