@@ -4,6 +4,7 @@ from .base import Option, Reducer, Reduction, available, get_class, make, regist
 from .irka import IRKA
 from .irka_projected import IRKAProjected  # noqa: F401  (registers "irka-projected")
 from .bt import BT  # noqa: F401  (registers "bt")
+from .bt_fl import BTFL  # noqa: F401  (registers "bt-fl")
 from .irka_fo import IRKAFO  # noqa: F401  (registers "irka-fo")
 from .so_h2 import SOH2  # noqa: F401  (registers "so-h2")
 from .modal import Modal  # noqa: F401  (registers "modal")

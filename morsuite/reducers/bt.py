@@ -102,7 +102,7 @@ from ..linalg.gramians import gramian_factors
 from ..rom import FirstOrderROM, SecondOrderROM
 from .base import Option, Reducer, register
 
-__all__ = ["BT", "FORMS"]
+__all__ = ["BT", "FORMS", "SquareRootBT", "level_products"]
 
 FORMS = ("first-order", "pp", "pv", "vp", "vv", "fv")
 
@@ -119,52 +119,19 @@ _LEVELS = {  # form: (svd for V, factor block of V, svd for W)
 }
 
 
-class BT(Reducer):
-    """Balanced truncation from LR-ADI Gramian factors (see the module docstring).
+class SquareRootBT(Reducer):
+    """The square-root step shared by the balanced truncations (``bt``, ``bt-fl``).
 
-    ``reduce(r)``: with ``form="first-order"`` r is the number of first-order
-    states of the :class:`~morsuite.rom.FirstOrderROM`; otherwise r is the
-    dimension of the :class:`~morsuite.rom.SecondOrderROM` (2r states). Both are
-    in ``info`` (``r``, ``states``).
+    A subclass declares the option ``form`` (one of :data:`FORMS`) and ``hsv_tol``
+    and keeps its Gramian factors in ``self._gram`` (made by its ``_gramians``):
+    ``{"c": ..., "o": ..., "prods": level_products(c, o, fom), "svd": {}, "svd_times": {},
+    "projected": {}}``, where ``c`` and ``o`` have the blocks ``position``,
+    ``velocity`` (and ``o.position_unprojected``) and ``rank`` of
+    :class:`~morsuite.linalg.lradi.LRADIResult`. :meth:`_truncate` then makes the
+    reduced model of any r from the cached SVDs and projections.
     """
 
-    name = "bt"
-
-    OPTIONS = {
-        "form": Option("first-order", "choice", "first-order square-root BT (stable, error bound) or a "
-                       "second-order balancing level: position-position, position-velocity, "
-                       "velocity-position, velocity-velocity (the paper's), free-velocity", choices=FORMS),
-        "tol": Option(1e-12, "float", "relative residual norm ||W^T W|| / ||W0^T W0|| at which LR-ADI stops "
-                      "(1e-12, not lradi's 1e-10: the truncation and its bound need the tail Hankel singular "
-                      "values; on dsms(6000) at r = 20 tol 1e-10 left them 10-20% low and the error 2.24e-12 "
-                      "above its computed bound 1.96e-12; 1e-12 gives 1.80e-12 <= 3.66e-12 for 5 more LUs; on "
-                      "tcom(2000) it costs 1205 instead of 969 iterations)",
-                      low=0, high=1, open_low=True, open_high=True),
-        "maxiter": Option(3000, "int", "largest number of LR-ADI iterations per equation (a complex pair "
-                          "counts two); the TCOM (nc = 2000) needs about 1200", low=1),
-        "shifts": Option("projection", "choice", "shift strategy: adaptive projection (Ritz) shifts or "
-                         "Penzl's heuristic", choices=("projection", "penzl")),
-        "num_shifts": Option(16, "int", "shifts (a complex pair counted once) taken from each shift "
-                             "computation", low=1),
-        "selection": Option("residual", "choice", "projection shifts chosen by their share of the current "
-                            "residual or by Penzl's greedy rule on the ADI rational function",
-                            choices=("residual", "gain")),
-        "refine": Option(1, "int", "long-double refinement steps of each shifted LR-ADI solve (1, not lradi's 0: "
-                         "without it the factors carry the solves' forward error, 8e-12 of ||T||_H2^2 on "
-                         "tcom(2000), which the exact H2 errors sharing them cannot certify; costs no LU, "
-                         "docs/design/norms.md)", low=0),
-        "gramian_cache": Option("model", "choice", "where the LR-ADI factors are kept: in the model's cache, "
-                                "shared with every bt reducer and analysis.h2_norm / h2_error on the same model "
-                                "object and ADI options (LR-ADI runs once per model), or on this reducer only (a "
-                                "fresh run per reducer, for benchmarks that time whole runs)",
-                                choices=("model", "reducer")),
-        "hsv_tol": Option(1e-13, "float", "singular values below hsv_tol times the largest are never kept "
-                          "(caps r)", low=0, high=1, open_high=True),
-    }
-
-    def __init__(self, fom, **options):
-        super().__init__(fom, **options)
-        self._gram = None  # shared by reducers that agree on ADI_OPTIONS (use_gramians_of)
+    name = "square-root-bt"
 
     # -- orders ------------------------------------------------------------
     def max_order(self) -> int:
@@ -176,41 +143,49 @@ class BT(Reducer):
         if self.options["form"] == "first-order" and isinstance(r, Integral) and not isinstance(r, bool) \
                 and r > self.max_order():
             raise InputError(f"r = {r} exceeds the number of first-order states on the hidden manifold "
-                             f"(2 (n1 - n2) = {self.max_order()}) for bt with form='first-order'")
+                             f"(2 (n1 - n2) = {self.max_order()}) for {self.name} with form='first-order'")
         return super()._validate_r(r)
 
-    # -- Gramians (once per reducer) --------------------------------------
-    def use_gramians_of(self, other: "BT") -> "BT":
-        """Share the Gramian factors (and SVDs) of ``other``, a ``bt`` reducer of the same
-        model with the same ADI options (``form`` and ``hsv_tol`` may differ). Returns self."""
-        if not isinstance(other, BT):
-            raise InputError(f"other must be a BT reducer; got {type(other).__name__}")
-        if other.fom is not self.fom:
-            raise InputError("other is bound to a different model object; Gramians cannot be shared")
-        diff = [k for k in ADI_OPTIONS if self.options[k] != other.options[k]]
-        if diff:
-            raise OptionError(f"other has different ADI options ({', '.join(diff)}); Gramians cannot be shared")
-        if other._gram is None:
-            other._gramians()
-        self._gram = other._gram
-        return self
+    #: why a reduced model of ``form`` may be unstable, for the StabilityWarning
+    def _instability_note(self, form):
+        return ("; second-order balancing levels other than 'fv' do not preserve stability"
+                if form not in ("first-order", "fv") else "; the Gramians are not accurate enough")
 
-    def _gramians(self) -> dict:
-        """The LR-ADI factors and their timing, computed on first use."""
-        if self._gram is not None:
-            return self._gram
-        o = self.options
-        gf = gramian_factors(self.fom, use_cache=o["gramian_cache"] == "model", **{k: o[k] for k in ADI_OPTIONS})
-        c, ob = gf.controllability, gf.observability
+    def _truncate(self, r):
+        """The reduced model of order r from the kept factors: (rom, extra info, times).
+
+        ``extra`` holds ``hsv``, ``stable`` (with ``unstable_poles`` when not),
+        ``error_bound`` (first-order form) or ``level_singular_values``; ``times``
+        the seconds of new SVDs (``svd``), of the projection (``projection``), and
+        of every SVD this form relies on, whoever paid it (``svd_setup``).
+        """
+        g = self._gram
+        form = self.options["form"]
+        svd_before = set(g["svd_times"])
+        t0 = time.perf_counter()
+        U, hsv, Vt = self._svd("fo")
+        extra = {"hsv": hsv}
+        if form == "first-order":
+            rom, r_used = self._first_order(r, U, hsv, Vt)
+            extra["error_bound"] = 2.0 * float(np.sum(hsv[r_used:]))
+        else:
+            rom, level_sv = self._second_order(r, form)
+            extra["error_bound"] = None
+            extra["level_singular_values"] = level_sv
         t1 = time.perf_counter()
-        fom = self.fom
-        # the two products every form needs: Y_p^T Z_p and Y_v^T M Z_v (their sum is Y^T E Z)
-        # Y_p enters only through products with Z_p, Z_v in ker G: its unprojected form will do
-        prods = {"pp": ob.position_unprojected.T @ c.position, "vv": ob.velocity.T @ (fom.M @ c.velocity)}
-        t2 = time.perf_counter()
-        self._gram = {"c": c, "o": ob, "prods": prods, "svd": {}, "svd_times": {}, "projected": {},
-                      "times": {"adi": gf.time_s, "products": t2 - t1}, "adi_computed": gf.computed}
-        return self._gram
+        stable = bool(rom.is_stable())
+        extra["stable"] = stable
+        if not stable:
+            lam = rom.poles()
+            extra["unstable_poles"] = int(np.sum(lam.real >= 0))
+            self.warn(f"{self.name}: the {form} reduced model at r = {rom.order} has {extra['unstable_poles']} "
+                      f"poles in the closed right half-plane (max real part {lam.real.max():.3e})"
+                      + self._instability_note(form), StabilityWarning)
+        svd_new = sum(v for k, v in g["svd_times"].items() if k not in svd_before)
+        svd_keys = {"fo"} | ({_LEVELS[form][0], _LEVELS[form][2]} - {None} if form != "first-order" else set())
+        times = {"svd": svd_new, "projection": t1 - t0 - svd_new,
+                 "svd_setup": sum(g["svd_times"].get(k, 0.0) for k in svd_keys)}
+        return rom, extra, times
 
     def _svd(self, key):
         """Cached SVD of Y_a^T (M) Z_b for key in pp, pv, vp, vv, or 'fo' (Y^T E Z)."""
@@ -233,72 +208,12 @@ class BT(Reducer):
         tol = self.options["hsv_tol"]
         n_ok = int(np.sum(s > tol * s[0])) if s.size and s[0] > 0 else 0
         if n_ok < r and what is not None:
-            self.warn(f"bt: only {n_ok} {what} exceed hsv_tol = {tol:g} times the largest (factor ranks "
+            self.warn(f"{self.name}: only {n_ok} {what} exceed hsv_tol = {tol:g} times the largest (factor ranks "
                       f"{self._gram['c'].rank} and {self._gram['o'].rank}); r capped from {r} to {n_ok}",
                       RankWarning)
         if n_ok == 0:
-            raise InputError(f"bt: no singular value above hsv_tol = {tol:g} of the largest; nothing to keep")
+            raise InputError(f"{self.name}: no singular value above hsv_tol = {tol:g} of the largest; nothing to keep")
         return min(r, n_ok)
-
-    def _reduce(self, r):
-        fresh = self._gram is None
-        g = self._gramians()
-        adi_fresh = fresh and g["adi_computed"]  # False when the model's cache had the factors
-        c, ob = g["c"], g["o"]
-        form = self.options["form"]
-        for res in (c, ob):
-            if not res.converged:
-                self.warn(f"bt: LR-ADI ({res.equation}) stopped at maxiter = {res.maxiter} with relative "
-                          f"residual {res.residual:.2e} > tol = {res.tol:.1e}; the Gramians (and the Hankel "
-                          f"singular values and bound) are not accurate to tol", ConvergenceWarning)
-        svd_before = set(g["svd_times"])
-        t0 = time.perf_counter()
-        U, hsv, Vt = self._svd("fo")
-        extra = {}
-        if form == "first-order":
-            rom, r_used = self._first_order(r, U, hsv, Vt)
-            extra["error_bound"] = 2.0 * float(np.sum(hsv[r_used:]))
-        else:
-            rom, level_sv = self._second_order(r, form)
-            extra["error_bound"] = None
-            extra["level_singular_values"] = level_sv
-        t1 = time.perf_counter()
-        stable = bool(rom.is_stable())
-        if not stable:
-            lam = rom.poles()
-            extra["unstable_poles"] = int(np.sum(lam.real >= 0))
-            self.warn(f"bt: the {form} reduced model at r = {rom.order} has {extra['unstable_poles']} poles in "
-                      f"the closed right half-plane (max real part {lam.real.max():.3e})"
-                      + ("; second-order balancing levels other than 'fv' do not preserve stability"
-                         if form not in ("first-order", "fv") else "; the Gramians are not accurate enough"),
-                      StabilityWarning)
-        times = g["times"]
-        st_c = c.times
-        svd_new = sum(v for k, v in g["svd_times"].items() if k not in svd_before)
-        svd_keys = {"fo"} | ({_LEVELS[form][0], _LEVELS[form][2]} - {None} if form != "first-order" else set())
-        info = {
-            "form": form, "converged": bool(c.converged and ob.converged),
-            "status": "direct" if c.converged and ob.converged else "cap",  # LR-ADI's maxiter
-            "iterations": max(c.iterations, ob.iterations),
-            "adi_iterations": {"controllability": c.iterations, "observability": ob.iterations},
-            "residual_history": {"controllability": c.residuals, "observability": ob.residuals},
-            "adi": {"controllability": c.summary(history=False), "observability": ob.summary(history=False)},
-            "factor_ranks": {"controllability": c.rank, "observability": ob.rank},
-            "lu_count": c.lu_count if adi_fresh else 0,
-            "lu_count_shared": c.lu_count,  # the Gramian factors' LR-ADI, whoever paid it
-            "hsv": hsv, "stable": stable, **extra,
-            "time_breakdown": {"adi": times["adi"] if adi_fresh else 0.0,
-                               "lu": st_c["factor"] if adi_fresh else 0.0,
-                               "solves": (c.times["solve"] + ob.times["solve"]) if adi_fresh else 0.0,
-                               "shifts": st_c["shifts"] if adi_fresh else 0.0,
-                               "products": times["products"] if fresh else 0.0,
-                               "svd": svd_new, "projection": t1 - t0 - svd_new},
-            # r-independent work paid once per reducer (studies add it back for 'standalone' times)
-            "setup_reused": not adi_fresh,
-            "setup_cost": {"adi": times["adi"], "products": times["products"],
-                           "svd": sum(g["svd_times"].get(k, 0.0) for k in svd_keys)},
-        }
-        return rom, info
 
     def _projected(self, form, r, n_max, build, headroom=None):
         """Leading r x r blocks of the projected matrices, built for R >= r columns and cached.
@@ -357,6 +272,133 @@ class BT(Reducer):
 
         Mr, Dr, Kr, Fr, Lr = self._projected(form, r, n_ok, build)
         return SecondOrderROM(Mr, Dr, Kr, Fr, Lr), level_sv
+
+
+class BT(SquareRootBT):
+    """Balanced truncation from LR-ADI Gramian factors (see the module docstring).
+
+    ``reduce(r)``: with ``form="first-order"`` r is the number of first-order
+    states of the :class:`~morsuite.rom.FirstOrderROM`; otherwise r is the
+    dimension of the :class:`~morsuite.rom.SecondOrderROM` (2r states). Both are
+    in ``info`` (``r``, ``states``).
+    """
+
+    name = "bt"
+
+    OPTIONS = {
+        "form": Option("first-order", "choice", "first-order square-root BT (stable, error bound) or a "
+                       "second-order balancing level: position-position, position-velocity, "
+                       "velocity-position, velocity-velocity (the paper's), free-velocity", choices=FORMS),
+        "tol": Option(1e-12, "float", "relative residual norm ||W^T W|| / ||W0^T W0|| at which LR-ADI stops "
+                      "(1e-12, not lradi's 1e-10: the truncation and its bound need the tail Hankel singular "
+                      "values; on dsms(6000) at r = 20 tol 1e-10 left them 10-20% low and the error 2.24e-12 "
+                      "above its computed bound 1.96e-12; 1e-12 gives 1.80e-12 <= 3.66e-12 for 5 more LUs; on "
+                      "tcom(2000) it costs 1205 instead of 969 iterations)",
+                      low=0, high=1, open_low=True, open_high=True),
+        "maxiter": Option(3000, "int", "largest number of LR-ADI iterations per equation (a complex pair "
+                          "counts two); the TCOM (nc = 2000) needs about 1200", low=1),
+        "shifts": Option("projection", "choice", "shift strategy: adaptive projection (Ritz) shifts or "
+                         "Penzl's heuristic", choices=("projection", "penzl")),
+        "num_shifts": Option(16, "int", "shifts (a complex pair counted once) taken from each shift "
+                             "computation", low=1),
+        "selection": Option("residual", "choice", "projection shifts chosen by their share of the current "
+                            "residual or by Penzl's greedy rule on the ADI rational function",
+                            choices=("residual", "gain")),
+        "refine": Option(1, "int", "long-double refinement steps of each shifted LR-ADI solve (1, not lradi's 0: "
+                         "without it the factors carry the solves' forward error, 8e-12 of ||T||_H2^2 on "
+                         "tcom(2000), which the exact H2 errors sharing them cannot certify; costs no LU, "
+                         "docs/design/norms.md)", low=0),
+        "gramian_cache": Option("model", "choice", "where the LR-ADI factors are kept: in the model's cache, "
+                                "shared with every bt reducer and analysis.h2_norm / h2_error on the same model "
+                                "object and ADI options (LR-ADI runs once per model), or on this reducer only (a "
+                                "fresh run per reducer, for benchmarks that time whole runs)",
+                                choices=("model", "reducer")),
+        "hsv_tol": Option(1e-13, "float", "singular values below hsv_tol times the largest are never kept "
+                          "(caps r)", low=0, high=1, open_high=True),
+    }
+
+    def __init__(self, fom, **options):
+        super().__init__(fom, **options)
+        self._gram = None  # shared by reducers that agree on ADI_OPTIONS (use_gramians_of)
+
+    # -- Gramians (once per reducer) --------------------------------------
+    def use_gramians_of(self, other: "BT") -> "BT":
+        """Share the Gramian factors (and SVDs) of ``other``, a ``bt`` reducer of the same
+        model with the same ADI options (``form`` and ``hsv_tol`` may differ). Returns self."""
+        if not isinstance(other, BT):
+            raise InputError(f"other must be a BT reducer; got {type(other).__name__}")
+        if other.fom is not self.fom:
+            raise InputError("other is bound to a different model object; Gramians cannot be shared")
+        diff = [k for k in ADI_OPTIONS if self.options[k] != other.options[k]]
+        if diff:
+            raise OptionError(f"other has different ADI options ({', '.join(diff)}); Gramians cannot be shared")
+        if other._gram is None:
+            other._gramians()
+        self._gram = other._gram
+        return self
+
+    def _gramians(self) -> dict:
+        """The LR-ADI factors and their timing, computed on first use."""
+        if self._gram is not None:
+            return self._gram
+        o = self.options
+        gf = gramian_factors(self.fom, use_cache=o["gramian_cache"] == "model", **{k: o[k] for k in ADI_OPTIONS})
+        c, ob = gf.controllability, gf.observability
+        t1 = time.perf_counter()
+        fom = self.fom
+        prods = level_products(c, ob, fom)
+        t2 = time.perf_counter()
+        self._gram = {"c": c, "o": ob, "prods": prods, "svd": {}, "svd_times": {}, "projected": {},
+                      "times": {"adi": gf.time_s, "products": t2 - t1}, "adi_computed": gf.computed}
+        return self._gram
+
+    def _reduce(self, r):
+        fresh = self._gram is None
+        g = self._gramians()
+        adi_fresh = fresh and g["adi_computed"]  # False when the model's cache had the factors
+        c, ob = g["c"], g["o"]
+        form = self.options["form"]
+        for res in (c, ob):
+            if not res.converged:
+                self.warn(f"bt: LR-ADI ({res.equation}) stopped at maxiter = {res.maxiter} with relative "
+                          f"residual {res.residual:.2e} > tol = {res.tol:.1e}; the Gramians (and the Hankel "
+                          f"singular values and bound) are not accurate to tol", ConvergenceWarning)
+        rom, extra, tt = self._truncate(r)
+        times = g["times"]
+        st_c = c.times
+        info = {
+            "form": form, "converged": bool(c.converged and ob.converged),
+            "status": "direct" if c.converged and ob.converged else "cap",  # LR-ADI's maxiter
+            "iterations": max(c.iterations, ob.iterations),
+            "adi_iterations": {"controllability": c.iterations, "observability": ob.iterations},
+            "residual_history": {"controllability": c.residuals, "observability": ob.residuals},
+            "adi": {"controllability": c.summary(history=False), "observability": ob.summary(history=False)},
+            "factor_ranks": {"controllability": c.rank, "observability": ob.rank},
+            "lu_count": c.lu_count if adi_fresh else 0,
+            "lu_count_shared": c.lu_count,  # the Gramian factors' LR-ADI, whoever paid it
+            **extra,
+            "time_breakdown": {"adi": times["adi"] if adi_fresh else 0.0,
+                               "lu": st_c["factor"] if adi_fresh else 0.0,
+                               "solves": (c.times["solve"] + ob.times["solve"]) if adi_fresh else 0.0,
+                               "shifts": st_c["shifts"] if adi_fresh else 0.0,
+                               "products": times["products"] if fresh else 0.0,
+                               "svd": tt["svd"], "projection": tt["projection"]},
+            # r-independent work paid once per reducer (studies add it back for 'standalone' times)
+            "setup_reused": not adi_fresh,
+            "setup_cost": {"adi": times["adi"], "products": times["products"],
+                           "svd": tt["svd_setup"]},
+        }
+        return rom, info
+
+
+def level_products(c, ob, fom) -> dict:
+    r"""The two products every form needs, :math:`Y_p^TZ_p` ("pp") and :math:`Y_v^TMZ_v` ("vv").
+
+    Their sum is :math:`Y^TEZ`. :math:`Y_p` enters only through products with
+    :math:`Z_p, Z_v \in \ker G`, so its unprojected form (``position_unprojected``) will do.
+    Cost: two dense products of n1 x k blocks and one sparse product.
+    """
+    return {"pp": ob.position_unprojected.T @ c.position, "vv": ob.velocity.T @ (fom.M @ c.velocity)}
 
 
 def _orthonormal(X):
