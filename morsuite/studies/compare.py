@@ -41,10 +41,19 @@ METHODS = {
     "bt": ("bt", {}, 1, "BT, first-order"),
     "irka-projected": ("irka-projected", {}, 2, "IRKA, Pi-projected (dense)"),
     **{f"bt-{lvl}": ("bt", {"form": lvl}, 2, f"BT ({lvl}, second-order)") for lvl in ("pp", "pv", "vp", "vv", "fv")},
+    "bt-fl": ("bt-fl", {}, 1, "BT, frequency-limited to the band"),
+    "modal": ("modal", {}, 2, "modal truncation + static correction"),
+    "krylov": ("krylov", {}, 2, "Krylov moment matching (SOAR)"),
 }
-DEFAULT_METHODS = ("irka", "irka-fo", "so-h2", "bt-vv", "bt")
+#: the H2/BT family and the engineering baselines (modal truncation, Krylov moment matching: one LU each)
+DEFAULT_METHODS = ("irka", "irka-fo", "so-h2", "bt-vv", "bt", "modal", "krylov")
 #: the inputs of ``--input`` besides a CSV file (columns t, u1..um)
 INPUTS = ("step", "impulse", "chirp")
+
+
+def _options(method: str, band) -> dict:
+    """The method's options in a comparison on ``band``: frequency-limited BT limited to it."""
+    return {**METHODS[method][1], **({"band": list(band)} if method == "bt-fl" else {})}
 
 
 def _alias(name: str) -> str:
@@ -137,7 +146,8 @@ def compare_spec(model: str, states, methods=None, band=None, input=None, name=N
                            f"{band[1]:.3g}] rad/s; exact H2 and Hinf errors of every reduction.",
             "norms": ["h2", "hinf"], "models": {"model": source},
             "grids": {"band": {"band": band, "n": 200}},
-            "methods": {_alias(m): {"reducer": METHODS[m][0], **({"options": METHODS[m][1]} if METHODS[m][1] else {}),
+            "methods": {_alias(m): {"reducer": METHODS[m][0], **({"options": _options(m, band)} if _options(m, band)
+                                                              else {}),
                                     "label": METHODS[m][3]} for m in methods},
             "scenes": []}
 
@@ -167,6 +177,10 @@ def compare_spec(model: str, states, methods=None, band=None, input=None, name=N
                                    **extra, "input": _input(input),
                                    "title": f"{fom.name}: {input if input in INPUTS else 'measured input'}, "
                                             f"{n} states"})
+    r, other = orders([states[-1]])
+    spec["scenes"].append({"name": f"modes_{states[-1]}", "kind": "modes", "model": "model", "grid": "band",
+                           "methods": aliases, "r": r, **({"r_by_method": other} if other else {}),
+                           "title": f"{fom.name}: modes in the band at {states[-1]} states"})
     if len(states) > 1:
         r, other = orders(states)
         extra = {"r_by_method": other} if other else {}

@@ -74,6 +74,8 @@ KINDS = {
     "hsv": Kind("Hankel singular value decay", {"r": _R, "count": (None, None)}, False, True),
     "table": Kind("summary table of the scene's reductions",
                   {"r": _R, "grid": _GRID, "norms": ([], subset_of(NORM_KINDS))}, True, False),
+    "modes": Kind("eigenfrequencies, damping ratios and MAC of the full and the reduced models in the band, "
+                  "and the reduced models' structure checks", {"r": _R, "grid": _GRID}, True, True, with_full=True),
     "time": Kind("output of the full and reduced models over time, and the output error",
                  {"r": _R, **TIME_KEYS}, False, True),
 }
@@ -97,6 +99,8 @@ def needs(scene):
 
 def output_names(scene) -> list:
     """The names of the scene's outputs (figures or a table)."""
+    if scene.kind == "modes":
+        return [scene.name, f"{scene.name}_structure"]
     return [scene.name, f"{scene.name}_error"] if scene.kind == "time" else [scene.name]
 
 

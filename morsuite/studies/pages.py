@@ -194,7 +194,8 @@ def study_page(study, outputs, summary, manifest: dict, modes=None) -> dict:
              "cache": _cache_counts(manifest["artifacts"]), "norms": manifest["norms"]["summary"],
              "norm_options": {k: v for k, v in manifest["norms"]["options"].items()
                               if k in manifest["norms"]["summary"]}}
-    boards = scoreboards(study, [t for t in tables if t["name"] != summary.name])
+    summaries = {s.name for s in study.scenes if s.kind == "table"}  # the reductions' tables, not modes tables
+    boards = scoreboards(study, [t for t in tables if t["name"] != summary.name and t["name"] in summaries])
     heads = [h for h in (headline(b) for b in boards if b["table"] == boards[0]["table"]) if h]
     return plain({
         "scoreboards": boards, "headline": heads[-1] if heads else "", "key_figure": _key_figure(study, figures),

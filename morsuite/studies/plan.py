@@ -279,7 +279,7 @@ def build_plan(study) -> Plan:
             mg.aliases.add((model_alias, grid, method_alias))
             plan.metrics_of[(model_alias, grid, method_alias)] = mid
             inputs += [fid, f"{g.id}/r{r}", f"{mid}/r{r}"]
-        kind = "table" if scene.kind == "table" else "figure"
+        kind = "table" if scene.kind in ("table", "modes") else "figure"
         for name in output_names(scene):
             outputs[f"{kind}/{name}"] = OutputArtifact(f"{kind}/{name}", kind, scene.name, sorted(set(inputs)))
     # the study's own norms: for every reduction some scene needs

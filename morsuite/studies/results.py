@@ -71,6 +71,8 @@ class Results:
         #: the study's modes and poles as the page shows them (``{"rows", "poles", "note"}``, see
         #: docs/design/reports.md "Modes and poles"), or None: no modes section on the page
         self.modes = modes
+        #: each ``modes`` scene's data by scene name (:func:`morsuite.studies.modes.compute_modes`)
+        self.modes_of: dict = {}
         self._foms, self._red, self._met = foms, reductions, metrics
         self._norms, self._nerr = norms or {}, norm_errors or {}
         self._sims, self._serr = sims or {}, sim_errors or {}

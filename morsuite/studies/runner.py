@@ -190,6 +190,7 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
                           {k: v for k, v in e.items() if k not in METRIC_ARRAYS})
     _store_new(cache, plan, computed, norms, norm_errors, missing_norms, sims, sim_errors, missing_sims)
     res = Results(study, plan, foms, reductions, metrics, norms, norm_errors, sims, sim_errors)
+    _modes(study, res)
 
     # -- outputs: figures and tables, each reused when its content did not change
     t1 = time.perf_counter()
@@ -241,6 +242,18 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
                 f"and tables made, the others unchanged; {manifest['timing']['total_s']:.1f} s, computing "
                 f"{t_compute:.1f} s)")
     return RunResult(study, outdir, manifest, summary, files, notes)
+
+
+def _modes(study, res):
+    """The ``modes`` scenes' data (a few LUs of the full model each, in this process); the first is the
+    page's modes section."""
+    from .modes import compute_modes
+
+    for scene in study.scenes:
+        if scene.kind == "modes":
+            res.modes_of[scene.name] = compute_modes(scene, study, res)
+            if res.modes is None:
+                res.modes = res.modes_of[scene.name]
 
 
 def _page(study, shown, summary, manifest, outdir, old, files, rerender, modes=None):

@@ -408,13 +408,27 @@ def _table_scene(scene, study, res):
     return TableData(scene.name, title, rows, columns=columns, note=note)
 
 
+def _modes_scene(scene, study, res):
+    """The modes table and the structure table of a ``modes`` scene, from what the driver computed
+    (:func:`morsuite.studies.modes.compute_modes`, kept in ``res.modes_of``)."""
+    from .modes import MODES_COLUMNS, STRUCTURE_COLUMNS
+
+    data = res.modes_of.get(scene.name) or {"rows": [], "structure": [], "note": "modes not computed"}
+    name = study.models[scene.model].name
+    return [TableData(scene.name, _title(scene, study, f"{name}: eigenfrequencies, damping and MAC in the band"),
+                      data["rows"], columns=MODES_COLUMNS, int_columns=("r", "mode"), note=data["note"]),
+            TableData(f"{scene.name}_structure", _title(scene, study, f"{name}: structure of the reduced models"),
+                      data["structure"], columns=STRUCTURE_COLUMNS, int_columns=("r",))]
+
+
 def _time_scene(scene, study, res):
     return time_figures(scene, study, res, MAX_POINTS)
 
 
 _BUILDERS = {"sigma": _freq_scene, "error": _freq_scene, "compare": _freq_scene,
              "error_vs_r": _against_r_scene, "time_vs_r": _against_r_scene, "pareto": _pareto_scene,
-             "convergence": _convergence_scene, "hsv": _hsv_scene, "table": _table_scene, "time": _time_scene}
+             "convergence": _convergence_scene, "hsv": _hsv_scene, "table": _table_scene, "time": _time_scene,
+             "modes": _modes_scene}
 
 
 def build(scene, study, res) -> list:

@@ -45,12 +45,19 @@ def stamp() -> dict:
 
 
 def rom_payload(rom) -> dict:
-    """A reduced model as plain data: its kind and its matrices."""
-    return {"kind": rom.kind, "arrays": {f: np.asarray(getattr(rom, f)) for f in type(rom)._fields}}
+    """A reduced model as plain data: its kind and its matrices (and its lift ``basis`` where it has one:
+    the mode shapes of a ``modes`` scene need it)."""
+    arrays = {f: np.asarray(getattr(rom, f)) for f in type(rom)._fields}
+    if getattr(rom, "basis", None) is not None:
+        arrays["basis"] = np.asarray(rom.basis)
+    return {"kind": rom.kind, "arrays": arrays}
 
 
 def rom_from_payload(payload: dict):
     """The reduced model of a :func:`rom_payload` (a :class:`~morsuite.rom.SecondOrderROM` or :class:`~morsuite.rom.FirstOrderROM`)."""
     from ..rom import FirstOrderROM, SecondOrderROM
     cls = {"second-order": SecondOrderROM, "first-order": FirstOrderROM}[payload["kind"]]
-    return cls(*(payload["arrays"][f] for f in cls._fields))
+    rom = cls(*(payload["arrays"][f] for f in cls._fields))
+    if payload["arrays"].get("basis") is not None:
+        rom.basis = np.asarray(payload["arrays"]["basis"])
+    return rom

@@ -275,7 +275,7 @@ class Krylov(Reducer):
         one = "left" not in sides
         if one and state["symmetric"]:
             Mr, Dr, Kr = ((X + X.T) / 2 for X in (Mr, Dr, Kr))
-        rom = SecondOrderROM(Mr, Dr, Kr, W.T @ fom.F, fom.L @ V)
+        rom = SecondOrderROM(Mr, Dr, Kr, W.T @ fom.F, fom.L @ V, basis=V)
         kernel = self._kernel_residual([V] if one else [V, W])
         if kernel > KERNEL_WARN:
             self.warn(f"krylov: the basis leaves ker G by {kernel:.1e} (relative); the saddle solves or the "

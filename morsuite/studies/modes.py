@@ -1,0 +1,150 @@
+r"""The ``modes`` scene: does each reduced model keep the structure's modes and physics?
+
+For a scene of kind ``modes`` (model, grid, methods, one r per method) the driver computes,
+once per run and before the outputs are drawn:
+
+- the full model's poles in and near the grid's band, with damping ratios and mode shapes
+  (:func:`morsuite.analysis.modes.model_modes`: shift-invert Arnoldi on a few saddle LUs);
+- per reduced model, its poles (:func:`~morsuite.analysis.modes.rom_modes`), matched to the
+  full model's in the band (:func:`~morsuite.analysis.modes.match_modes`: relative frequency
+  error, damping error, missing and spurious modes), the MAC of each matched pair where the
+  model has a lift :math:`V` (``rom.basis``: the full mode shape against :math:`Vq`;
+  ``None``, shown as "no lift", otherwise), and the structure checks
+  (:func:`~morsuite.analysis.modes.structure_checks`: :math:`\hat M, \hat K` symmetric positive
+  definite, :math:`\hat D` semidefinite, stable), with the summary's ``worse_than_zero`` (the
+  norms in which the model is no better than :math:`T_r = 0`).
+
+The result is plain data in the page's format (``docs/design/reports.md``, "Modes and poles"):
+``rows`` (one per full mode in the band and method, plus the spurious ones), ``poles`` (the full
+model's, then each reduced model's), ``structure`` (one row per method) and ``note``. The scene's
+tables (``NAME.csv``: the rows; ``NAME_structure.csv``: the checks) are written from it, so the
+page and the CSV files show the same numbers.
+
+Cost: the full model's modes (a few LUs; ``info["lu_count"]``), then dense work of order 2r per
+reduced model and O(n1 k) per MAC.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+__all__ = ["MAX_MODES", "MODES_TOL", "MODES_COLUMNS", "STRUCTURE_COLUMNS", "compute_modes"]
+
+#: the full model's modes a table shows: those some reduced model matches, then the lowest others, at most
+#: this many; also the cap of the poles computed per shift (``max_poles`` of
+#: :func:`~morsuite.linalg.eigen.damped_poles`): a lightly damped model has hundreds in its band
+#: (406 on the DSMS g = 600, 80 s), and a report needs the dominant few at a few percent of its time
+MAX_MODES = 24
+#: ARPACK's relative accuracy of the full model's poles in a report (``tol`` of
+#: :func:`~morsuite.linalg.eigen.damped_poles`; its default 0, machine precision, took 3x the solves on the
+#: clustered spectrum of the DSMS g = 600, 2026-11-27): frequencies to about 1e-9, residuals are reported
+MODES_TOL = 1e-9
+
+#: columns of the modes table (and of the page's rows)
+MODES_COLUMNS = ["model", "method", "r", "mode", "status", "full_frequency", "reduced_frequency",
+                 "rel_frequency_error", "full_damping", "damping_error", "mac"]
+#: columns of the structure table
+STRUCTURE_COLUMNS = ["model", "method", "r", "kind", "symmetric", "M_spd", "K_spd", "D_psd", "stable",
+                     "lift", "matched", "missing", "spurious", "worse_than_zero"]
+
+
+def _num(x):
+    x = float(x)
+    return None if not math.isfinite(x) else x
+
+
+def _pole_list(label, result):
+    return {"label": label, "real": [float(v) for v in result.poles.real],
+            "imag": [float(v) for v in result.poles.imag]}
+
+
+def compute_modes(scene, study, res) -> dict:
+    """The modes, MAC and structure checks of ``scene`` (kind ``modes``) from the run's results ``res``.
+
+    Parameters
+    ----------
+    scene : SceneEntry
+        Its ``model``, ``grid`` (the band), ``methods`` and their orders (``rs_of``).
+    study : Study
+    res : Results
+        The reductions of the run (their ROM payloads; a ROM saved with its lift keeps it).
+
+    Returns
+    -------
+    dict
+        ``rows``, ``poles``, ``structure``, ``note`` and ``info`` (the full model's solve: LUs,
+        shifts, time). Plain data.
+    """
+    from ..analysis.modes import mac, match_modes, model_modes, rom_modes, structure_checks
+    from .task_common import model_of, rom_from_payload
+
+    entry = study.models[scene.model]
+    fom = model_of(entry.source)
+    grid = study.grids[scene.grid]
+    lo, hi, _ = grid.bounds_for(entry)
+    band = (float(lo), float(hi))
+    t0 = time.perf_counter()
+    full = model_modes(fom, band, max_poles=MAX_MODES, tol=MODES_TOL)
+    t_full = time.perf_counter() - t0
+    in_band = np.flatnonzero(full.in_band)
+    rows, poles, structure, notes = [], [_pole_list("full", full)], [], []
+    matched = {}
+    for method in scene.methods:
+        r = scene.rs_of(method)[0]
+        red = res.reduction(scene.model, method, r)
+        if red is None or "error" in red:
+            notes.append(f"{method} r = {r}: no reduced model ({(red or {}).get('error', 'not computed')})")
+            continue
+        rom = rom_from_payload(red["rom"])
+        rm = rom_modes(rom, band)
+        df = match_modes(full, rm, band)
+        lift = rm.shapes is not None
+        matched[method] = df
+        for rec in df.to_dict("records"):
+            i, k = int(rec["full_index"]), int(rec["rom_index"])
+            value = None
+            if lift and rec["status"] == "matched":
+                value = float(mac(full.shapes[:, i], rm.shapes[:, k])[0, 0])
+            rows.append({"model": scene.model, "method": method, "r": int(r),
+                         "mode": int(np.searchsorted(in_band, i)) + 1 if i >= 0 else None,
+                         "status": rec["status"], "full_frequency": _num(rec["freq_full"]),
+                         "reduced_frequency": _num(rec["freq_rom"]),
+                         "rel_frequency_error": _num(rec["rel_freq_error"]),
+                         "full_damping": _num(rec["damping_full"]), "damping_error": _num(rec["damping_error"]),
+                         "mac": value})
+        checks = structure_checks(rom)
+        counts = df["status"].value_counts()
+        zero = res.summary_row(scene.model, method, r, scene.grid).get("worse_than_zero")
+        structure.append({"model": scene.model, "method": method, "r": int(r), "kind": rom.kind,
+                          **{k: checks.get(k) for k in ("symmetric", "M_spd", "K_spd", "D_psd", "stable")},
+                          "lift": lift, **{k: int(counts.get(k, 0)) for k in ("matched", "missing", "spurious")},
+                          "worse_than_zero": zero or ""})
+        poles.append(_pole_list(f"{method} r = {r}", rm))
+    shown = _shown_modes(matched, in_band)
+    rows = [row for row in rows if row["mode"] is None or row["mode"] in shown]
+    if in_band.size > len(shown):
+        notes.append(f"the table shows {len(shown)} of the {in_band.size} modes in the band (those a reduced model "
+                     "matches, then the lowest); the structure table counts all")
+    nolift = [s["method"] for s in structure if not s["lift"]]
+    if nolift:
+        notes.append("no lift V (no MAC): " + ", ".join(nolift))
+    info = {"band": list(band), "modes_in_band": int(in_band.size), "time_s": t_full,
+            **{k: full.info.get(k) for k in ("lu_count", "shifts", "covered", "max_residual")}}
+    note = (f"The full model's {in_band.size} modes found in [{band[0]:.3g}, {band[1]:.3g}] rad/s "
+            f"(at most {MAX_MODES} per shift, nearest each) "
+            f"({info['lu_count']} LUs, {t_full:.2f} s). " + "; ".join(notes))
+    return {"rows": rows, "poles": poles, "structure": structure, "note": note.strip(), "info": info}
+
+
+def _shown_modes(matched, in_band) -> set:
+    """Mode numbers (1-based, in the band) the table shows: every mode some reduced model matches, then
+    the lowest others, :data:`MAX_MODES` in all (all matched ones even beyond)."""
+    hit = set()
+    for df in matched.values():
+        idx = df.loc[df["status"] == "matched", "full_index"].to_numpy(dtype=int)
+        hit |= {int(np.searchsorted(in_band, i)) + 1 for i in idx}
+    rest = [k for k in range(1, in_band.size + 1) if k not in hit]
+    return hit | set(rest[: max(0, MAX_MODES - len(hit))])
