@@ -234,6 +234,9 @@ def test_options_are_recorded():
     assert o["points"] == [0.2, {"re": 0.0, "im": 1.0}] or as_complex(o["points"]).tolist() == [0.2, 1j]
     assert (o["orth_tol"], o["reorth"], o["sided"], o["directions"]) == (1e-9, 1, "one", "block")
     assert res.info["method"] == "krylov" and res.info["status"] == "direct" and res.converged
+    # the command line's form: the points as text
+    _, text = _reduce(fom, 4, points="[0.2, 1j, -1j]")
+    assert as_complex(text.info["points"]).tolist() == [0.2, 1j]
 
 
 @pytest.mark.parametrize("opts, match", [

@@ -37,7 +37,8 @@ def expansion_points(points, npoints: int, band) -> np.ndarray:
     ``"band"``: ``npoints`` points :math:`i\omega_k` with :math:`\omega_k` spread
     log-uniformly over the band, edges included (one point: the geometric mean);
     each serves its conjugate. A list: those points, duplicates and conjugates
-    merged (the one with nonnegative imaginary part kept), in the order given.
+    merged (the one with nonnegative imaginary part kept), in the order given; also
+    as text, numbers separated by commas (``"0.5, 1+2j"``, the command line's form).
 
     Parameters
     ----------
@@ -64,6 +65,11 @@ def expansion_points(points, npoints: int, band) -> np.ndarray:
         if points == "band":
             w = np.array([np.sqrt(lo * hi)]) if npoints == 1 else np.geomspace(lo, hi, npoints)
             return 1j * w
+        try:  # a list written as text (the command line's --option points=0.5,1+2j)
+            return expansion_points([complex(x.replace(" ", "")) for x in points.strip("[]() ").split(",")],
+                                    npoints, band)
+        except ValueError:
+            pass
         raise OptionError(f"The 'points' parameter of Krylov must be 'auto', 'band' or a list of expansion "
                           f"points. Got {points!r} instead.")
     try:
