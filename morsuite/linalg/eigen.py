@@ -358,7 +358,7 @@ def _distinct(lam, X, rtol=1e-8, stol=1e-6):
 
 @_one_blas_thread
 def damped_poles(system, band, *, k: int | None = None, shifts=None, n_shifts: int | None = None,
-                 max_poles: int = 200, tol: float = 0.0, solver=None):
+                 max_poles: int = 200, tol: float = 0.0, maxiter: int | None = None, solver=None):
     r"""Poles of the full constrained model in and near a band, by shift-invert Arnoldi (module docstring).
 
     Parameters
@@ -380,6 +380,10 @@ def damped_poles(system, band, *, k: int | None = None, shifts=None, n_shifts: i
         Cap of the poles computed per shift (default 200).
     tol : float
         ARPACK's relative accuracy (default 0: machine precision).
+    maxiter : int, optional
+        ARPACK's restarts per run (default ``max(1000, 10 k)``); a smaller budget bounds the cost
+        on clustered spectra (a report's budget), the poles not converged by then are left out
+        with a warning.
     solver : SaddlePointSolver, optional
         Solver to use (default a fresh one of the system).
 
@@ -402,6 +406,7 @@ def damped_poles(system, band, *, k: int | None = None, shifts=None, n_shifts: i
     w1, w2 = _band(band)
     k = _positive_int("k", k) or 6
     max_poles = _positive_int("max_poles", max_poles, allow_none=False)
+    maxiter = _positive_int("maxiter", maxiter)
     n1 = system.n1
     limit = 2 * (n1 - system.n2) - 1
     if shifts is None:
@@ -426,7 +431,7 @@ def damped_poles(system, band, *, k: int | None = None, shifts=None, n_shifts: i
             ncv = min(2 * n1, max(2 * kk + 1, kk + 20))
             try:
                 theta, W = spla.eigs(OP, k=kk, which="LM", v0=_start_vector(2 * n1, complex), ncv=ncv, tol=tol,
-                                     maxiter=max(1000, 10 * kk))
+                                     maxiter=max(1000, 10 * kk) if maxiter is None else maxiter)
             except spla.ArpackNoConvergence as exc:
                 theta, W = exc.eigenvalues, exc.eigenvectors
                 warnings.warn(f"damped_poles: ARPACK converged {theta.size} of {kk} poles at shift {sigma}",
@@ -445,11 +450,15 @@ def damped_poles(system, band, *, k: int | None = None, shifts=None, n_shifts: i
                 break
             kk = min(limit, max_poles, 2 * kk)
         X = W[:n1]
+        if X.shape[1] == 0:  # ARPACK converged no pole at this shift (said by its warning)
+            continue
         # multipliers for the residual: S(sigma)[x'; z'] = [-(lam M + D + sigma M) x; 0], z = (lam - sigma) z'
         rhs = -(system.M @ X) * (lam + sigma)[None, :] - system.D @ X
         Z = lu.solve(rhs, full=True)[n1:] * (lam - sigma)[None, :]
         count[0] += X.shape[1]
         found.append((lam, X, Z))
+    if not found:
+        found = [(np.zeros(0, complex), np.zeros((n1, 0), complex), np.zeros((system.n2, 0), complex))]
     lam = np.concatenate([f[0] for f in found])
     X = np.hstack([f[1] for f in found])
     Z = np.hstack([f[2] for f in found])

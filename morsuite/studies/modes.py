@@ -31,7 +31,7 @@ import time
 
 import numpy as np
 
-__all__ = ["MAX_MODES", "MODES_TOL", "MODES_COLUMNS", "STRUCTURE_COLUMNS", "compute_modes"]
+__all__ = ["MAX_MODES", "MODES_MAXITER", "MODES_TOL", "MODES_COLUMNS", "STRUCTURE_COLUMNS", "compute_modes"]
 
 #: the full model's modes a table shows: those some reduced model matches, then the lowest others, at most
 #: this many; also the cap of the poles computed per shift (``max_poles`` of
@@ -42,6 +42,10 @@ MAX_MODES = 24
 #: :func:`~morsuite.linalg.eigen.damped_poles`; its default 0, machine precision, took 3x the solves on the
 #: clustered spectrum of the DSMS g = 600, 2026-11-27): frequencies to about 1e-9, residuals are reported
 MODES_TOL = 1e-9
+#: ARPACK's restarts per run in a report (``maxiter`` of :func:`~morsuite.linalg.eigen.damped_poles`): the
+#: DSMS g = 6000 took 84,000 solves (138 s, loaded machine) for 3 poles in its band without a cap; a pole
+#: not converged within it is left out and the note says the list may be incomplete
+MODES_MAXITER = 30
 
 #: columns of the modes table (and of the page's rows)
 MODES_COLUMNS = ["model", "method", "r", "mode", "status", "full_frequency", "reduced_frequency",
@@ -87,7 +91,7 @@ def compute_modes(scene, study, res) -> dict:
     lo, hi, _ = grid.bounds_for(entry)
     band = (float(lo), float(hi))
     t0 = time.perf_counter()
-    full = model_modes(fom, band, max_poles=MAX_MODES, tol=MODES_TOL)
+    full = model_modes(fom, band, max_poles=MAX_MODES, tol=MODES_TOL, maxiter=MODES_MAXITER)
     t_full = time.perf_counter() - t0
     in_band = np.flatnonzero(full.in_band)
     rows, poles, structure, notes = [], [_pole_list("full", full)], [], []
@@ -131,6 +135,9 @@ def compute_modes(scene, study, res) -> dict:
     nolift = [s["method"] for s in structure if not s["lift"]]
     if nolift:
         notes.append("no lift V (no MAC): " + ", ".join(nolift))
+    if not full.info.get("covered", True):
+        notes.append("the full model's list may miss modes in the band (the eigensolver's budget, "
+                     f"{MAX_MODES} poles per shift and {MODES_MAXITER} restarts, was reached)")
     info = {"band": list(band), "modes_in_band": int(in_band.size), "time_s": t_full,
             **{k: full.info.get(k) for k in ("lu_count", "shifts", "covered", "max_residual")}}
     note = (f"The full model's {in_band.size} modes found in [{band[0]:.3g}, {band[1]:.3g}] rad/s "
