@@ -12,6 +12,8 @@ import scipy.linalg as sla
 
 import morsuite as ms
 from morsuite.linalg.saddle import SaddlePointSolver
+from morsuite.reducers.base import BLAS_THREADS
+from morsuite.utils import blas_threads
 from morsuite.reducers.bt_fl import band_factors, band_nodes, compress
 
 
@@ -65,9 +67,10 @@ def dense(dsms20):
 @pytest.mark.parametrize("variable", ["log", "linear"])
 def test_band_factors_match_the_dense_closed_form(dsms20, dense, variable):
     N, E, Pb, Qb = dense
-    omega, weights = band_nodes(BAND, 128, variable)
+    omega, weights = band_nodes(BAND, 96, variable)  # (64 nodes: 3.6e-10 in log(w), 2.7e-9 in w)
     assert np.all((omega > BAND[0]) & (omega < BAND[1])) and weights.sum() == pytest.approx(BAND[1] - BAND[0])
-    c, o = band_factors(dsms20, omega, weights)
+    with blas_threads(BLAS_THREADS):  # as inside reduce: tiny solves, where BLAS threads only contend
+        c, o = band_factors(dsms20, omega, weights)
     G = dsms20.G
     assert np.abs(G @ c.position).max() <= 1e-12 * np.abs(c.position).max()  # on the hidden manifold
     assert np.abs(G @ o.velocity).max() <= 1e-12 * np.abs(o.velocity).max()
