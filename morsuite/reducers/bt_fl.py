@@ -89,7 +89,7 @@ from .base import Option, register
 from .bt import FORMS, SquareRootBT, level_products
 from .shift_solves import default_threads, map_threads
 
-__all__ = ["BTFL", "BandFactor", "band_nodes", "band_factors", "compress"]
+__all__ = ["BTFL", "BandFactor", "band_nodes", "band_factors", "check_band", "compress"]
 
 VARIABLES = ("auto", "log", "linear")
 
