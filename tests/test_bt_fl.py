@@ -12,6 +12,7 @@ import scipy.linalg as sla
 
 import morsuite as ms
 from morsuite.linalg.saddle import SaddlePointSolver
+from morsuite.linalg.warmup import warm_kernels
 from morsuite.reducers.base import BLAS_THREADS
 from morsuite.utils import blas_threads
 from morsuite.reducers.bt_fl import band_factors, band_nodes, compress
@@ -106,6 +107,7 @@ def test_lu_count_is_one_per_node_and_factors_are_kept(dsms20, monkeypatch):
         calls.append(args)
         return original(self, *args, **kwargs)
 
+    warm_kernels()  # its own small solves, once per process, before counting
     monkeypatch.setattr(SaddlePointSolver, "factor", counted)
     red = ms.reducers.make("bt-fl", dsms20, band=BAND, nodes=48)
     first = red.reduce(3).info
@@ -148,6 +150,28 @@ def test_first_order_fl_bt_need_not_be_stable(tcom20):
     with pytest.warns(ms.StabilityWarning, match="does not preserve stability"):
         info = ms.reducers.make("bt-fl", tcom20, band=SUB_BAND).reduce(4).info
     assert info["stable"] is False and info["unstable_poles"] >= 1
+
+
+def test_one_sided_is_stable_and_beats_bt_where_two_sided_does_not(tcom20, monkeypatch):
+    """limited='controllability': the band controllability Gramian against the full observability one
+    (Enns' one-sided weighting) keeps the first-order models stable, r = 4 included."""
+    calls = []
+    original = SaddlePointSolver.factor
+
+    def counted(self, *args, **kwargs):
+        calls.append(args)
+        return original(self, *args, **kwargs)
+
+    bt = ms.reducers.make("bt", tcom20)
+    bt.reduce(4)  # its LR-ADI (and the kernels' warm-up) before counting
+    monkeypatch.setattr(SaddlePointSolver, "factor", counted)
+    fl = ms.reducers.make("bt-fl", tcom20, band=SUB_BAND, limited="controllability")
+    info = fl.reduce(4).info  # every LU counted: the quadrature's nodes and a fresh LR-ADI run (observability)
+    assert info["lu_count"] == info["lu_count_shared"] == len(calls) > info["nodes_evaluated"]
+    for r in (4, 6, 8, 10):
+        res = fl.reduce(r)
+        assert res.info["stable"] and res.info["limited"] == "controllability"
+        assert _band_error(tcom20, res.rom, SUB_BAND) <= _band_error(tcom20, bt.reduce(r).rom, SUB_BAND), r
 
 
 def test_default_band_is_the_models_and_every_form_reduces(dsms20):
