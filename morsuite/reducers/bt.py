@@ -146,8 +146,8 @@ class SquareRootBT(Reducer):
                              f"(2 (n1 - n2) = {self.max_order()}) for {self.name} with form='first-order'")
         return super()._validate_r(r)
 
-    #: why a reduced model of ``form`` may be unstable, for the StabilityWarning
     def _instability_note(self, form):
+        """Why a reduced model of ``form`` may be unstable (the end of the StabilityWarning)."""
         return ("; second-order balancing levels other than 'fv' do not preserve stability"
                 if form not in ("first-order", "fv") else "; the Gramians are not accurate enough")
 

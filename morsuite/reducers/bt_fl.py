@@ -66,13 +66,22 @@ The factors are kept on the reducer: later ``reduce(r)`` calls cost the projecti
 There is no error bound (``error_bound`` None): FL-BT is judged by its band error, and
 its first-order reduced models need not be stable (a :class:`StabilityWarning` says so).
 
-``info``: ``band``, ``variable``, ``nodes`` (of the kept rule), ``nodes_evaluated``,
+``limited="controllability"``: only :math:`P_\Omega` is band-limited; :math:`Q` is the
+full observability Gramian from a fresh LR-ADI run with ``bt``'s ADI defaults
+(:func:`~morsuite.linalg.gramians.gramian_factors`, its LUs counted in ``lu_count``).
+This is Enns' one-sided frequency weighting: in the balanced basis :math:`Q` still
+solves its Lyapunov equation, whose leading block is that of the reduced model, so the
+first-order reduced models are stable (for an observable truncation). Cost: the
+quadrature plus bt's LR-ADI (lock-step, both equations).
+
+``info``: ``band``, ``variable``, ``limited``, ``nodes`` (of the kept rule), ``nodes_evaluated``,
 ``quad_levels`` (nodes and measured change per level), ``quad_change`` (the last
 change; None with fixed nodes), ``quad_tol``, ``lu_count`` (the LUs this call paid:
-``nodes_evaluated`` on the first call, 0 after), ``lu_count_shared`` (``nodes_evaluated``),
+``nodes_evaluated``, plus the LR-ADI's with ``limited="controllability"``, on the first
+call, 0 after), ``lu_count_shared`` (the same count, whoever paid it),
 ``factor_ranks`` (after compression), ``factor_columns`` (before), ``hsv`` (band Hankel
-singular values), ``time_breakdown`` (quadrature, of which lu, solves, compression and
-products, over every level; svd; projection), ``setup_reused``, ``setup_cost`` (quadrature, svd).
+singular values), ``time_breakdown`` (quadrature, with the LR-ADI if any, of which lu,
+solves, compression and products, over every level; svd; projection), ``setup_reused``, ``setup_cost`` (quadrature, svd).
 """
 
 from __future__ import annotations
@@ -85,11 +94,12 @@ import numpy as np
 import scipy.linalg as sla
 
 from ..errors import ConvergenceWarning, InputError
+from ..linalg.gramians import gramian_factors
 from .base import Option, register
 from .bt import FORMS, SquareRootBT, level_products
 from .shift_solves import default_threads, map_threads
 
-__all__ = ["BTFL", "BandFactor", "band_nodes", "band_factors", "compress"]
+__all__ = ["BTFL", "BandFactor", "band_nodes", "band_factors", "check_band", "compress"]
 
 VARIABLES = ("auto", "log", "linear")
 
@@ -267,6 +277,9 @@ class BTFL(SquareRootBT):
                           "(caps r)", low=0, high=1, open_high=True),
         "solver_threads": Option(0, "int", "threads that factor and solve nodes concurrently (0: 2 on two or "
                                  "more cores, 1 for KLU)", low=0),
+        "limited": Option("both", "choice", "which Gramians are band-limited: both (FL-BT), or only the "
+                          "controllability one with the full observability Gramian from bt's LR-ADI (Enns' "
+                          "one-sided weighting: first-order models stable)", choices=("both", "controllability")),
     }
 
     def __init__(self, fom, **options):
@@ -338,15 +351,20 @@ class BTFL(SquareRootBT):
             if levels[-1]["change"] <= o["quad_tol"]:
                 break
         change = levels[-1]["change"]
-        t1 = time.perf_counter()
         c, ob = rule["c"], rule["o"]
         st = solver.stats
+        lus, prods, adi = int(st.factorizations), rule["prods"], None
+        if o["limited"] == "controllability":  # the full observability Gramian: a fresh LR-ADI run (its LUs counted)
+            gf = gramian_factors(self.fom, use_cache=False)
+            ob, lus, adi = gf.observability, lus + gf.lu_count, gf
+            prods = level_products(c, ob, self.fom)
+        t1 = time.perf_counter()
         self._gram = {
-            "c": c, "o": ob, "prods": rule["prods"], "svd": {}, "svd_times": {}, "projected": {},
+            "c": c, "o": ob, "prods": prods, "svd": {}, "svd_times": {}, "projected": {},
             "times": {"quadrature": t1 - t0, "lu": st.factor_time_s + st.assemble_time_s,
                       "solves": st.solve_time_s,
                       "compression": spent["compression"], "products": spent["products"]},
-            "lu_count": int(st.factorizations), "nodes": rule["n"], "omega": rule["omega"], "levels": levels,
+            "lu_count": lus, "adi": adi, "nodes": rule["n"], "omega": rule["omega"], "levels": levels,
             "change": change, "quad_converged": converged, "columns": rule["columns"], "backend": solver.backend,
             "threads": threads,
         }
@@ -360,6 +378,10 @@ class BTFL(SquareRootBT):
             self.warn(f"bt-fl: the band Hankel singular values still changed by {g['change']:.2e} > quad_tol = "
                       f"{o['quad_tol']:.1e} at max_nodes = {o['max_nodes']} (last rule: {g['nodes']} nodes); the "
                       f"band Gramians are not accurate to quad_tol", ConvergenceWarning)
+        adi_ok = g["adi"] is None or g["adi"].converged
+        if not adi_ok:
+            self.warn("bt-fl: the LR-ADI of the full observability Gramian stopped at its maxiter; that Gramian "
+                      "is not accurate to its tolerance", ConvergenceWarning)
         rom, extra, tt = self._truncate(r)
         extra["error_bound"] = None  # no bound for frequency-limited BT
         times = g["times"]
@@ -367,7 +389,8 @@ class BTFL(SquareRootBT):
         paid = {k: (times[k] if fresh else 0.0) for k in ("quadrature", "lu", "solves", "compression", "products")}
         info = {
             "form": o["form"], "band": list(o["band"]), "variable": self._variable(),
-            "converged": bool(g["quad_converged"]), "status": "direct" if g["quad_converged"] else "cap",
+            "limited": o["limited"], "converged": bool(g["quad_converged"] and adi_ok),
+            "status": "direct" if g["quad_converged"] and adi_ok else "cap",
             "iterations": len(g["levels"]), "nodes": g["nodes"], "nodes_evaluated": nodes_evaluated,
             "omega": g["omega"], "quad_levels": g["levels"], "quad_change": g["change"], "quad_tol": o["quad_tol"],
             "lu_count": g["lu_count"] if fresh else 0, "lu_count_shared": g["lu_count"],
