@@ -41,7 +41,7 @@ METHODS = {
     "bt": ("bt", {}, 1, "BT, first-order"),
     "irka-projected": ("irka-projected", {}, 2, "IRKA, Pi-projected (dense)"),
     **{f"bt-{lvl}": ("bt", {"form": lvl}, 2, f"BT ({lvl}, second-order)") for lvl in ("pp", "pv", "vp", "vv", "fv")},
-    "bt-fl": ("bt-fl", {}, 1, "BT, frequency-limited to the band"),
+    "bt-fl": ("bt-fl", {"limited": "controllability"}, 1, "BT, frequency-limited to the band (one-sided: stable)"),
     "modal": ("modal", {}, 2, "modal truncation + static correction"),
     "krylov": ("krylov", {}, 2, "Krylov moment matching (SOAR)"),
 }
