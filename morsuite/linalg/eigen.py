@@ -358,7 +358,7 @@ def _distinct(lam, X, rtol=1e-8, stol=1e-6):
 
 @_one_blas_thread
 def damped_poles(system, band, *, k: int | None = None, shifts=None, n_shifts: int | None = None,
-                 max_poles: int = 200, tol: float = 0.0, maxiter: int | None = None, solver=None):
+                 max_poles: int = 40, tol: float = 0.0, maxiter: int = 60, solver=None):
     r"""Poles of the full constrained model in and near a band, by shift-invert Arnoldi (module docstring).
 
     Parameters
@@ -368,22 +368,24 @@ def damped_poles(system, band, *, k: int | None = None, shifts=None, n_shifts: i
     band : (w1, w2)
         Frequencies in rad/s, :math:`0 \le w_1 < w_2`.
     k : int, optional
-        Poles requested per shift at the start (default 6); doubled until the disk of the
-        poles found around the shift reaches past the shift's part of the band
-        (:math:`[e_i, e_{i+1}]` of a geometric split of the band), capped at ``max_poles``.
+        Poles requested per shift at the start (default 10); if the disk of the poles found
+        around the shift does not reach past the shift's part of the band
+        (:math:`[e_i, e_{i+1}]` of a geometric split of the band), one more run computes
+        ``max_poles``.
     shifts : sequence of complex, optional
         The shifts :math:`\sigma_i`; default ``n_shifts`` points :math:`j\omega` at the
         geometric centres of equal log-parts of the band.
     n_shifts : int, optional
         Default ``max(1, ceil(log10(w2 / w1)))`` (one shift per decade), at most 6.
     max_poles : int
-        Cap of the poles computed per shift (default 200).
+        Cap of the poles computed per shift (default 40). A band holding more poles than that
+        near a shift gets the nearest ones, ``covered`` False and a warning (the cost grows
+        quickly with it: ``docs/design/modal.md``).
     tol : float
         ARPACK's relative accuracy (default 0: machine precision).
-    maxiter : int, optional
-        ARPACK's restarts per run (default ``max(1000, 10 k)``); a smaller budget bounds the cost
-        on clustered spectra (a report's budget), the poles not converged by then are left out
-        with a warning.
+    maxiter : int
+        ARPACK's restart cap per run (default 60): clustered poles (dsms) converge slowly; at the
+        cap the converged poles are kept, ``covered`` is False and a warning says so.
     solver : SaddlePointSolver, optional
         Solver to use (default a fresh one of the system).
 
@@ -404,9 +406,9 @@ def damped_poles(system, band, *, k: int | None = None, shifts=None, n_shifts: i
     check_system(system, "system")
     t0 = time.perf_counter()
     w1, w2 = _band(band)
-    k = _positive_int("k", k) or 6
+    k = _positive_int("k", k) or 10
     max_poles = _positive_int("max_poles", max_poles, allow_none=False)
-    maxiter = _positive_int("maxiter", maxiter)
+    maxiter = _positive_int("maxiter", maxiter, allow_none=False)
     n1 = system.n1
     limit = 2 * (n1 - system.n2) - 1
     if shifts is None:
@@ -428,12 +430,13 @@ def damped_poles(system, band, *, k: int | None = None, shifts=None, n_shifts: i
         need = max(abs(1j * a - sigma), abs(1j * b - sigma))
         kk = min(k, limit, max_poles)
         while True:
-            ncv = min(2 * n1, max(2 * kk + 1, kk + 20))
+            ncv = min(2 * n1, max(2 * kk + 1, kk + 40))
             try:
                 theta, W = spla.eigs(OP, k=kk, which="LM", v0=_start_vector(2 * n1, complex), ncv=ncv, tol=tol,
-                                     maxiter=max(1000, 10 * kk) if maxiter is None else maxiter)
+                                     maxiter=maxiter)
             except spla.ArpackNoConvergence as exc:
                 theta, W = exc.eigenvalues, exc.eigenvectors
+                covered = False
                 warnings.warn(f"damped_poles: ARPACK converged {theta.size} of {kk} poles at shift {sigma}",
                               ConvergenceWarning, stacklevel=2)
             ok = np.abs(theta) > 0
@@ -448,17 +451,14 @@ def damped_poles(system, band, *, k: int | None = None, shifts=None, n_shifts: i
                               f"reach past its part of the band ({a:.4g}, {b:.4g}); poles may be missing",
                               ConvergenceWarning, stacklevel=2)
                 break
-            kk = min(limit, max_poles, 2 * kk)
+            kk = min(limit, max_poles)  # one rerun at the cap: each Arnoldi run starts afresh
         X = W[:n1]
-        if X.shape[1] == 0:  # ARPACK converged no pole at this shift (said by its warning)
-            continue
         # multipliers for the residual: S(sigma)[x'; z'] = [-(lam M + D + sigma M) x; 0], z = (lam - sigma) z'
         rhs = -(system.M @ X) * (lam + sigma)[None, :] - system.D @ X
-        Z = lu.solve(rhs, full=True)[n1:] * (lam - sigma)[None, :]
+        Z = (lu.solve(rhs, full=True)[n1:] * (lam - sigma)[None, :] if lam.size
+             else np.zeros((system.n2, 0), dtype=complex))
         count[0] += X.shape[1]
         found.append((lam, X, Z))
-    if not found:
-        found = [(np.zeros(0, complex), np.zeros((n1, 0), complex), np.zeros((system.n2, 0), complex))]
     lam = np.concatenate([f[0] for f in found])
     X = np.hstack([f[1] for f in found])
     Z = np.hstack([f[2] for f in found])
