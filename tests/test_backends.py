@@ -70,11 +70,12 @@ def _check_solves(fom, solver, B):
 
 
 def test_auto_choice_is_structural_and_recorded(dsms50, tcom20):
-    """Chains get the banded LU (the TCOM's border of 6 rows KLU where installed), a small 3D grid
-    SuperLU; the analysis is plain data on the model."""
+    """Chains get the banded LU (the TCOM's border of 6 rows KLU where installed, from BAND_RULE's
+    klu_min_n rows on), a small 3D grid SuperLU; the analysis is plain data on the model."""
     from morsuite.linalg.backends_ext import available
+    big_enough = tcom20.n1 + tcom20.n2 >= BAND_RULE["klu_min_n"]
     for fom, kl_ku, want in ((dsms50, (1, 1), "banded"),
-                             (tcom20, (2, 2), "klu" if available()["klu"] else "banded")):
+                             (tcom20, (2, 2), "klu" if available()["klu"] and big_enough else "banded")):
         a = fom.lu_analysis()
         assert a["backend"] == want and (a["kl"], a["ku"]) == kl_ku and a["requested"] == "auto"
     g = grid3d_model(7)
@@ -213,6 +214,7 @@ def test_auto_rule_with_the_libraries():
     every = {"klu": True, "rslab": True, "pardiso": True}
     assert choose(2, 2, 6, 200000, none)[0] == "banded"
     assert choose(2, 2, 6, 200000, default)[0] == "klu"
+    assert choose(2, 2, 6, BAND_RULE["klu_min_n"] - 1, default)[0] == "banded"   # tiny: the long-standing rule
     assert choose(1, 1, 1, 200000, every)[0] == "banded"
     assert choose(1, 1, BAND_RULE["max_border"] + 1, 10 ** 5, none)[0] == "superlu"
     assert choose(900, 900, 600, 10 ** 4, every)[0] == "pardiso"

@@ -75,8 +75,8 @@ LIBRARY_BACKENDS = ("klu", "rslab", "pardiso")
 #: :mod:`~morsuite.linalg.kernels` up to ``kl + ku <= numba_max_band`` and LAPACK's blocked ``?gbtrf``
 #: above (2026-11-26, second session: the unblocked kernel is 1.2x faster at kl + ku = 10, 1.45x
 #: slower at 66)
-BAND_RULE = {"max_band": 64, "max_border": 8, "max_border_klu": 1, "pardiso_min_n": 2000, "rslab_min_n": 1000,
-             "numba_max_band": 16}
+BAND_RULE = {"max_band": 64, "max_border": 8, "max_border_klu": 1, "klu_min_n": 1000, "pardiso_min_n": 2000,
+             "rslab_min_n": 1000, "numba_max_band": 16}
 
 
 def factor_nnz(lu) -> int:
@@ -126,7 +126,10 @@ def choose(kl: int, ku: int, n2: int, n: int = 0, available: dict | None = None)
     With ``B = BAND_RULE`` and ``n`` the order of S:
 
     - ``kl + ku <= B["max_band"]`` (a narrow band): banded if ``n2 <= B["max_border"]``
-      (``B["max_border_klu"]`` where KLU is installed), else KLU if installed, else SuperLU;
+      (``B["max_border_klu"]`` where KLU is installed and ``n >= B["klu_min_n"]``), else KLU if
+      so, else SuperLU (below ``klu_min_n`` every backend takes microseconds, and the long-standing
+      rule keeps its behaviour at near-singular shifts: a random undamped model of 32 rows led the
+      IRKA iteration elsewhere on KLU's rounding, 2026-11-27);
     - a wide band (3D solids): PARDISO if installed and ``n >= B["pardiso_min_n"]``, else rslab's
       supernodal LU if installed and ``n >= B["rslab_min_n"]``, else SuperLU.
 
@@ -139,10 +142,11 @@ def choose(kl: int, ku: int, n2: int, n: int = 0, available: dict | None = None)
     av = backends_ext.available() if available is None else available
     B = BAND_RULE
     if kl + ku <= B["max_band"]:
-        limit = B["max_border_klu"] if av.get("klu") else B["max_border"]
+        klu = bool(av.get("klu")) and n >= B["klu_min_n"]
+        limit = B["max_border_klu"] if klu else B["max_border"]
         if n2 <= limit:
             return "banded", f"RCM bandwidth kl + ku = {kl + ku} <= {B['max_band']} and n2 = {n2} <= {limit}"
-        if av.get("klu"):
+        if klu:
             return "klu", f"RCM bandwidth kl + ku = {kl + ku} <= {B['max_band']}, n2 = {n2} > {limit}: KLU"
         return "superlu", f"n2 = {n2} above the banded border limit {limit}"
     wide = f"RCM bandwidth kl + ku = {kl + ku} > {B['max_band']}"
