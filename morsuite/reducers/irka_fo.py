@@ -447,7 +447,8 @@ class IRKAFO(SurrogatePhase, IRKA):
         info.update(lu_count=own + paid, lu_count_own=own, lu_count_start=paid, lu_count_shared=shared,
                     setup_reused=paid == 0)
         info["status"] = ("converged" if info["converged"] else "stalled"
-                          if info["engine_converged"] or info.get("cycle_detected") else "cap")
+                          if info["engine_converged"] or info.get("cycle_detected") or getattr(self, "_stalled", False)
+                          else "cap")
         return rom, info
 
 
