@@ -76,8 +76,9 @@ __all__ = ["IRKABase"]
 #: engaged (option safeguard_stop), a relaxed iterate within ITERATE_CYCLE * cycle_tol of a recent one is a
 #: cycle too (measured on fem_block(1000), r = 6: its period-4 cycle closes to 1e-3 only after 25 iterations)
 ITERATE_CYCLE = 10.0
-#: engaged (option safeguard_stop), the iteration stops at a cycle after this many reactions to earlier ones
-GUARD_CYCLES = 2
+#: engaged (option safeguard_stop), the iteration stops when a cycle forms again after this many reactions
+#: (stronger hysteresis, half the step; the recent sets forgotten) to earlier ones
+GUARD_CYCLES = 1
 #: per-iteration records copied into info["history"], in this order
 _HISTORY_KEYS = ("measure", "shift_change", "response_change", "criterion", "n_shifts", "rank", "ill_conditioned",
                  "refined", "gram_schmidt", "stable", "max_pole_real", "update", "mirrored", "step", "shifts")

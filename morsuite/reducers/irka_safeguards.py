@@ -143,9 +143,9 @@ GUARD_OPTIONS = {
     "safeguard_min_step": Option(0.125, "float", "smallest step of the engaged safeguard's adaptive "
                                  "relaxation (1: no relaxation)", low=0, high=1, open_low=True),
     "safeguard_stop": Option(True, "bool", "the engaged safeguard stops the iteration when a cycle of shift "
-                             "sets (of the proposed sets, or of the relaxed iterates within 10 cycle_tol) recurs "
-                             "after two reactions (stronger hysteresis, smaller step) to earlier ones "
-                             "(status cycle) or after safeguard_window iterations without a new smallest measure "
+                             "sets (of the proposed sets, or of the relaxed iterates within 10 cycle_tol) forms "
+                             "again after a reaction (stronger hysteresis, smaller step, recent sets forgotten) "
+                             "to an earlier one (status cycle) or after safeguard_window iterations without a new smallest measure "
                              "(status stalled), returning the best iterate, instead of running to maxit"),
     "shortlist": Option(5, "int", "stable iterates kept (with their models) for the final choice "
                         "without convergence (safeguard on)", low=1),
