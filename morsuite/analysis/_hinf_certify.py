@@ -24,13 +24,15 @@ EPS = np.finfo(float).eps
 LOCAL = 0.05
 
 
-def refine_peak(sig, lo, c, hi, rtol, budget):
+def refine_peak(sig, lo, c, hi, rtol, budget, bar=None):
     r"""Maximise sig on [lo, hi] around the sample c (secant on the derivative, bisection safeguard).
 
     Stops when the gain still predicted by the local quadratic model,
     :math:`\sigma'(x)^2 / (2|\sigma''|)` with :math:`\sigma''` from the last two
     derivatives, is below ``rtol`` times the best value, when the bracket has
-    shrunk to rounding, or when ``budget`` LUs are spent.
+    shrunk to rounding, or when ``budget`` LUs are spent; with ``bar`` (a value
+    found elsewhere) also when the peak the model predicts, raised by
+    :data:`BAR_MARGIN`, stays below ``bar``: this maximum cannot be the largest.
     """
     fl, dl = sig(lo)
     fc, dc = sig(c)
@@ -68,7 +70,13 @@ def refine_peak(sig, lo, c, hi, rtol, budget):
             a, fa, da = x, fx, dx
         if curv < 0 and fx >= best[0] and dx * dx / (2.0 * -curv) <= rtol * fx:
             break
+        if bar is not None and curv < 0 and (1.0 + BAR_MARGIN) * (fx + dx * dx / (2.0 * -curv)) < bar:
+            break
     return best, used, history
+
+
+#: ``refine_peak(bar=...)`` gives up on a maximum whose predicted peak is below bar / (1 + BAR_MARGIN)
+BAR_MARGIN = 0.25
 
 
 #: the dense level-set test's resolution: the certified gap is at least RESOLUTION * eps * ||T|| / peak

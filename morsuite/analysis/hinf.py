@@ -87,7 +87,8 @@ from ._fom import FomResponse
 from ._hinf_certify import certificate as _certificate, refine_peak as _refine
 from ._hinf_dense import error_realization, hidden_realization
 from ._rom import RomResponse
-from .h2 import breakpoints
+from .h2 import breakpoints, resonances
+from .response import freq_grid
 
 __all__ = ["hinf_norm", "hinf_error", "hinf_rel_error"]
 
@@ -96,7 +97,25 @@ EPS = np.finfo(float).eps
 CERTIFY_DIM = 300
 
 
-def _check(max_lus, rtol, per_decade, certify_dim=0, certify_tol=0.5, certify_lus=4):
+def _band_grid(band_grid):
+    """``band_grid`` checked: None, or ``(lo, hi, n)`` with 0 < lo < hi finite and an integer n >= 2."""
+    if band_grid is None:
+        return None
+    try:
+        lo, hi, n = band_grid
+        ok = (0 < float(lo) < float(hi) < np.inf and not isinstance(n, bool)
+              and isinstance(n, (int, np.integer)) and n >= 2)
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise OptionError(f"band_grid must be None or (lo, hi, n) with 0 < lo < hi and an integer n >= 2; "
+                          f"got {band_grid!r}")
+    return (float(lo), float(hi), int(n))
+
+
+def _check(max_lus, rtol, per_decade, certify_dim=0, certify_tol=0.5, certify_lus=4, skip_factor=0.0):
+    if not (isinstance(skip_factor, (float, int)) and not isinstance(skip_factor, bool) and 0 <= skip_factor < 1):
+        raise OptionError(f"skip_factor must be a number in [0, 1); got {skip_factor!r}")
     if isinstance(certify_dim, bool) or not isinstance(certify_dim, (int, np.integer)) or certify_dim < 0:
         raise OptionError(f"certify_dim must be a non-negative integer; got {certify_dim!r}")
     if not (isinstance(certify_tol, (float, int)) and 0 < certify_tol < 1):
@@ -132,13 +151,15 @@ class _Sigma:
             return self.samples[w]
         s = 1j * w
         self.calls += 1
+        # always refined and kept: the entry then serves every search and the band response alike
+        T0, Tx, dT = self.ev.sample(s)
         if self.rr is None:
-            T, dT = self.ev.transfer_and_derivative(s, need=lambda T0: False)
+            T = T0
         else:
             Tr = self.rr.transfer(s)
-            # refine only where the unrefined difference would lose more than rtol / 100 (16 eps |T| / |E|)
-            need = lambda T0: bool(16.0 * EPS * np.linalg.norm(T0) > 0.01 * self.rtol * np.linalg.norm(T0 - Tr))  # noqa: E731
-            T, dT = self.ev.transfer_and_derivative(s, need=need)
+            # refined only where the unrefined difference would lose more than rtol / 100 (16 eps |T| / |E|)
+            need = bool(16.0 * EPS * np.linalg.norm(T0) > 0.01 * self.rtol * np.linalg.norm(T0 - Tr))
+            T = Tx if need and Tx is not None else T0
             self.scale = max(self.scale, float(np.linalg.norm(np.asarray(T, dtype=complex))))
             T = T - Tr
             dT = dT - self.rr.derivative(s)
@@ -152,15 +173,33 @@ class _Sigma:
         return self.samples[w]
 
 
-def _grid(fom, rom_poles, ritz, per_decade, budget):
-    """Start frequencies: 0, resonances of the reduced model and of the model, a log grid."""
+def _anchored(lo, hi, b_lo, b_hi, per_decade):
+    """Log-lattice points ``b_lo 10^(-k/per_decade)`` down to ``lo`` and ``b_hi 10^(k/per_decade)`` up to ``hi``
+    (k >= 1): anchored at the band's ends, so that searches whose ranges differ share their points."""
+    below = int(np.ceil(per_decade * np.log10(b_lo / lo))) if lo < b_lo else 0
+    above = int(np.ceil(per_decade * np.log10(hi / b_hi))) if hi > b_hi else 0
+    return np.concatenate([b_lo * 10.0 ** (-np.arange(below, 0, -1) / per_decade),
+                           b_hi * 10.0 ** (np.arange(1, above + 1) / per_decade)])
+
+
+def _grid(fom, rom_poles, ritz, per_decade, budget, band_grid=None):
+    """Start frequencies: 0, resonances of the reduced model and of the model, a log grid; with
+    ``band_grid`` that grid's points (not counted in ``budget``) and the log grid outside it only."""
     own = np.abs(np.asarray(rom_poles, dtype=complex).imag)
     own = np.unique(own[own > 0])
-    model = breakpoints(ritz) if ritz is not None and ritz.size else np.zeros(0)
-    lo, hi = fom.band
+    if ritz is None or not ritz.size:
+        model = np.zeros(0)
+    elif band_grid is None:
+        model = breakpoints(ritz)
+    else:  # the band grid resolves the flanks: the resonances' centres only
+        model = np.array([w for w, _ in resonances(ritz)], dtype=float)
+    lo, hi = fom.band if band_grid is None else (float(band_grid[0]), float(band_grid[1]))
     freqs = np.concatenate([own, model])
     if freqs.size:
         lo, hi = min(lo, freqs.min() / 10.0), max(hi, freqs.max() * 10.0)
+    if band_grid is not None:
+        return _banded(own, model, _anchored(lo, hi, float(band_grid[0]), float(band_grid[1]), per_decade),
+                       freq_grid(band_grid[:2], band_grid[2]), budget)
     n_log = int(np.ceil(np.log10(hi / lo) * per_decade)) + 1
     logs = np.logspace(np.log10(lo), np.log10(hi), n_log)
     room = budget - 1 - own.size - logs.size
@@ -178,13 +217,29 @@ def _grid(fom, rom_poles, ritz, per_decade, budget):
     return pts, {"rom_resonances": int(own.size), "model_resonances": int(model.size), "log_grid": int(logs.size)}
 
 
-def _search(fom, rr, rom_poles, feed, *, max_lus, grid_lus, rtol, per_decade, refine, n_peaks, adi):
+def _banded(own, model, logs, band, budget):
+    """:func:`_grid` with a band grid: ``band`` kept whole (free), the model's resonances thinned to the
+    ``budget`` left by 0, the reduced model's resonances and the log points outside the band."""
+    room = budget - 1 - own.size - logs.size
+    if model.size > max(room, 0):
+        model = model[np.linspace(0, model.size - 1, max(room, 0)).astype(int)] if room > 0 else model[:0]
+    pts = np.unique(np.concatenate([[0.0], own, model, logs, band]))
+    # a conjugate pair's |Im| can differ in the last bit: one sample per frequency (the band's points kept)
+    near = np.concatenate([[False], np.diff(pts) <= 1e-10 * pts[1:]]) & ~np.isin(pts, band)
+    return pts[~near], {"rom_resonances": int(own.size), "model_resonances": int(model.size),
+                        "log_grid": int(logs.size), "band_grid": int(band.size)}
+
+
+def _search(fom, rr, rom_poles, feed, *, max_lus, grid_lus, rtol, per_decade, refine, n_peaks, adi,
+            band_grid=None, skip_factor=0.0):
     gf = cached_gramian_factors(fom, **adi)
     ritz = np.asarray(gf.controllability.shifts) if gf is not None else None
     sig = _Sigma(fom, rr, refine, rtol)
-    pts, how = _grid(fom, rom_poles, ritz, per_decade, min(grid_lus, max_lus - 1))
+    pts, how = _grid(fom, rom_poles, ritz, per_decade, min(grid_lus, max_lus - 1), band_grid)
     for w in pts:
         sig(w)
+    # the band grid's samples are the band response's (one memo): the budgets count the others
+    sig.calls -= how.get("band_grid", 0)
     ws = np.array(sorted(sig.samples))
     fs = np.array([sig.samples[w][0] for w in ws])
     # local maxima of the samples (the ends count), best first
@@ -193,18 +248,26 @@ def _search(fom, rr, rom_poles, feed, *, max_lus, grid_lus, rtol, per_decade, re
     is_max[:-1] &= fs[:-1] >= fs[1:]
     cands = np.flatnonzero(is_max)
     cands = cands[np.argsort(-fs[cands])][:n_peaks]
+    est = np.array([_resonance_peak(ws, fs, i) for i in cands])
+    if skip_factor > 0:  # the most promising first: the others then meet a higher bar
+        cands, est = cands[np.argsort(-est, kind="stable")], est[np.argsort(-est, kind="stable")]
     best = (float(fs.max()), float(ws[np.argmax(fs)]))
-    refinements = []
-    for i in cands:
+    refinements, skipped = [], []
+    for i, e in zip(cands, est):
         left = max(max_lus - sig.calls, 0)
         if left == 0:
             break
+        if e < skip_factor * best[0]:
+            skipped.append({"start": float(ws[i]), "estimate": float(e)})
+            continue
         if i == ws.size - 1:
             continue  # the largest grid frequency: the response decays beyond it
         if i == 0 and ws[0] == 0.0 and sig.samples[ws[1]][1] <= 0:
             continue  # a maximum at w = 0 (sigma is even in w)
         lo, hi = ws[max(i - 1, 0)], ws[i + 1]
-        (fv, wv), used, hist = _refine(sig, lo, ws[i], hi, rtol, left)
+        # with skip_factor, a maximum after the first is refined only while it may still beat the best
+        bar = best[0] if skip_factor > 0 and refinements else None
+        (fv, wv), used, hist = _refine(sig, lo, ws[i], hi, rtol, left, bar)
         refinements.append({"start": float(ws[i]), "peak": float(wv), "value": fv, "lus": used})
         if fv > best[0]:
             best = (fv, float(wv))
@@ -214,13 +277,37 @@ def _search(fom, rr, rom_poles, feed, *, max_lus, grid_lus, rtol, per_decade, re
     rec = {"peak_frequency": w_peak, "lu_count": sig.ev.lu_count, "lu_shifts": list(sig.ev.shifts),
            "samples": len(sig.samples),
            "grid": how, "grid_size": int(pts.size), "model_resonances_from": "cached LR-ADI shifts" if gf else None,
-           "refinements": refinements}
+           "refinements": refinements, "skipped": skipped}
     return float(value), rec, sig
+
+
+def _resonance_peak(ws, fs, i) -> float:
+    r"""Estimated peak of the local maximum ``fs[i]`` of the samples: the isolated resonance
+    :math:`\sigma(\omega)^{-2} = a(\omega - \omega_0)^2 + b` through it and its two neighbours (exact
+    for one lightly damped pole, :math:`|
+ho / (j\omega - \lambda)|`); ``inf`` at an end of the grid or
+    where the model has no positive minimum of :math:`\sigma^{-2}` (no finite estimate)."""
+    if i == 0 or i == ws.size - 1:
+        return np.inf
+    x, f = ws[i - 1:i + 2], fs[i - 1:i + 2]
+    if np.any(f <= 0):
+        return np.inf
+    q = 1.0 / f ** 2
+    c = x[1]
+    h1, h2 = x[0] - c, x[2] - c
+    # q(c + h) = q1 + B h + A h^2 through the three samples
+    d1, d2 = (q[0] - q[1]) / h1, (q[2] - q[1]) / h2
+    A = (d2 - d1) / (h2 - h1)
+    B = d1 - A * h1
+    if not A > 0:
+        return np.inf
+    qmin = q[1] - B * B / (4.0 * A)
+    return float(1.0 / np.sqrt(qmin)) if qmin > 0 else np.inf
 
 
 def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-10, per_decade: int = 8,
               refine: int = 1, n_peaks: int = 8, adi=None, certify_dim: int = CERTIFY_DIM, certify_tol: float = 1e-6,
-              certify_lus: int = 100, details: bool = False):
+              certify_lus: int = 100, band_grid=None, skip_factor: float = 0.0, details: bool = False):
     r""":math:`\|T\|_{\mathcal H_\infty} = \sup_\omega \sigma_{\max}(T(j\omega))`: the peak found (a lower
     bound), with a certified upper bound where :math:`n_1 - n_2 \le` ``certify_dim``.
 
@@ -253,6 +340,22 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
         to the realization's resolution, module docstring).
     certify_lus : int
         LUs for the certificate's samples (default 100).
+    band_grid : (float, float, int), optional
+        ``(lo, hi, n)``: the frequencies of a band response of the model (``n`` log-spaced in
+        [lo, hi], :func:`~morsuite.analysis.freq_grid`), sampled too and drawn from the model's memo of
+        :math:`T(j\omega)` (:class:`~morsuite.analysis._fom.FomResponse`) that the band response
+        fills (``morsuite compare`` sets it to its band grid). They replace the log grid inside
+        [lo, hi] (outside it, ``per_decade`` points a decade anchored at lo and hi, the same
+        for every search) and are not counted in ``grid_lus`` and ``max_lus``, which count
+        the other samples; default None: the log grid over the whole range.
+    skip_factor : float
+        In [0, 1): a local maximum of the start grid is refined only if its estimated peak
+        reaches ``skip_factor`` times the best value found so far, the most promising first;
+        the estimate is the isolated resonance :math:`\sigma^{-2} = a(\omega - \omega_0)^2 + b`
+        through the maximum and its two neighbours (exact for one lightly damped pole;
+        unbounded at the grid's ends). Default 0: each of the ``n_peaks`` best maxima is
+        refined (``morsuite compare`` uses 0.5: refinements of maxima far below the peak
+        are most of a search's LUs). The skipped ones are in ``details["skipped"]``.
     details : bool
         Also return a dict (``lower_bound``, ``upper_bound``, ``certified``, ``certificate``,
         ``peak_frequency``, ``lu_count``, ``samples``, ``refinements``, ...).
@@ -263,12 +366,13 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
         The largest peak found: a lower bound of the norm (``details["lower_bound"]``).
     """
     check_fom(fom)
-    _check(max_lus, rtol, per_decade, certify_dim, certify_tol, certify_lus)
+    _check(max_lus, rtol, per_decade, certify_dim, certify_tol, certify_lus, skip_factor)
+    band_grid = _band_grid(band_grid)
     adi = adi_options(adi)
     # the start grid depends on whether the model's resonances (cached Gramian factors) are there
     resonances = cached_gramian_factors(fom, **adi) is not None
     key = ("hinf_norm", max_lus, grid_lus, rtol, per_decade, refine, n_peaks, tuple(sorted(adi.items())),
-           certify_dim, certify_tol, certify_lus, resonances)
+           certify_dim, certify_tol, certify_lus, resonances, band_grid, skip_factor)
     cache = getattr(fom, "cache", None)
     if cache is not None and key in cache:
         value, rec = cache[key]
@@ -277,7 +381,8 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
         t0 = time.perf_counter()
         with blas_threads(1):
             value, rec, sig = _search(fom, None, np.zeros(0), None, max_lus=max_lus, grid_lus=grid_lus, rtol=rtol,
-                                      per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi)
+                                      per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi,
+                                      band_grid=band_grid, skip_factor=skip_factor)
             value = _certificate(fom, sig, lambda: hidden_realization(fom), value, rec, certify_dim=certify_dim,
                                  certify_tol=certify_tol, certify_lus=certify_lus, rtol=rtol)
         rec["time_s"] = time.perf_counter() - t0
@@ -289,7 +394,7 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
 
 def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-10, per_decade: int = 8,
                refine: int = 1, n_peaks: int = 8, adi=None, certify_dim: int = CERTIFY_DIM, certify_tol: float = 1e-6,
-               certify_lus: int = 100, details: bool = False):
+               certify_lus: int = 100, band_grid=None, skip_factor: float = 0.0, details: bool = False):
     r""":math:`\|T - T_r\|_{\mathcal H_\infty}`: the peak found (a lower bound, exact to ``rtol`` at that
     peak), with a certified upper bound where :math:`n_1 - n_2 \le` ``certify_dim``.
 
@@ -308,7 +413,8 @@ def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float
     ----------
     fom : Index3Model
     rom : SecondOrderROM or FirstOrderROM
-    max_lus, grid_lus, rtol, per_decade, refine, n_peaks, adi, certify_dim, certify_tol, certify_lus, details
+    max_lus, grid_lus, rtol, per_decade, refine, n_peaks, adi, certify_dim, certify_tol, certify_lus, band_grid,
+    skip_factor, details
         As in :func:`hinf_norm`.
 
     Returns
@@ -326,7 +432,8 @@ def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float
     InputError
         ``rom`` has non-finite matrices or a singular E.
     """
-    _check(max_lus, rtol, per_decade, certify_dim, certify_tol, certify_lus)
+    _check(max_lus, rtol, per_decade, certify_dim, certify_tol, certify_lus, skip_factor)
+    band_grid = _band_grid(band_grid)
     adi = adi_options(adi)
     arrays, why = validate_rom(fom, rom, "rom")
     if why is not None:
@@ -339,7 +446,8 @@ def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float
     feed = float(np.linalg.norm(arrays[4], 2)) if np.any(arrays[4] != 0) else None
     with blas_threads(1):
         value, rec, sig = _search(fom, rr, rom.poles(), feed, max_lus=max_lus, grid_lus=grid_lus, rtol=rtol,
-                                  per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi)
+                                  per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi,
+                                  band_grid=band_grid, skip_factor=skip_factor)
         value = _certificate(fom, sig, lambda: error_realization(fom, arrays), value, rec, certify_dim=certify_dim,
                              certify_tol=certify_tol, certify_lus=certify_lus, rtol=rtol)
     rec["time_s"] = time.perf_counter() - t0

@@ -7,7 +7,7 @@ import numpy as np
 from ..errors import InputError
 from ..linalg.dense import sigma_max  # public here too (ms.analysis.sigma_max); reducers take it from linalg
 
-__all__ = ["sigma_max", "errors", "freq_grid"]
+__all__ = ["sigma_max", "errors", "freq_grid", "band_response"]
 
 
 def freq_grid(band, n: int = 200) -> np.ndarray:
@@ -55,3 +55,46 @@ def errors(fom, rom, omega, *, H_full=None):
         rel = np.where(sf > 0, ea / sf, np.where(ea > 0, np.inf, 0.0))  # 0/0: both responses vanish
     return pd.DataFrame({"omega": omega, "sigma_full": sf, "sigma_rom": sigma_max(Hr),
                          "abs_error": ea, "rel_error": rel})
+
+
+def band_response(fom, omega, *, progress: bool = False):
+    r"""The full model's response on a grid, drawn from and kept in the model's memo of :math:`T(j\omega)`.
+
+    The values of :meth:`Index3Model.freqresp <morsuite.models.Index3Model.freqresp>` (one LU per
+    frequency, the LU's solution), computed through
+    :meth:`FomResponse.sample <morsuite.analysis._fom.FomResponse.sample>`: each sample is also
+    refined in extended precision and given its derivative :math:`T'(j\omega)` (one transposed
+    solve), and kept in ``fom.cache``, so that the H-infinity searches of the model and of its
+    reduced models (:func:`~morsuite.analysis.hinf_norm` and :func:`~morsuite.analysis.hinf_error`
+    with ``band_grid``) pay no LU at these frequencies; a frequency already kept costs none here.
+
+    Parameters
+    ----------
+    fom : Index3Model
+    omega : array_like
+        Frequencies (rad/s), real, finite, non-negative.
+    progress : bool
+        Draw a progress bar.
+
+    Returns
+    -------
+    H : ndarray, complex (len(omega), p, m)
+    lu_count : int
+        LUs made by this call (at most ``len(omega)``).
+    """
+    from ..utils import blas_threads
+    from ._fom import FomResponse
+
+    w = np.atleast_1d(np.asarray(omega, dtype=float))
+    if w.ndim != 1 or w.size == 0 or not np.all(np.isfinite(w)) or np.any(w < 0):
+        raise InputError(f"omega must be a non-empty 1-D array of finite frequencies >= 0; got shape {w.shape}")
+    ev = FomResponse(fom, refine=1, memo=True)
+    out = np.empty((w.size, fom.p, fom.m), dtype=complex)
+    it = range(w.size)
+    if progress:
+        from tqdm.auto import tqdm
+        it = tqdm(it, desc=f"freqresp {fom.name}", unit="freq", leave=False)
+    with blas_threads(1):
+        for i in it:
+            out[i] = ev.sample(1j * w[i])[0]
+    return out, ev.lu_count

@@ -154,6 +154,20 @@ class FomResponse:
                 memo.clear()
             memo[complex(s)] = (T0, T, self.last_unit, *rest)
 
+    def sample(self, s):
+        r"""``(T0, T, dT)`` at ``s``: the LU's :math:`T(s)` (complex128), the refined one (as
+        :meth:`transfer`; None with ``refine=0``) and :math:`T'(s)`, as
+        :meth:`transfer_and_derivative` computes them, always refined: kept in the model's memo, such
+        an entry serves every later call at ``s`` whatever its ``need`` (the band response of a
+        comparison and the H-infinity searches of its reduced models share one memo). One LU per
+        shift not kept yet; a shift kept unrefined is computed again."""
+        hit = self._memo_d.get(complex(s)) if self._memo_d is not None else None
+        if hit is None or (self.refine and hit[1] is None):
+            self.transfer_and_derivative(s)
+            hit = self._memo_d.get(complex(s)) if self._memo_d is not None else self._last
+        self.last_unit = hit[2]
+        return hit[0], hit[1], hit[3]
+
     def transfer_and_derivative(self, s, need=None):
         r""":math:`T(s)` (refined as :meth:`transfer`, with ``need``) and
         :math:`T'(s) = -Y^T(2sM + D)X` (:math:`S(s)^TY = [L^T; 0]`, double precision):
@@ -168,4 +182,5 @@ class FomResponse:
         Y = lu.solve(fom.L.T.astype(complex), trans=True)
         dT = -(Y.T @ ((2 * s) * (fom.M @ X) + fom.D @ X))
         self._keep(self._memo_d, s, T0, T, dT)
+        self._last = (T0, T, self.last_unit, dT)
         return (T0 if T is None else T), dT

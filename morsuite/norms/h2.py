@@ -170,13 +170,12 @@ def h2_norm(fom, *, adi=None, details: bool = False):
                    "trusted": trusted}
 
 
-def breakpoints(lam) -> np.ndarray:
-    r"""Frequencies at which to cut the axis for poles ``lam``: resonances that stand apart.
+def resonances(lam) -> list:
+    r"""The resonances of poles ``lam`` that stand apart: ``(omega_p, delta)`` per feature, by frequency.
 
-    A pole :math:`\lambda = -\delta + j\omega_p` (:math:`\omega_p > \delta`) makes a
-    peak of width about :math:`\delta` at :math:`\omega_p`. Peaks closer than their
-    widths form one feature and get one cut, and further cuts at
-    :math:`\omega_p \pm 4^k\delta` up to half-way to the next feature.
+    A pole :math:`\lambda = -\delta + j\omega_p` (:math:`\omega_p > \delta`) makes a peak of width
+    about :math:`\delta` at :math:`\omega_p`; peaks closer than their widths form one feature,
+    represented by its sharpest peak (the centres :func:`breakpoints` cuts at).
     """
     lam = np.asarray(lam, dtype=complex)
     lam = lam[np.isfinite(lam) & (lam.imag >= 0)]
@@ -190,6 +189,18 @@ def breakpoints(lam) -> np.ndarray:
                 kept[-1] = (w, d)
             continue
         kept.append((w, d))
+    return kept
+
+
+def breakpoints(lam) -> np.ndarray:
+    r"""Frequencies at which to cut the axis for poles ``lam``: resonances that stand apart.
+
+    A pole :math:`\lambda = -\delta + j\omega_p` (:math:`\omega_p > \delta`) makes a
+    peak of width about :math:`\delta` at :math:`\omega_p`. Peaks closer than their
+    widths form one feature and get one cut, and further cuts at
+    :math:`\omega_p \pm 4^k\delta` up to half-way to the next feature.
+    """
+    kept = resonances(lam)
     out = []
     for i, (w, d) in enumerate(kept):
         out.append(w)

@@ -73,6 +73,12 @@ from .shift_update import COMPLEX_TOL, UpdateSchedule, bt_rule, initial_shifts, 
 
 __all__ = ["IRKABase"]
 
+#: engaged (option safeguard_stop), a relaxed iterate within ITERATE_CYCLE * cycle_tol of a recent one is a
+#: cycle too (measured on fem_block(1000), r = 6: its period-4 cycle closes to 1e-3 only after 25 iterations)
+ITERATE_CYCLE = 10.0
+#: engaged (option safeguard_stop), the iteration stops when a cycle forms again after this many reactions
+#: (stronger hysteresis, half the step; the recent sets forgotten) to earlier ones
+GUARD_CYCLES = 1
 #: per-iteration records copied into info["history"], in this order
 _HISTORY_KEYS = ("measure", "shift_change", "response_change", "criterion", "n_shifts", "rank", "ill_conditioned",
                  "refined", "gram_schmidt", "stable", "max_pole_real", "update", "mirrored", "step", "shifts")
@@ -324,12 +330,12 @@ class IRKABase(Reducer):
                 crit = "response"
         return crit
 
-    def _is_cycle(self, new_alpha, d_shift, recent) -> bool:
-        """Back to an earlier set while still far from the current one (slow oscillating
-        convergence has d_shift near tol instead)."""
+    def _is_cycle(self, new_alpha, d_shift, recent, loose: float = 1.0) -> bool:
+        """Back to an earlier set (within ``loose`` times ``cycle_tol``) while still far from the current
+        one (slow oscillating convergence has d_shift near tol instead)."""
         o = self.options
         return bool(o["cycle_window"]) and d_shift > 100 * o["cycle_tol"] and any(
-            new_alpha.size == a.size and shift_distance(new_alpha, a) < o["cycle_tol"] for a in recent)
+            new_alpha.size == a.size and shift_distance(new_alpha, a) < loose * o["cycle_tol"] for a in recent)
 
     def _ban_culprit(self, guard, it, alpha, Vraw, Wraw, left):
         """Ban the shift or pair whose removal from this iteration's raw bases leaves the most
@@ -357,6 +363,7 @@ class IRKABase(Reducer):
         guard = CycleGuard.from_options(o)
         chosen = None
         converged = cycled = False
+        stalled = forget = False
         t_proj = t_upd = 0.0
         cap = r
         schedule = UpdateSchedule(o["update"], o["relaxation"], o["maxit"])
@@ -413,9 +420,18 @@ class IRKABase(Reducer):
             guard.observe(measure)
             if guard.active and not stable and measure < guard.settle:
                 reason = "unstable fixed point"  # the criterion never accepts it: move away
-            elif crit == "shifts" and self._is_cycle(new_alpha, d_shift, recent):
+            elif crit == "shifts" and (self._is_cycle(new_alpha, d_shift, recent)
+                                       or (guard.engaged and o["safeguard_stop"]
+                                           and self._is_cycle(alpha, d_shift, recent, ITERATE_CYCLE))):
+                # engaged, the relaxed iterates can cycle while no proposed set repeats: both are watched
+                if guard.engaged and o["safeguard_stop"] and guard.cycles >= GUARD_CYCLES:
+                    cycled = True  # it cycles on through its stronger hysteresis and smaller steps: stop
+                    guard.events.append((it, f"cycle after {guard.cycles} reactions: stopped"))
+                    break
                 if guard.engaged:
                     guard.on_cycle(it)
+                    # stopping: the answer is judged on the iterates that follow it, not on the old cycle
+                    forget = bool(o["safeguard_stop"])
                     prev_change = np.inf  # the step was just halved: no second adaptation
                 elif schedule.can_switch():
                     schedule.switch(it)
@@ -430,6 +446,10 @@ class IRKABase(Reducer):
                 guard.new_stage()
             elif guard.active and not guard.engaged and not schedule.can_switch() and guard.stalled():
                 reason = "stall"
+            elif guard.engaged and o["safeguard_stop"] and guard.stalled():
+                stalled = True  # engaged and no new smallest measure for a window: stop
+                guard.events.append((it, f"no new smallest measure in {guard.window} iterations: stopped"))
+                break
             how, relax = schedule.rule
             if reason is not None:
                 if reason == "unstable fixed point":
@@ -444,7 +464,8 @@ class IRKABase(Reducer):
                 relax = guard.adapt_step(d_shift, prev_change) if np.isfinite(prev_change) else guard.step
             prev_change = d_shift
             history[-1]["step"] = relax
-            recent = (recent + [alpha.copy()])[-o["cycle_window"]:] if o["cycle_window"] else []
+            recent = (recent + [alpha.copy()])[-o["cycle_window"]:] if o["cycle_window"] and not forget else []
+            forget = False
             alpha, bdir, cdir = self._next_data(it, (alpha, bdir, cdir), (new_alpha, new_b, new_c), relax,
                                                 blend=guard.engaged)
         score = None
@@ -453,6 +474,7 @@ class IRKABase(Reducer):
             chosen = shortlist.choose(None if score is None else (lambda m: score(self.fom, m)))
         times = {"setup": t_setup, **setup_times, **self._phase_times(), "projection": t_proj,
                  "shift_update": t_upd}
+        self._stalled = stalled  # read by _outcome (its signature is shared with the variants)
         rom, info = self._outcome(r, chosen, history, it, converged, cycled, times=times, perturbed=perturbed,
                                   switched=schedule.switched_at)
         info["safeguard"] = {**guard.info(), "active": guard.active,
@@ -468,7 +490,7 @@ class IRKABase(Reducer):
                 info["setup_reused"] = True
                 info["setup_cost"] = {"score_gramians": sg["score_gramian_time_relied"]}
         info.setdefault("status", "converged" if info["converged"] else "cycle" if cycled  # a variant may overrule
-                        else "uncertified" if converged else "cap")
+                        else "stalled" if stalled else "uncertified" if converged else "cap")
         return rom, info
 
     def _outcome(self, r, best, history, it, converged, cycled, *, times, perturbed, switched):
@@ -482,7 +504,9 @@ class IRKABase(Reducer):
                       f"the model supports to rank_tol = {o['rank_tol']:g}, hsv_tol = {o['hsv_tol']:g}",
                       RankWarning, stacklevel=4)
         if not converged:
-            why = "a cycle of shift sets was detected" if cycled else f"maxit = {o['maxit']} was reached"
+            why = ("a cycle of shift sets was detected" if cycled else
+                   f"the safeguard made no progress in {o['safeguard_window']} iterations"
+                   if getattr(self, "_stalled", False) else f"maxit = {o['maxit']} was reached")
             what = (f"iteration {best_it} (shift change {history[best_it - 1]['measure']:.2e}, tol {o['tol']:g})"
                     if best_it else "its start")
             self.warn(f"{self.name} did not converge at r = {r}: {why}; returning {what}",

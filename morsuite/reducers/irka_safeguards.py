@@ -142,6 +142,11 @@ GUARD_OPTIONS = {
                                     open_high=True),
     "safeguard_min_step": Option(0.125, "float", "smallest step of the engaged safeguard's adaptive "
                                  "relaxation (1: no relaxation)", low=0, high=1, open_low=True),
+    "safeguard_stop": Option(True, "bool", "the engaged safeguard stops the iteration when a cycle of shift "
+                             "sets (of the proposed sets, or of the relaxed iterates within 10 cycle_tol) forms "
+                             "again after a reaction (stronger hysteresis, smaller step, recent sets forgotten) "
+                             "to an earlier one (status cycle) or after safeguard_window iterations without a new smallest measure "
+                             "(status stalled), returning the best iterate, instead of running to maxit"),
     "shortlist": Option(5, "int", "stable iterates kept (with their models) for the final choice "
                         "without convergence (safeguard on)", low=1),
     "shortlist_score": Option("h2", "choice", "how the shortlisted iterates are ranked without convergence: "
@@ -254,6 +259,8 @@ class CycleGuard:
         self.h = hysteresis
         self.engaged_at = None
         self.reason = None
+        #: cycles met while engaged (each answered by a stronger hysteresis and a smaller step)
+        self.cycles = 0
         self.tabu = []
         self.events = []
         self.step = 1.0
@@ -269,6 +276,7 @@ class CycleGuard:
         """Take over from iteration ``it`` on, recording ``reason`` in the event log."""
         self.engaged_at, self.reason = it, reason
         self.events.append((it, f"engaged: {reason}"))
+        self.new_stage()  # its progress is counted from here
 
     def observe(self, measure):
         """Record this iteration's measure (progress: a new smallest one in the stage)."""
@@ -288,8 +296,10 @@ class CycleGuard:
     def on_cycle(self, it):
         """A further cycle while engaged: fourfold hysteresis, half the step."""
         self.h *= 4.0
+        self.cycles += 1
         self.step = max(self.min_step, self.step / 2)
         self.events.append((it, f"cycle: hysteresis {self.h:g}, step {self.step:g}"))
+        self.new_stage()  # a new hysteresis and step: progress counted afresh
 
     def adapt_step(self, change, previous):
         """Halve the step when the shift change grew, double it (at most 1) when it fell."""

@@ -30,6 +30,25 @@ def _adi(ctx, where, value):
     return out
 
 
+def _band_grid(ctx, where, value):
+    """None, or ``[lo, hi, n]``: a band response's grid (0 < lo < hi, an integer n >= 2)."""
+    if value is None:
+        return None
+    ok = (isinstance(value, (list, tuple)) and len(value) == 3
+          and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+          and isinstance(value[2], int) and value[2] >= 2 and 0 < value[0] < value[1] < float("inf"))
+    if not ok:
+        ctx.fail(where, f"expected [lo, hi, n] with 0 < lo < hi and an integer n >= 2; got {value!r}")
+    return [float(value[0]), float(value[1]), int(value[2])]
+
+
+def _skip_factor(ctx, where, value):
+    """A number in [0, 1)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value < 1:
+        ctx.fail(where, f"expected a number in [0, 1); got {value!r}")
+    return float(value)
+
+
 #: kind -> option -> (default, validator); the keyword options of h2_error / hinf_error
 NORM_OPTIONS = {
     "h2": {"method": ("auto", choice_of(("auto", "error-gramian", "pole-residue", "quadrature"))), "rtol": (1e-8, float_in_01),
@@ -37,7 +56,8 @@ NORM_OPTIONS = {
     "hinf": {"max_lus": (190, int_at_least(4)), "grid_lus": (120, positive_int), "rtol": (1e-10, float_in_01),
              "per_decade": (8, positive_int), "refine": (1, nonnegative_int), "n_peaks": (8, positive_int),
              "adi": (None, _adi), "certify_dim": (300, nonnegative_int), "certify_tol": (1e-6, float_in_01),
-             "certify_lus": (100, int_at_least(4))},
+             "certify_lus": (100, int_at_least(4)), "band_grid": (None, _band_grid),
+             "skip_factor": (0.0, _skip_factor)},
 }
 
 

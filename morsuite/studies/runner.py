@@ -406,8 +406,11 @@ def _compute_missing(plan, cache, choice, bars, desc, have, todo) -> dict:
                                                    red_nodes.get(mg.reduce, {}), dask_key_name=mid)
     def after(model):
         # the norms share the model's Gramian factors with bt: let the reductions of the model run
-        # first, so that a bt reduction pays (and reports) its own LR-ADI, as it does without norms
-        return [red_nodes[gid] for gid in red_nodes if plan.reduces[gid].model.model_id == model.model_id]
+        # first, so that a bt reduction pays (and reports) its own LR-ADI, as it does without norms;
+        # and its band responses, whose samples the H-infinity searches draw from the model's memo
+        return ([red_nodes[gid] for gid in red_nodes if plan.reduces[gid].model.model_id == model.model_id]
+                + [fom_nodes[fid] for fid in graph if fid in plan.foms and plan.foms[fid].model.model_id
+                   == model.model_id])
 
     for nid, n in plan.norms.items():
         if nid not in norms:

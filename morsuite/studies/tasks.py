@@ -6,7 +6,8 @@ plain data: arrays, numbers, strings, dicts. A reduced model travels as
 ``{"kind": ..., "arrays": {name: ndarray}}``, never as a pickled object on disk.
 
 - :func:`fom_response`: the full model's response on one grid (one LU per
-  frequency), shared by every reduced model compared on that grid.
+  frequency), shared by every reduced model compared on that grid, and kept in the
+  model's memo of T(jw) for the H-infinity searches (:func:`~morsuite.analysis.response.band_response`).
 - :func:`reduce_sweep`: one reducer instance for one (model, method, options),
   ``reduce(r)`` for every requested r in increasing order, so work that does not
   depend on r (Gramian factors, a projector) is done once.
@@ -43,15 +44,16 @@ def fom_response(source: str, lo: float, hi: float, n: int, key: str, cache_root
     and ``sigma_full`` = :math:`\sigma_{\max}(H(j\omega))` (kept with it: a cached study then
     needs no linear algebra)."""
     from ..analysis import sigma_max
+    from ..analysis.response import band_response
 
     fom = _model(source)
     omega = np.logspace(np.log10(lo), np.log10(hi), n)
     t0 = time.perf_counter()
-    H = fom.freqresp(omega, progress=progress)
+    # through the model's memo of T(jw): the H-infinity searches with this band grid draw on it
+    H, lus = band_response(fom, omega, progress=progress)
     elapsed = time.perf_counter() - t0
-    stats = getattr(fom, "last_freqresp_stats", {}) or {}
     out = {"kind": "fom", "key": key, "model": fom.name, "omega": omega, "H": H, "sigma_full": sigma_max(H),
-           "time_s": elapsed, "lu_count": stats.get("factorizations"), "cached": False, "scheduler": run_by,
+           "time_s": elapsed, "lu_count": lus, "cached": False, "scheduler": run_by,
            **_stamp()}
     if cache_root is not None:
         from .cache import Cache

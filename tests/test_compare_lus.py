@@ -1,0 +1,134 @@
+"""Fewer LUs per comparison, same answers (issue 33, item 3).
+
+- The band response and the H-infinity searches share one memo of T(jw) of the full model
+  (:func:`morsuite.analysis.band_response`, ``band_grid``): the band response equals
+  ``fom.freqresp`` (one LU per frequency, the reference), no search pays an LU at a band
+  frequency, and each peak is the one the same search finds on a fresh model without the
+  memo (bit for bit: the budgets count samples), and at least the peak of today's default
+  search (log grid, every maximum refined) to the search's ``rtol``.
+- IRKA's engaged safeguard stops on a cycle (status ``cycle``) instead of running to maxit.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import morsuite as ms
+from morsuite.errors import ConvergenceWarning, OptionError
+
+
+def _bt(fom, r):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return ms.reducers.make("bt", fom).reduce(r).rom
+
+
+def _model():
+    fom = ms.models.dsms(g=60)
+    ms.analysis.h2_norm(fom)  # the Gramian factors: the model's resonances for the start grids
+    return fom
+
+
+N_BAND = 60
+OPTS = {"certify_dim": 0, "skip_factor": 0.5}
+
+
+def _sequence(fom, roms, band_grid, band_first=True):
+    """A comparison's sequence: band response, model norm, one error search per reduced model."""
+    lus = 0
+    if band_first:
+        H, n = ms.analysis.band_response(fom, ms.analysis.freq_grid(band_grid[:2], band_grid[2]))
+        lus += n
+    out = [ms.analysis.hinf_norm(fom, band_grid=band_grid, details=True, **OPTS)]
+    out += [ms.analysis.hinf_error(fom, rom, band_grid=band_grid, details=True, **OPTS) for rom in roms]
+    lus += sum(d["lu_count"] for _, d in out)
+    return out, lus
+
+
+def test_band_response_is_freqresp_and_fills_the_memo():
+    fom = _model()
+    omega = ms.analysis.freq_grid(fom.band, N_BAND)
+    H, lus = ms.analysis.band_response(fom, omega)
+    ref = fom.freqresp(omega)
+    assert lus == N_BAND
+    assert np.max(np.abs(H - ref)) <= 1e-12 * np.max(np.abs(ref))
+    H2, lus2 = ms.analysis.band_response(fom, omega)  # served from the memo: no LU, the same values
+    assert lus2 == 0 and np.array_equal(H, H2)
+
+
+def test_shared_memo_serves_band_response_and_hinf_searches():
+    fom = _model()
+    band_grid = (fom.band[0], fom.band[1], N_BAND)
+    roms = [_bt(fom, r) for r in (4, 8, 12)]
+    shared, lus = _sequence(fom, roms, band_grid)
+    # the unshared computation: a fresh model, each search on its own (memo emptied before each)
+    fresh = _model()
+    alone = []
+    for rom in [None] + roms:
+        for key in [k for k in fresh.cache if isinstance(k, tuple) and str(k[0]).startswith(("fom_response",
+                                                                                            "hinf_norm"))]:
+            del fresh.cache[key]
+        alone.append(ms.analysis.hinf_norm(fresh, band_grid=band_grid, details=True, **OPTS) if rom is None
+                     else ms.analysis.hinf_error(fresh, rom, band_grid=band_grid, details=True, **OPTS))
+    for (v, d), (v0, d0) in zip(shared, alone):
+        assert v == v0 and d["samples"] == d0["samples"] and d["refinements"] == d0["refinements"]
+        # no band frequency is paid again: each search's LUs are its other samples at most
+        assert d["lu_count"] <= d["samples"] - N_BAND
+        assert d0["lu_count"] == d0["samples"]
+    # the bound of the sequence: the band grid once, then each search's own samples beyond it
+    assert lus <= N_BAND + sum(d["samples"] - N_BAND for _, d in shared)
+    assert lus < sum(d0["lu_count"] for _, d0 in alone)
+    # today's default search (log grid, every maximum refined): each peak at least its value, to rtol
+    for rom, (v, _) in zip([None] + roms, shared):
+        ref = ms.analysis.hinf_norm(fom, certify_dim=0) if rom is None else \
+            ms.analysis.hinf_error(fom, rom, certify_dim=0)
+        assert v >= ref * (1 - 1e-9), (v, ref)
+
+
+def test_searches_draw_on_the_memo_whatever_the_order():
+    """The band response after the searches: the values the same, the band response pays no LU
+    where a search sampled (all of the band grid)."""
+    fom = _model()
+    band_grid = (fom.band[0], fom.band[1], N_BAND)
+    roms = [_bt(fom, 6)]
+    first, _ = _sequence(fom, roms, band_grid, band_first=False)
+    H, lus = ms.analysis.band_response(fom, ms.analysis.freq_grid(band_grid[:2], band_grid[2]))
+    assert lus == 0
+    other = _model()
+    second, _ = _sequence(other, roms, band_grid)
+    assert [v for v, _ in first] == [v for v, _ in second]
+
+
+@pytest.mark.parametrize("opts, match", [({"band_grid": (1.0, 0.5, 10)}, "band_grid"),
+                                         ({"band_grid": (0.1, 1.0, 1)}, "band_grid"),
+                                         ({"band_grid": "band"}, "band_grid"),
+                                         ({"skip_factor": 1.0}, "skip_factor"),
+                                         ({"skip_factor": True}, "skip_factor")])
+def test_bad_sharing_options_are_refused(opts, match):
+    fom = ms.models.dsms(g=20)
+    with pytest.raises(OptionError, match=match):
+        ms.analysis.hinf_norm(fom, **opts)
+
+
+def test_irka_safeguard_stops_on_a_cycle():
+    """tcom(nc=40), r = 8, the residue rule without hysteresis and the safeguard's hysteresis 0: the
+    engaged safeguard cannot break the selection cycle (measured: 100 iterations to the cap before);
+    it stops when the cycle forms again after its reaction (measured: 19 iterations), converged False
+    with status cycle and a warning, returning a stable shortlisted iterate."""
+    fom = ms.models.tcom(nc=40)
+    opts = {"update": "residue", "residue_hysteresis": 0.0, "safeguard": "on", "safeguard_hysteresis": 0.0,
+            "maxit": 60}
+    with pytest.warns(ConvergenceWarning, match="cycle"):
+        res = ms.reducers.make("irka", fom, **opts).reduce(8)
+    info = res.info
+    assert info["status"] == "cycle" and not info["converged"] and info["cycle_detected"]
+    assert info["iterations"] < opts["maxit"]
+    assert info["safeguard"]["engaged_at"] is not None and "stopped" in info["safeguard"]["events"][-1]
+    assert res.rom.is_stable() and 1 <= info["best_iteration"] <= info["iterations"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        old = ms.reducers.make("irka", fom, safeguard_stop=False, **opts).reduce(8).info
+    assert old["status"] == "cap" and old["iterations"] == opts["maxit"]
