@@ -367,7 +367,7 @@ def test_library_backends_pickle_without_their_handles(backend, tcom20):
     KLU holds the GIL (nbklu), so IRKA's automatic solver threads are 1 with it."""
     import pickle
 
-    from morsuite.reducers.shift_solves import default_threads
+    from morsuite.reducers.irka.shift_solves import default_threads
     _need(backend)
     solver = tcom20.new_solver(backend=backend)
     x = solver.factor(0.3j).solve(tcom20.F)

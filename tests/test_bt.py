@@ -15,7 +15,7 @@ import pytest
 import scipy.linalg as sla
 
 import morsuite as ms
-from morsuite.reducers.bt import FORMS
+from morsuite.reducers.bt.balanced import FORMS
 from support import assert_sets_close
 
 DSMS_HSV = np.array([0.1326606742, 0.08189541682, 0.02236780891, 0.01676544437, 2.494449919e-3,

@@ -15,7 +15,7 @@ from morsuite.linalg.saddle import SaddlePointSolver
 from morsuite.linalg.warmup import warm_kernels
 from morsuite.reducers.base import BLAS_THREADS
 from morsuite.utils import blas_threads
-from morsuite.reducers.bt_fl import band_factors, band_nodes, compress
+from morsuite.reducers.bt.frequency_limited import band_factors, band_nodes, compress
 
 
 def _dense_band_gramians(fom, band):

@@ -1,7 +1,7 @@
-"""The descent in cluster-polynomial coordinates (morsuite.linalg.h2_clusters).
+"""The descent in cluster-polynomial coordinates (morsuite.reducers.h2.clusters).
 
 References independent of the module: the error system's Lyapunov solution (scipy), the pole-residue
-variable projection of morsuite.linalg.h2_poles (value, relative gradient and its own descent, where
+variable projection of morsuite.reducers.h2.poles (value, relative gradient and its own descent, where
 the poles are well separated), central differences of J for the gradient, and of the gradient for
 Kaufman's matrix at a zero residual (where it is the Hessian).
 """
@@ -14,11 +14,11 @@ import scipy.linalg as sla
 
 from morsuite.errors import MorsuiteError
 from morsuite.linalg.dense import match_sets
-from morsuite.linalg.h2_clusters import (Clusters, ModalTM, _fd_hessian, alternating_descent, cluster_descent,
+from morsuite.reducers.h2.clusters import (Clusters, ModalTM, _fd_hessian, alternating_descent, cluster_descent,
                                          cluster_evaluate)
-from morsuite.linalg.h2_gradient import ModalTarget
-from morsuite.linalg.h2_poles import Coordinates, ModalValues, optimal_residues
-from morsuite.linalg.h2_poles_descent import pole_descent
+from morsuite.reducers.h2.gradient import ModalTarget
+from morsuite.reducers.h2.poles import Coordinates, ModalValues, optimal_residues
+from morsuite.reducers.h2.poles_descent import pole_descent
 
 
 def _target(seed=3, n=20, close=1.03):
@@ -153,7 +153,7 @@ def test_alternating_descent_hands_over_to_the_same_optimum():
 
 
 def _real(co, x):
-    from morsuite.linalg.h2_poles import _real_modal
+    from morsuite.reducers.h2.poles import _real_modal
     return _real_modal(co, x)
 
 
@@ -161,7 +161,7 @@ def test_product_form_of_the_target_values_against_triangular_solves():
     """ModalTM.tm_values by the all-pass product form against one triangular solve per target pole
     (h2_orthonormal.modal_tm_values) and the triangular Sylvester solve, for a sequence with repeats and
     poles 1e-6 apart."""
-    from morsuite.linalg.h2_orthonormal import modal_tm_values, tm_realization
+    from morsuite.reducers.h2.orthonormal import modal_tm_values, tm_realization
     _, tgt, lam = _target()
     tt = ModalTM(tgt)
     seq = np.repeat(np.array([-0.03 + 0.5j, -0.03 - 0.5j, -0.03 * (1 + 1e-6) + 0.5j, -0.2, -1.0 + 3j]), 2)
@@ -198,7 +198,7 @@ def test_polish_moves_a_coarse_optimum_to_the_closer_targets_stationary_point():
     to the full target: stationary there (the orthonormal relative gradient of h2_clusters, an independent
     form), its J the error system's Lyapunov value, and the same point as the pole descent against the full
     target from the same start."""
-    from morsuite.reducers.so_h2_siso import _polish
+    from morsuite.reducers.h2.siso import _polish
     full, tgt, lam = _target()
     weight = np.abs(tgt.C[0] * tgt.B[:, 0]) / np.abs(tgt.poles.real)
     # the two weakest conjugate pairs dropped: a cut between the 4th and 5th smallest weights, clear of

@@ -1,8 +1,8 @@
-"""The orthonormal (Takenaka-Malmquist) form of the relative gradient (morsuite.linalg.h2_orthonormal).
+"""The orthonormal (Takenaka-Malmquist) form of the relative gradient (morsuite.reducers.h2.orthonormal).
 
 References independent of the module: scipy's Lyapunov solver for the basis' Gram matrix, adaptive
 quadrature on the imaginary axis for the inner products, and the pole-residue relative gradient of
-morsuite.linalg.h2_poles where its Gram matrix is well conditioned (the dense reference of the
+morsuite.reducers.h2.poles where its Gram matrix is well conditioned (the dense reference of the
 derivative systems against the index-3 model is in test_so_h2_certified.py).
 """
 
@@ -13,10 +13,10 @@ import pytest
 import scipy.integrate as sint
 import scipy.linalg as sla
 
-from morsuite.linalg.h2_gradient import ModalTarget
-from morsuite.linalg.h2_orthonormal import (modal_tm_values, realization_tm_values, tm_realization,
+from morsuite.reducers.h2.gradient import ModalTarget
+from morsuite.reducers.h2.orthonormal import (modal_tm_values, realization_tm_values, tm_realization,
                                             tm_rho)
-from morsuite.linalg.h2_poles import Coordinates, ModalValues, optimal_residues
+from morsuite.reducers.h2.poles import Coordinates, ModalValues, optimal_residues
 
 CLUSTER = np.array([-0.03 + 0.011j, -0.03 * (1 + 1e-7) + 0.011j * (1 + 1e-7), -0.5 + 0j])
 
@@ -69,7 +69,7 @@ def test_rho_equals_the_pole_residue_form_where_that_is_well_conditioned(iterati
     x = co.join([], [], np.array([-0.05 + 1.1j, -0.05 + 2.9j]), np.array([0.5 + 0j, -0.5 + 0j]))
     ev = optimal_residues(co, x, tv)
     if iterations:
-        from morsuite.linalg.h2_poles_descent import varpro_descent
+        from morsuite.reducers.h2.poles_descent import varpro_descent
         ev = varpro_descent(co, ev.x, tv, maxit=iterations, gtol=1e-12)[0]
     lam, phi = co.split(ev.x)
     A, beta = tm_realization(np.repeat(lam, 2))
@@ -91,9 +91,9 @@ def test_full_model_rho_in_the_orthonormal_form_against_the_dense_reference(monk
     import warnings
 
     import morsuite as ms
-    from morsuite.linalg import h2_stationarity
+    from morsuite.reducers.h2 import stationarity as h2_stationarity
     from morsuite.linalg.h2 import norm_squared
-    from morsuite.linalg.h2_gradient import FullTarget, second_order_realization
+    from morsuite.reducers.h2.gradient import FullTarget, second_order_realization
     from test_so_h2_certified import dense_rho
 
     fom = ms.models.tcom(nc=20)

@@ -382,7 +382,7 @@ def test_residue_selection_hysteresis_keeps_a_pole_in_use():
     """Two real poles with near-equal H2 scores compete for one slot: without hysteresis the
     larger score wins; with it the pole whose mirror is a current shift stays, unless the
     other scores higher by more than the factor 1 + h."""
-    from morsuite.reducers.shift_update import select_by_residue
+    from morsuite.reducers.irka.shift_update import select_by_residue
 
     lam = np.array([-1.0, -2.0], dtype=complex)
     # scores |b||c| / sqrt(2 |Re lam|): pole 1 scores 2% above pole 0

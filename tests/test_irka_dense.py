@@ -65,7 +65,7 @@ def test_kernel_projection_on_the_rows_of_g_against_the_dense_projector(monkeypa
     fom = ms.models.tcom(nc=30)
     red = ms.reducers.make("irka", fom)
     red._setup()
-    import morsuite.reducers.irka as irka_mod
+    import morsuite.reducers.irka.second_order as irka_mod
     fallbacks = []
     gs = irka_mod.gram_schmidt
     monkeypatch.setattr(irka_mod, "gram_schmidt", lambda *a, **k: fallbacks.append(1) or gs(*a, **k))
@@ -124,13 +124,13 @@ def test_bases_made_orthonormal_on_two_threads_give_the_same_rom(monkeypatch):
     """The right and left bases orthonormalised concurrently (threshold lowered so that a small
     model takes that path) give the bits of the serial run, with refined solves and the
     kernel projection in play (DSMS)."""
-    from morsuite.reducers.irka import IRKA
+    from morsuite.reducers.irka.second_order import IRKA
 
     fom = ms.models.dsms(g=400)
     opts = dict(maxit=4, tol=1e-300, safeguard="off", refine_when="always")
     monkeypatch.setattr(IRKA, "PARALLEL_BASES_MIN", 0)
     calls = []
-    import morsuite.reducers.irka as irka_mod
+    import morsuite.reducers.irka.second_order as irka_mod
     mt = irka_mod.map_threads
     monkeypatch.setattr(irka_mod, "map_threads", lambda fn, jobs, t: calls.append((len(jobs), t)) or mt(fn, jobs, t))
     with pytest.warns(ms.errors.ConvergenceWarning):

@@ -18,7 +18,7 @@ import scipy.linalg as sla
 import morsuite as ms
 from morsuite.errors import ConvergenceWarning, InputError, OptionError
 from morsuite.reducers.base import as_complex
-from morsuite.reducers.irka_surrogate import Chart, ModalSurrogate, newton_fixed_point, SurrogateMap
+from morsuite.reducers.irka.surrogate import Chart, ModalSurrogate, newton_fixed_point, SurrogateMap
 from morsuite.linalg.dense import match_sets
 from support import assert_sets_close, eig_tolerance
 

@@ -10,7 +10,7 @@ import warnings
 import numpy as np
 
 import morsuite as ms
-from morsuite.reducers import irka as irka_module
+from morsuite.reducers.irka import second_order as irka_module
 
 from test_irka_fo import Projected, hermite_mismatch, modal
 

@@ -1,5 +1,5 @@
 """The closed-form Jacobian of the SISO first-order IRKA map against a modal surrogate
-(morsuite.reducers.irka_jacobian), checked against central differences of the map itself,
+(morsuite.reducers.irka.jacobian), checked against central differences of the map itself,
 and Newton's method with it: its fixed point against the dense Hermite conditions."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import pytest
 import scipy.linalg as sla
 
 import morsuite as ms
-from morsuite.reducers.irka_surrogate import Chart, ModalSurrogate, SurrogateMap, _jacobian, iterate, newton_fixed_point
+from morsuite.reducers.irka.surrogate import Chart, ModalSurrogate, SurrogateMap, _jacobian, iterate, newton_fixed_point
 
 
 def _surrogate(seed=3, n=16, m=1, p=1):

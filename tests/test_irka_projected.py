@@ -15,7 +15,7 @@ from threadpoolctl import threadpool_limits
 
 import morsuite as ms
 from morsuite.linalg.dense import shift_distance
-from morsuite.reducers.irka_projected import form_projector, memory_estimate, split_projector
+from morsuite.reducers.irka.projected import form_projector, memory_estimate, split_projector
 
 
 def rel(a, b):

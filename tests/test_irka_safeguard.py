@@ -18,9 +18,9 @@ import scipy.linalg as sla
 import morsuite as ms
 from morsuite.reducers.base import as_complex
 from support import assert_sets_close
-from morsuite.reducers.irka_safeguards import CycleGuard, Shortlist, guard_weights, instability_culprit, \
+from morsuite.reducers.irka.safeguards import CycleGuard, Shortlist, guard_weights, instability_culprit, \
     shift_slots
-from morsuite.reducers.shift_update import COMPLEX_TOL, relaxed_update, select_by_residue
+from morsuite.reducers.irka.shift_update import COMPLEX_TOL, relaxed_update, select_by_residue
 
 EPS = np.finfo(float).eps
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import morsuite as ms
-from morsuite.reducers import irka_score
+from morsuite.reducers.irka import score as irka_score
 
 
 @pytest.fixture(scope="module")
@@ -25,7 +25,7 @@ def mimo():
 def _scored_run(monkeypatch, fom, r, **opts):
     """The reduction with the default scorer, the (rom, score) pairs it scored, and whether any
     iterate offered to the shortlist was stable."""
-    from morsuite.reducers.irka_safeguards import Shortlist
+    from morsuite.reducers.irka.safeguards import Shortlist
 
     seen, offered = [], []
     original = irka_score.ExactH2Score.__call__
@@ -81,7 +81,7 @@ def test_returned_iterate_has_the_smallest_exact_h2_error_of_the_shortlist(monke
 
 def test_shortlist_chooses_the_smallest_exact_h2_error_not_the_smallest_measure(mimo):
     """Deterministic: stable candidates offered with measures that rank them in the wrong order."""
-    from morsuite.reducers.irka_safeguards import Shortlist
+    from morsuite.reducers.irka.safeguards import Shortlist
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

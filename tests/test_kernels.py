@@ -11,7 +11,7 @@ import scipy.linalg.lapack as lapack
 
 from morsuite.linalg import kernels
 from morsuite.linalg.backends import BandedBorderLU
-from morsuite.reducers.shift_solves import map_threads
+from morsuite.reducers.irka.shift_solves import map_threads
 
 pytestmark = pytest.mark.skipif(not kernels.available(), reason="numba is not installed")
 

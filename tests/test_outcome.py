@@ -336,7 +336,7 @@ norms = ["h2", "hinf"]
 
 def test_study_tables_and_verdicts_flag_a_model_worse_than_zero(tmp_path, monkeypatch):
     from morsuite.reducers import base
-    from morsuite.reducers.bt import BT
+    from morsuite.reducers.bt.balanced import BT
     from morsuite.studies import run
 
     class Mirror(BT):

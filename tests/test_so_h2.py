@@ -18,11 +18,11 @@ import scipy.linalg as sla
 import morsuite as ms
 from morsuite.errors import InputError, OptionError
 from morsuite.linalg.h2 import modal_form, norm_squared
-from morsuite.linalg.h2_gradient import (FullTarget, ModalTarget, gauss_newton_diagonal, h2_objective,
+from morsuite.reducers.h2.gradient import (FullTarget, ModalTarget, gauss_newton_diagonal, h2_objective,
                                          second_order_realization)
-from morsuite.linalg.lbfgs import Evaluation, lbfgs_descent
-from morsuite.reducers import so_h2 as so_h2_module
-from morsuite.reducers.so_h2_params import General, Passive
+from morsuite.reducers.h2.lbfgs import Evaluation, lbfgs_descent
+from morsuite.reducers.h2 import so_h2 as so_h2_module
+from morsuite.reducers.h2.params import General, Passive
 from test_norms import error_ss, extended_h2_error, hidden_ss, lyap_h2
 
 MIMO = dict(n1=30, n2=3, m=3, p=3, seed=1, zeta=0.01)

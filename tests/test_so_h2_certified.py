@@ -20,8 +20,8 @@ import scipy.linalg as sla
 
 import morsuite as ms
 from morsuite.linalg import saddle
-from morsuite.linalg.h2_gradient import FullTarget, second_order_realization
-from morsuite.linalg.h2_stationarity import full_stationarity
+from morsuite.reducers.h2.gradient import FullTarget, second_order_realization
+from morsuite.reducers.h2.stationarity import full_stationarity
 from morsuite.linalg.h2 import norm_squared
 from test_norms import hidden_ss
 

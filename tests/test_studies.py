@@ -183,7 +183,7 @@ def test_removed_scene_computes_nothing_of_its_own(tmp_path):
 
 
 def test_irka_only_study_never_forms_projector_or_gramians(tmp_path, monkeypatch):
-    mod = pytest.importorskip("morsuite.reducers.irka_projected") if "irka-projected" in \
+    mod = pytest.importorskip("morsuite.reducers.irka.projected") if "irka-projected" in \
         ms.reducers.available() else None
     if mod is not None:
         def boom(*a, **k):
@@ -531,7 +531,7 @@ def fake_bt(monkeypatch):
     """A stand-in "bt" with BT's conventions: r-independent work done once per instance
     (reported as setup_cost/setup_reused), Hankel singular values and an error bound."""
     from morsuite.reducers import base
-    from morsuite.reducers.irka import IRKA
+    from morsuite.reducers.irka.second_order import IRKA
 
     class FakeBT(IRKA):
         name = "fake-bt"

@@ -295,7 +295,7 @@ def test_cached_rerun_computes_nothing_and_imports_no_numerics(study, tmp_path):
 def unstable_reducer(monkeypatch):
     """A registered reducer whose models have negative damping (poles in the right half-plane)."""
     from morsuite.reducers import base
-    from morsuite.reducers.irka import IRKA
+    from morsuite.reducers.irka.second_order import IRKA
 
     class Unstable(IRKA):
         name = "unstable"

@@ -296,7 +296,7 @@ def canonical_name(target: str) -> str | None:
 def _resolve_public_name(app, env, node, contnode):
     """Resolve what the Python domain could not: a morsuite object by the name users type
     (``morsuite.reducers.make``), a short name imported into the current module
-    (``SingularShiftError`` in ``morsuite.reducers.irka``), ``np.``/``pd.`` abbreviations."""
+    (``SingularShiftError`` in ``morsuite.reducers.irka.second_order``), ``np.``/``pd.`` abbreviations."""
     if node.get("refdomain") != "py":
         return None
     target = node.get("reftarget", "")

@@ -46,7 +46,7 @@ import scipy.sparse.linalg as spla
 from ..linalg.backends import choose
 from ..linalg.backends_ext import available as extras_available
 from ..utils import blas_threads
-from ..reducers.shift_solves import map_threads
+from ..reducers.irka.shift_solves import map_threads
 from . import benchmark
 
 __all__ = ["bench_lu_backends", "bench_lu_rule", "grid3d_elastic", "strip_model"]

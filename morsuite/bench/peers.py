@@ -327,7 +327,7 @@ def bench_peers(quick: bool = False, out_dir=None, *, plan: dict | None = None, 
     from pymor.reductors.sobt import SOBTvReductor
     from pymor.reductors.sor_irka import SORIRKAReductor
 
-    from ..reducers.irka_projected import IRKAProjected
+    from ..reducers.irka.projected import IRKAProjected
 
     rows, details = [], {}
     specs = list(dict.fromkeys(list(plan["dense_models"]) + list(plan["sparse_models"])))

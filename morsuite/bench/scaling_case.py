@@ -115,7 +115,7 @@ def run_case(case: dict) -> dict:
         row.update(probe.as_dict())
     derive_row(row)
     if task == "irka-projected":
-        from ..reducers.irka_projected import memory_estimate
+        from ..reducers.irka.projected import memory_estimate
 
         row["memory_estimate_gib"] = memory_estimate(fom.n1, fom.n2)["peak_gib"]
     return row

@@ -202,7 +202,7 @@ class KLULU:
     False). The reference order makes the factors depend on the values only, never on which shift
     was factored before. ``solve(b, trans)`` as SuperLU's; the backward-error check of
     :class:`~morsuite.linalg.saddle_lu.SaddleLU` follows every solve. KLU holds the GIL (one solver
-    thread, :func:`morsuite.reducers.shift_solves.default_threads`).
+    thread, :func:`morsuite.reducers.irka.shift_solves.default_threads`).
     """
 
     def __init__(self, As, pattern):

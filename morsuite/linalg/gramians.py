@@ -1,6 +1,6 @@
 r"""Low-rank Gramian factors of a model, computed once per model and ADI options.
 
-Balanced truncation (:mod:`morsuite.reducers.bt`) and the exact H2 norm
+Balanced truncation (:mod:`morsuite.reducers.bt.balanced`) and the exact H2 norm
 (:func:`morsuite.analysis.h2_norm`) need the same pair of LR-ADI factors
 :math:`P \approx ZZ^T`, :math:`Q \approx YY^T` of the projected Lyapunov
 equations (:mod:`morsuite.linalg.lradi`). :func:`gramian_factors` is the one
@@ -42,7 +42,7 @@ __all__ = ["ADI_DEFAULTS", "GramianFactors", "gramian_factors", "cached_gramian_
            "h2_tail"]
 
 #: LR-ADI options of the shared factors, with balanced truncation's defaults (``bt`` declares the same);
-#: tol 1e-12 (not lradi's 1e-10): see morsuite.reducers.bt; refine 1 (not lradi's 0): one long-double
+#: tol 1e-12 (not lradi's 1e-10): see morsuite.reducers.bt.balanced; refine 1 (not lradi's 0): one long-double
 #: refinement step of every controllability solve, without which ||T||_H2^2 from the factor is off by the
 #: solves' forward error (7.9e-12 relative on tcom(2000), docs/design/norms.md); it costs no LU, +25% (dsms(6000))
 #: and +47% (tcom(2000)) of the LR-ADI time

@@ -437,7 +437,7 @@ class SaddlePointSolver:
 
     def _scratch(self):
         """Scratch arrays of the pattern's size: shared in the main thread, fresh in others
-        (factorizations may run in a thread pool, :mod:`morsuite.reducers.shift_solves`)."""
+        (factorizations may run in a thread pool, :mod:`morsuite.reducers.irka.shift_solves`)."""
         if threading.current_thread() is threading.main_thread():
             return self._work
         return np.empty(self._m.size), np.empty(self._m.size)

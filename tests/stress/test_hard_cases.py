@@ -174,7 +174,7 @@ def _check_cycle_outcome(res, W):
 
 def test_a_forced_two_cycle_is_detected_and_the_best_iterate_returned(monkeypatch):
     """Roundoff-independent: the shift update alternates between two sets, so IRKA must stop on a cycle."""
-    from morsuite.reducers import irka_engine
+    from morsuite.reducers.irka import engine as irka_engine
 
     fom = ms.models.dsms(100)
     sets = [np.array([0.02, 0.3 - 0.2j, 0.3 + 0.2j], dtype=complex),

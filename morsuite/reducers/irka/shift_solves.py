@@ -7,7 +7,7 @@ jobs, has the reducer's ``_map_shifts`` run them (in order, or concurrently), an
 makes the basis vectors in shift order, so the bases do not depend on how the
 solves were scheduled.
 
-Executors of :class:`~.irka.IRKA` (option ``executor``):
+Executors of :class:`~morsuite.reducers.irka.second_order.IRKA` (option ``executor``):
 
 ``"threads"`` (default)
     A thread pool of ``solver_threads`` workers (0: :func:`default_threads`, 2 on two
@@ -30,8 +30,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ..errors import InputError, SingularShiftError
-from ..linalg.refine import SaddleOperator, refined_solve
+from ...errors import InputError, SingularShiftError
+from ...linalg.refine import SaddleOperator, refined_solve
 from .shift_update import COMPLEX_TOL
 
 __all__ = ["raw_bases", "default_threads", "map_threads", "map_dask", "remote_shift_solves"]
@@ -119,7 +119,7 @@ def map_threads(fn, jobs, threads: int) -> list:
 def remote_shift_solves(solver, job, steps: int, ext: bool, check_all: bool):
     """One job on a Dask worker: (x, w, counters) with the worker's copy of the model's solver.
 
-    The same operations as the in-process job of :class:`~.irka.IRKA`: the LU at the
+    The same operations as the in-process job of :class:`~morsuite.reducers.irka.second_order.IRKA`: the LU at the
     shift, the solve (refined ``steps`` times with an ``ext``-precision residual), the
     transposed solve (checked when ``check_all``).
     """
@@ -127,7 +127,7 @@ def remote_shift_solves(solver, job, steps: int, ext: bool, check_all: bool):
     from collections import OrderedDict
     from dataclasses import replace
 
-    from ..linalg.saddle_lu import SolverStats
+    from ...linalg.saddle_lu import SolverStats
     af, rhs_v, rhs_w, a = job
     # own counters and cache: a worker may run several jobs at once on its copy of the solver
     solver = copy.copy(solver)

@@ -2,7 +2,7 @@ r"""Frequency-limited balanced truncation of index-3 second-order systems (``bt-
 
 On the hidden manifold the system has the first-order realization
 :math:`E = \mathrm{blkdiag}(I, M)`, :math:`A = [[0, I], [-K, -D]]`,
-:math:`B = [0; F]`, :math:`C = [L, 0]` of :mod:`morsuite.reducers.bt`. Its
+:math:`B = [0; F]`, :math:`C = [L, 0]` of :mod:`morsuite.reducers.bt.balanced`. Its
 band-restricted Gramians on :math:`\Omega = [-\omega_2, -\omega_1] \cup [\omega_1, \omega_2]`
 (Gawronski and Juang 1990) are
 
@@ -39,7 +39,7 @@ A Gauss-Legendre rule with nodes :math:`\omega_k` and weights :math:`c_k` on
 and :math:`Y` likewise, which are compressed (a thin QR, then an SVD of the
 triangular factor; singular values below ``compress_tol`` times the largest are
 dropped, so :math:`\|ZZ^T - Z_cZ_c^T\| \le \mathrm{compress\_tol}^2\|ZZ^T\|`). The
-square-root step of :class:`~morsuite.reducers.bt.SquareRootBT` then balances them:
+square-root step of :class:`~morsuite.reducers.bt.balanced.SquareRootBT` then balances them:
 ``form="first-order"`` (default) or one of the second-order levels ``pp``, ``pv``,
 ``vp``, ``vv``, ``fv``, exactly as ``bt`` does with its LR-ADI factors. This is the
 quadrature approach to frequency-limited BT of Benner, Kürschner and Saak (2016,
@@ -93,11 +93,11 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
-from ..errors import ConvergenceWarning, InputError
-from ..linalg.gramians import gramian_factors
-from .base import Option, register
-from .bt import FORMS, SquareRootBT, level_products
-from .shift_solves import default_threads, map_threads
+from ...errors import ConvergenceWarning, InputError
+from ...linalg.gramians import gramian_factors
+from ..base import Option, register
+from .balanced import FORMS, SquareRootBT, level_products
+from ..irka.shift_solves import default_threads, map_threads
 
 __all__ = ["BTFL", "BandFactor", "band_nodes", "band_factors", "check_band", "compress"]
 
@@ -197,7 +197,7 @@ def band_factors(fom, omega, weights, *, solver=None, threads: int = 1):
     solver : SaddlePointSolver, optional
         Default: ``fom.new_solver(cache_size=0)``; its ``stats`` count the LUs.
     threads : int
-        Nodes factored and solved concurrently (:func:`~morsuite.reducers.shift_solves.map_threads`).
+        Nodes factored and solved concurrently (:func:`~morsuite.reducers.irka.shift_solves.map_threads`).
 
     Returns
     -------

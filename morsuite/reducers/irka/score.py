@@ -1,7 +1,7 @@
 r"""The exact H2 score of IRKA's shortlisted iterates when the iteration does not converge.
 
 Without convergence the engine returns one of the stable iterates that its
-:class:`~.irka_safeguards.Shortlist` kept (the ``shortlist`` of smallest convergence
+:class:`~morsuite.reducers.irka.safeguards.Shortlist` kept (the ``shortlist`` of smallest convergence
 measure). :class:`ExactH2Score` ranks them by their exact H2 error
 :math:`\|T - T_r\|_{\mathcal H_2}` from the suite's one H2 evaluator,
 :func:`morsuite.norms.h2.h2_error`: the value, floor and ``trusted`` flag the studies
@@ -20,9 +20,9 @@ import warnings
 
 import numpy as np
 
-from ..errors import AccuracyWarning
-from ..linalg.gramians import ADI_DEFAULTS, cached_gramian_factors
-from ..norms.h2 import h2_error
+from ...errors import AccuracyWarning
+from ...linalg.gramians import ADI_DEFAULTS, cached_gramian_factors
+from ...norms.h2 import h2_error
 
 __all__ = ["ExactH2Score", "iterate_scorer", "score_cost"]
 

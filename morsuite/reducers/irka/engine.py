@@ -8,11 +8,11 @@ closed under conjugation in the open right half-plane, tangential directions):
    :math:`W` from :math:`w_i = P(\alpha_i)^{-T} L^T c_i`, one factorization per
    real shift or conjugate pair (hooks :meth:`~IRKABase._factor`,
    :meth:`~IRKABase._solve`; the variant says what :math:`P` is);
-2. orthonormal bases, the projection made well posed (:mod:`.irka_safeguards`)
+2. orthonormal bases, the projection made well posed (:mod:`~morsuite.reducers.irka.safeguards`)
    and the reduced model :math:`\hat M = W^T M V`, ..., :math:`\hat L = L V`
    (hook :meth:`~IRKABase._project`);
 3. new interpolation data from the reduced model's poles and residues
-   (:mod:`.shift_update`, option ``update``).
+   (:mod:`~morsuite.reducers.irka.shift_update`, option ``update``).
 
 Convergence (option ``criterion``): ``"shifts"``, the largest relative change
 of the optimally matched shifts (:func:`~morsuite.linalg.dense.shift_distance`),
@@ -37,14 +37,14 @@ otherwise the safeguard engages or (safeguard off) the iteration stops. Without
 convergence the best iterate (stable first) is returned with ``converged=False``, ``status`` "cap"
 or "cycle" (:mod:`.outcome`) and a :class:`~morsuite.errors.ConvergenceWarning`.
 
-Safeguard (option ``safeguard``, :class:`~.irka_safeguards.CycleGuard`): idle
+Safeguard (option ``safeguard``, :class:`~morsuite.reducers.irka.safeguards.CycleGuard`): idle
 while the plain iteration may still converge, so that its fixed points and
 paths are kept bit for bit; engaged when it cycles in its last stage, settles
 at an unstable model or stalls in its last stage, it replaces the update by
 the residue rule with matched hysteresis and a tabu list, relaxed adaptively
 in shifts and directions. Without convergence it also picks the returned
 iterate: the stable one of smallest exact H2 error among a shortlist
-(option ``shortlist_score``, :mod:`.irka_score`; :attr:`IRKABase.iterate_score` overrides).
+(option ``shortlist_score``, :mod:`~morsuite.reducers.irka.score`; :attr:`IRKABase.iterate_score` overrides).
 
 Options and defaults: :attr:`IRKABase.OPTIONS`. Cost per iteration: one
 factorization per real shift or conjugate pair (``info["lu_count"]``), two
@@ -59,26 +59,20 @@ import time
 
 import numpy as np
 
-from ..errors import (ConvergenceWarning, InputError, MorsuiteWarning, RankWarning, SingularShiftError,
-                      StabilityWarning)
-from ..linalg.dense import shift_distance, sigma_max
-from ..rom import SecondOrderROM
-from .base import Option, Reducer
-from .irka_safeguards import GUARD_OPTIONS, CycleGuard, Shortlist, ill_conditioned, instability_culprit, \
-    oblique_selection, orthonormal_basis, perturb_shifts, shift_slots, zero_transfer_error
-from .irka_score import iterate_scorer, score_cost
+from ...errors import (ConvergenceWarning, InputError, MorsuiteWarning, RankWarning, SingularShiftError,
+                       StabilityWarning)
+from ...linalg.dense import shift_distance, sigma_max
+from ...rom import SecondOrderROM
+from ..base import Option, Reducer
+from .safeguards import (GUARD_CYCLES, GUARD_OPTIONS, ITERATE_CYCLE, CycleGuard, Shortlist, ban_culprit, ill_conditioned,
+                         is_cycle, oblique_selection, orthonormal_basis, perturb_shifts, zero_transfer_error)
+from .score import iterate_scorer, score_cost
 from .shift_solves import raw_bases
-from .shift_update import COMPLEX_TOL, UpdateSchedule, bt_rule, initial_shifts, relaxed_update, residue_rule, \
-    shifts_from_poles
+from .shift_update import (COMPLEX_TOL, UpdateSchedule, bt_rule, initial_shifts, relaxed_update, residue_rule,
+                           shifts_from_poles)
 
 __all__ = ["IRKABase"]
 
-#: engaged (option safeguard_stop), a relaxed iterate within ITERATE_CYCLE * cycle_tol of a recent one is a
-#: cycle too (measured on fem_block(1000), r = 6: its period-4 cycle closes to 1e-3 only after 25 iterations)
-ITERATE_CYCLE = 10.0
-#: engaged (option safeguard_stop), the iteration stops when a cycle forms again after this many reactions
-#: (stronger hysteresis, half the step; the recent sets forgotten) to earlier ones
-GUARD_CYCLES = 1
 #: per-iteration records copied into info["history"], in this order
 _HISTORY_KEYS = ("measure", "shift_change", "response_change", "criterion", "n_shifts", "rank", "ill_conditioned",
                  "refined", "gram_schmidt", "stable", "max_pole_real", "update", "mirrored", "step", "shifts")
@@ -149,7 +143,7 @@ class IRKABase(Reducer):
 
     #: Score of the shortlisted stable iterates when the iteration does not converge (safeguard
     #: on): a callable ``(fom, rom) -> float``, smaller is better, or None: option
-    #: ``shortlist_score`` decides (default the exact H2 error, :class:`~.irka_score.ExactH2Score`).
+    #: ``shortlist_score`` decides (default the exact H2 error, :class:`~morsuite.reducers.irka.score.ExactH2Score`).
     #: On a reducer, ``red.iterate_score = f``; for every IRKA variant,
     #: ``IRKABase.iterate_score = staticmethod(f)``. Cost: one call per shortlisted iterate, at the end only.
     iterate_score = None
@@ -210,7 +204,7 @@ class IRKABase(Reducer):
 
     def _next_data(self, it, current, proposed, relax, blend=False):
         """The interpolation data of iteration ``it + 1``: the ``proposed`` update (alpha, b, c)
-        of the ``current`` data, relaxed when ``relax`` < 1 (:func:`~.shift_update.relaxed_update`;
+        of the ``current`` data, relaxed when ``relax`` < 1 (:func:`~morsuite.reducers.irka.shift_update.relaxed_update`;
         ``blend``: the directions too, phase-aligned, as the engaged safeguard asks).
         A variant may take another step here (the first-order IRKA: Newton's)."""
         if relax < 1:
@@ -227,7 +221,7 @@ class IRKABase(Reducer):
     def _bases(self, alpha, bdir, cdir, left: bool):
         """Raw real bases: per real shift or conjugate pair one factorization, its solve
         with F b_i and (two-sided) its transposed solve with L^T c_i; complex solutions
-        give their real and imaginary parts (:func:`.shift_solves.raw_bases`)."""
+        give their real and imaginary parts (:func:`~morsuite.reducers.irka.shift_solves.raw_bases`)."""
         return raw_bases(self, alpha, bdir, cdir, left)
 
     def _map_shifts(self, fn, jobs) -> list:
@@ -330,27 +324,6 @@ class IRKABase(Reducer):
                 crit = "response"
         return crit
 
-    def _is_cycle(self, new_alpha, d_shift, recent, loose: float = 1.0) -> bool:
-        """Back to an earlier set (within ``loose`` times ``cycle_tol``) while still far from the current
-        one (slow oscillating convergence has d_shift near tol instead)."""
-        o = self.options
-        return bool(o["cycle_window"]) and d_shift > 100 * o["cycle_tol"] and any(
-            new_alpha.size == a.size and shift_distance(new_alpha, a) < loose * o["cycle_tol"] for a in recent)
-
-    def _ban_culprit(self, guard, it, alpha, Vraw, Wraw, left):
-        """Ban the shift or pair whose removal from this iteration's raw bases leaves the most
-        stable model (:func:`~.irka_safeguards.instability_culprit`; projections, no solve)."""
-        def rom_without(cols):
-            keep = np.setdiff1d(np.arange(Vraw.shape[1]), cols)
-            try:
-                return self._rom_from_raw(Vraw[:, keep], Wraw[:, keep] if left else None, left)[0]
-            except (ArithmeticError, ValueError, np.linalg.LinAlgError):
-                return None
-        slots = shift_slots(alpha, COMPLEX_TOL)
-        s, val = instability_culprit(slots, rom_without) if len(slots) > 1 else (None, None)
-        if s is not None:
-            guard.ban(it, alpha[slots[s][0][0]], val)
-
     def _reduce(self, r):
         o = self.options
         t_setup0 = time.perf_counter()
@@ -420,9 +393,9 @@ class IRKABase(Reducer):
             guard.observe(measure)
             if guard.active and not stable and measure < guard.settle:
                 reason = "unstable fixed point"  # the criterion never accepts it: move away
-            elif crit == "shifts" and (self._is_cycle(new_alpha, d_shift, recent)
+            elif crit == "shifts" and (is_cycle(new_alpha, d_shift, recent, o)
                                        or (guard.engaged and o["safeguard_stop"]
-                                           and self._is_cycle(alpha, d_shift, recent, ITERATE_CYCLE))):
+                                           and is_cycle(alpha, d_shift, recent, o, ITERATE_CYCLE))):
                 # engaged, the relaxed iterates can cycle while no proposed set repeats: both are watched
                 if guard.engaged and o["safeguard_stop"] and guard.cycles >= GUARD_CYCLES:
                     cycled = True  # it cycles on through its stronger hysteresis and smaller steps: stop
@@ -453,7 +426,7 @@ class IRKABase(Reducer):
             how, relax = schedule.rule
             if reason is not None:
                 if reason == "unstable fixed point":
-                    self._ban_culprit(guard, it, alpha, Vraw, Wraw, left)
+                    ban_culprit(guard, it, alpha, self._rom_from_raw, Vraw, Wraw, left)
                     guard.step = 1.0  # jump off the banned shift, do not creep away from it
                 if not guard.engaged:
                     guard.engage(it, reason)

@@ -18,8 +18,8 @@ imaginary parts, orthonormalised and projected back onto :math:`\mathrm{null}(G)
 (``kernel_projection``); the reduced model is :math:`\hat M = W^T M V`,
 :math:`\hat D = W^T D V`, :math:`\hat K = W^T K V`, :math:`\hat F = W^T F`,
 :math:`\hat L = L V`. The iteration, the shift update and the safeguards are
-those of :class:`~.irka_engine.IRKABase` (:mod:`.shift_update`,
-:mod:`.irka_safeguards`).
+those of :class:`~morsuite.reducers.irka.engine.IRKABase` (:mod:`~morsuite.reducers.irka.shift_update`,
+:mod:`~morsuite.reducers.irka.safeguards`).
 
 Options: :attr:`IRKA.OPTIONS`, the shared table plus ``refine`` (1),
 ``refine_when`` ("ill-conditioned"), ``refine_precision`` ("extended"; one
@@ -42,12 +42,12 @@ from dataclasses import replace
 import numpy as np
 import scipy.sparse.linalg as spla
 
-from ..errors import SingularShiftError
-from ..linalg.dense import cholesky_qr2, right_solve
-from ..linalg.orthonormal import gram_schmidt
-from ..linalg.refine import SaddleOperator, refined_solve
-from .base import Option, register
-from .irka_engine import IRKABase
+from ...errors import SingularShiftError
+from ...linalg.dense import cholesky_qr2, right_solve
+from ...linalg.orthonormal import gram_schmidt
+from ...linalg.refine import SaddleOperator, refined_solve
+from ..base import Option, register
+from .engine import IRKABase
 from .shift_solves import default_threads, map_dask, map_threads
 
 __all__ = ["IRKA"]
@@ -58,7 +58,7 @@ class IRKA(IRKABase):
 
     ``reduce(r)`` returns a :class:`~morsuite.rom.SecondOrderROM` of order r
     (2r first-order states), or smaller if the bases lose numerical rank (see
-    :mod:`.irka_engine`).
+    :mod:`~morsuite.reducers.irka.engine`).
     """
 
     name = "irka"
@@ -125,7 +125,7 @@ class IRKA(IRKABase):
         return refined_solve(lu, rhs, trans, a, op, steps=steps, ext=self.options["refine_precision"] == "extended")
 
     def _map_shifts(self, fn, jobs):
-        """The shifts' jobs on the executor of option ``executor`` (:mod:`.shift_solves`)."""
+        """The shifts' jobs on the executor of option ``executor`` (:mod:`~morsuite.reducers.irka.shift_solves`)."""
         o = self.options
         if o["executor"] == "dask":
             steps = o["refine"] if self._refining() else 0

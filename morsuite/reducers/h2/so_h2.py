@@ -2,28 +2,28 @@ r"""``so-h2``: structure-preserving H2 descent for second-order reduced models.
 
 Minimises :math:`J = \|T - T_r\|_{\mathcal H_2}^2` over second-order reduced models
 :math:`T_r(s) = \hat L(s^2\hat M + s\hat D + \hat K)^{-1}\hat F` with
-:math:`\hat M = I` (no loss, :mod:`.so_h2_params`), in the spirit of the structured
+:math:`\hat M = I` (no loss, :mod:`~morsuite.reducers.h2.params`), in the spirit of the structured
 H2 literature (Mlinarić, Benner and Gugercin, arXiv 2209.00714 and 2401.10047;
 Sato, arXiv 1803.04097; Schwerdtner and Voigt's SOBMOR, arXiv 2011.07567).
 
 1. **Candidates**: the second-order BT levels ``levels`` (and the paper's IRKA with
-   ``irka_start``) at the same r (:mod:`.so_h2_starts`), ranked against a surrogate
+   ``irka_start``) at the same r (:mod:`~morsuite.reducers.h2.starts`), ranked against a surrogate
    :math:`T_N` (first-order BT of the cached Gramian factors, at most ``surrogate_tol``
    times the best candidate's error from the model); those the surrogate cannot separate
    get an exact error (:func:`.h2_decision.decision_h2`, r LUs each).
 2. **Descent** (``descent``). ``"varpro"`` (SISO, ``parametrization="general"``; the
    default there): a second-order model of order r is a first-order one of degree 2r whose
-   residues sum to zero (:mod:`morsuite.linalg.h2_poles`); from the ``starts`` candidates,
+   residues sum to zero (:mod:`morsuite.reducers.h2.poles`); from the ``starts`` candidates,
    variable projection (the residues by one linear solve) and trust-region Newton over the
-   poles against :math:`T_N` (:mod:`morsuite.linalg.h2_poles_descent`), then chord steps on
-   the full model's gradient (r LUs each, at most ``chord_maxit``) (:mod:`.so_h2_siso`).
+   poles against :math:`T_N` (:mod:`morsuite.reducers.h2.poles_descent`), then chord steps on
+   the full model's gradient (r LUs each, at most ``chord_maxit``) (:mod:`~morsuite.reducers.h2.siso`).
    ``"lbfgs"`` (the default otherwise): monotone preconditioned L-BFGS in the entries of
    :math:`\hat K, \hat D, \hat F, \hat L` against :math:`T_N`, then at most ``full_maxit``
-   iterations against the model (:mod:`morsuite.linalg.lbfgs`).
+   iterations against the model (:mod:`morsuite.reducers.h2.lbfgs`).
 3. **Certificate**: the relative gradient
    :math:`\rho = \|\Pi E\|_{\mathcal H_2}/\|E\|_{\mathcal H_2}` of the result against the
    full model (:math:`\Pi`: projection onto the tangent space of the reduced models;
-   :mod:`morsuite.linalg.h2_stationarity`, r LUs). ``converged`` is
+   :mod:`morsuite.reducers.h2.stationarity`, r LUs). ``converged`` is
    :math:`\rho \le` ``gtol``; ``info["status"]`` is ``"converged"``, ``"cap"`` (an iteration
    limit was reached first), ``"stalled"`` (no further decrease at the objective's accuracy,
    or the result was worse than the start, which is then returned) or ``"skipped"`` (the
@@ -36,7 +36,7 @@ The result is never worse than the start in exact H2 error (:func:`.h2_decision.
 ``info``: ``start``, ``start_h2_error`` (+ ``_floor``), ``candidates``, ``descent``,
 ``h2_error`` (exact, of the result) and ``h2_error_floor``, ``relative_gradient`` and ``gtol``
 (SISO, where the partial-fraction form is ill-conditioned: in an orthonormal basis,
-:mod:`morsuite.linalg.h2_orthonormal`; ``relative_gradient_form``, ``gram_condition``; the partial-fraction
+:mod:`morsuite.reducers.h2.orthonormal`; ``relative_gradient_form``, ``gram_condition``; the partial-fraction
 form beside it as ``relative_gradient_pole_residue``),
 ``status``, ``returned_start``, ``iterations`` (``iterations_surrogate`` + ``iterations_full``),
 ``history`` and ``history_full``, ``stop_reason`` and ``stop_reason_full``; varpro: ``starts``
@@ -63,19 +63,19 @@ import time
 
 import numpy as np
 
-from ..errors import AccuracyWarning, ConvergenceWarning, InputError, OptionError
-from ..linalg.gramians import ADI_DEFAULTS
-from ..linalg.h2 import norm_squared
-from ..linalg.h2_gradient import FullTarget, gauss_newton_diagonal, h2_objective, h2_value
-from ..linalg.h2_stationarity import full_stationarity
-from ..linalg.lbfgs import Evaluation, lbfgs_descent
-from ..utils import blas_threads
-from .base import Option, Reducer, register
-from .h2_decision import decision_h2
-from .so_h2_params import PARAMETRISATIONS
-from .so_h2_siso import pole_phase
-from .outcome import SetupLedger
-from .so_h2_starts import LEVELS, STARTS, Surrogates, candidate_roms, standard_realization
+from ...errors import AccuracyWarning, ConvergenceWarning, InputError, OptionError
+from ...linalg.gramians import ADI_DEFAULTS
+from ...linalg.h2 import norm_squared
+from .gradient import FullTarget, gauss_newton_diagonal, h2_objective, h2_value
+from .stationarity import full_stationarity
+from .lbfgs import Evaluation, lbfgs_descent
+from ...utils import blas_threads
+from ..base import Option, Reducer, register
+from ..h2_decision import decision_h2
+from .params import PARAMETRISATIONS
+from .siso import pole_phase
+from ..outcome import SetupLedger
+from .starts import LEVELS, STARTS, Surrogates, candidate_roms, standard_realization
 
 __all__ = ["SOH2"]
 
@@ -314,7 +314,7 @@ class SOH2(Reducer):
 
         Parts: ``adi`` (the Gramian factors), ``bt_products`` (the factor products), ``bt_svd`` (the
         SVDs of the BT levels and of the first-order surrogate source), ``surrogates`` (the first-order
-        surrogate models and their distances, :class:`~.so_h2_starts.Surrogates`) and ``full_target``.
+        surrogate models and their distances, :class:`~morsuite.reducers.h2.starts.Surrogates`) and ``full_target``.
         """
         svd_keys = set(self._labels()) - {"irka"} | {"fo"}
         svd_times = gram["svd_times"]

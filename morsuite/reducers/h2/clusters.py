@@ -2,10 +2,10 @@ r"""The H2 descent of a SISO reduced model in cluster-polynomial coordinates, it
 the orthonormal Takenaka-Malmquist basis: well conditioned where poles cluster.
 
 A SISO reduced model of McMillan degree n with relative degree 2 (the second-order models with
-:math:`\hat M = I`, :mod:`.h2_poles`) is :math:`T_r = p/q`, :math:`\deg p \le n - 2`. For a fixed
+:math:`\hat M = I`, :mod:`~morsuite.reducers.h2.poles`) is :math:`T_r = p/q`, :math:`\deg p \le n - 2`. For a fixed
 denominator q the best such model is the H2-orthogonal projection of T onto
 :math:`V_0 = \{p/q\}`; in the orthonormal basis :math:`x_1 = (sI - A_1)^{-1}\beta_1` of the pole
-sequence (:func:`~.h2_orthonormal.tm_realization`) it is :math:`T_r = \alpha^Tx_1` with
+sequence (:func:`~morsuite.reducers.h2.orthonormal.tm_realization`) it is :math:`T_r = \alpha^Tx_1` with
 
 .. math::
 
@@ -38,13 +38,13 @@ with :math:`e = E(-A_2)\beta_2`, :math:`u_{c,j} = g_{c,j}(-A_2)\beta_2` and
 with no difference of two Gram matrices); each
 :math:`g_{c,j}(-A)\beta` is one Sylvester solve with the cascade realization of :math:`T_r` and
 :math:`h_{c,j}` (companion form in :math:`\tilde s`), one per cluster. The relative gradient is
-:math:`\rho = \|(I - \hat\beta_2\hat\beta_2^T)e\|/\sqrt J` (:func:`~.h2_orthonormal.tm_rho`).
+:math:`\rho = \|(I - \hat\beta_2\hat\beta_2^T)e\|/\sqrt J` (:func:`~morsuite.reducers.h2.orthonormal.tm_rho`).
 
 The descent (:func:`cluster_descent`) is a trust region with Kaufman's matrix (Gauss-Newton, the
 default ``"gn"``; a secant or a differenced Hessian as options), in the norm of its diagonal; the clusters
 are re-formed when it stalls. Gauss-Newton is blind to negative curvature and plateaus near saddles
 (relative gradient about 0.1 at tcom(2000), r = 30); :func:`alternating_descent` alternates it with the
-pole-residue descent of :mod:`.h2_poles_descent` (exact Hessian), which leaves them. Cost per
+pole-residue descent of :mod:`~morsuite.reducers.h2.poles_descent` (exact Hessian), which leaves them. Cost per
 evaluation: the target's values :math:`T(-A)\beta` for the sequences of n and 2n poles (a modal target of
 order N: the all-pass product form, :math:`O(nN)`, :meth:`ModalTM.tm_values`), three triangular Sylvester
 solves (the cross Gramians of the two bases and the clusters' cascades, all clusters at once) and
@@ -58,10 +58,10 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
-from ..errors import InputError
-from .h2_orthonormal import tm_realization, tm_rho
-from .h2_poles import Coordinates, optimal_residues
-from .h2_poles_descent import _next_radius, _tr_step, pole_descent
+from ...errors import InputError
+from .orthonormal import tm_realization, tm_rho
+from .poles import Coordinates, optimal_residues
+from .poles_descent import _next_radius, _tr_step, pole_descent
 
 __all__ = ["Clusters", "ModalTM", "ClusterEvaluation", "cluster_evaluate", "cluster_descent", "pole_coordinates",
            "alternating_descent", "CTOL", "MAX_DEGREE"]
@@ -76,7 +76,7 @@ MAX_DEGREE = 8
 
 class ModalTM:
     r"""A dense SISO target in modal form :math:`T = \sum_j\psi_j/(s - \mu_j)` for :func:`cluster_evaluate`:
-    ``tm_values(A, beta)`` :math:`= T(-A)\beta` (:func:`~.h2_orthonormal.modal_tm_values`)."""
+    ``tm_values(A, beta)`` :math:`= T(-A)\beta` (:func:`~morsuite.reducers.h2.orthonormal.modal_tm_values`)."""
 
     def __init__(self, target):
         self.mu = np.asarray(target.poles)
@@ -85,7 +85,7 @@ class ModalTM:
 
     def tm_values(self, A, beta, sequence=None):
         r""":math:`T(-A)\beta` (class docstring). With the pole ``sequence`` of a Takenaka-Malmquist
-        realization (:func:`~.h2_orthonormal.tm_realization`: ``A = tm_realization(sequence)[0]``), by the
+        realization (:func:`~morsuite.reducers.h2.orthonormal.tm_realization`: ``A = tm_realization(sequence)[0]``), by the
         product form :math:`T(-A)\beta = \sum_j\psi_jx(-\mu_j)`,
 
         .. math::
@@ -396,8 +396,8 @@ def cluster_descent(poles, target, *, ctol: float = CTOL, maxit: int = 200, gtol
 
 
 def pole_coordinates(poles):
-    r"""(Coordinates, x) of :mod:`.h2_poles` at the given poles (conjugate-closed) with zero residues, the
-    first residue coordinate the pivot (for :func:`~.h2_poles.optimal_residues`)."""
+    r"""(Coordinates, x) of :mod:`~morsuite.reducers.h2.poles` at the given poles (conjugate-closed) with zero residues, the
+    first residue coordinate the pivot (for :func:`~morsuite.reducers.h2.poles.optimal_residues`)."""
     lam = np.asarray(poles, dtype=complex)
     re, up = lam[lam.imag == 0].real, lam[lam.imag > 0]
     co = Coordinates(re.size, up.size)
@@ -407,10 +407,10 @@ def pole_coordinates(poles):
 def alternating_descent(co: Coordinates, x, target, *, rounds: int = 3, cluster_maxit: int = 150,
                         pole_maxit: int = 150, gtol: float = 1e-7, plateau: tuple | None = None):
     r"""Alternate :func:`cluster_descent` (Gauss-Newton in cluster-polynomial coordinates: moves clusters
-    of poles the pole-residue metric cannot) and :func:`~.h2_poles_descent.pole_descent` (exact Hessian in
+    of poles the pole-residue metric cannot) and :func:`~morsuite.reducers.h2.poles_descent.pole_descent` (exact Hessian in
     pole-residue coordinates: leaves the saddles that Gauss-Newton, blind to negative curvature, plateaus
     at), from the pole-residue point x against the dense modal ``target`` (a
-    :class:`~.h2_poles.ModalValues`), for at most ``rounds`` rounds; stops after a round that does not
+    :class:`~morsuite.reducers.h2.poles.ModalValues`), for at most ``rounds`` rounds; stops after a round that does not
     decrease J (the cancellation-free value), or with ``"converged"`` when the pole descent converges or
     the orthonormal relative gradient of the round's result (the certified form, which the pole-residue
     one underestimates at clusters) is at most ``10 * gtol``. Returns ``(Coordinates, evaluation,

@@ -1,5 +1,5 @@
 r"""The surrogate phase of ``irka-fo`` (:class:`SurrogatePhase`, mixed into
-:class:`~morsuite.reducers.irka_fo.IRKAFO`): the surrogate's order, its construction from the
+:class:`~morsuite.reducers.irka.first_order.IRKAFO`): the surrogate's order, its construction from the
 start's balanced truncation, the iteration against it and Newton's method on its fixed-point map
 (``docs/design/irka_fo.md``, section "What was kept"). Cost: dense work only, no sparse LU;
 the surrogate's construction (a first-order BT projection with N states) is
@@ -13,7 +13,7 @@ import warnings
 
 import numpy as np
 
-from .irka_surrogate import ModalSurrogate, SurrogateMap, fixed_point_jacobian, iterate, newton_fixed_point
+from .surrogate import ModalSurrogate, SurrogateMap, fixed_point_jacobian, iterate, newton_fixed_point
 
 __all__ = ["SurrogatePhase", "SURROGATE_HEADROOM"]
 

@@ -4,7 +4,7 @@ Each IRKA iteration maps the reduced model to new interpolation data
 :math:`(\alpha_i, b_i, c_i)`: poles :math:`\lambda_i` of (a reduction of) the
 reduced model give :math:`\alpha_i = -\lambda_i` (mirrored into the open right
 half-plane if needed), its residue directions give :math:`b_i, c_i` (rows
-normalised to unit length). Option ``update`` of :class:`~.irka_engine.IRKABase`:
+normalised to unit length). Option ``update`` of :class:`~morsuite.reducers.irka.engine.IRKABase`:
 
 ``"bt"`` (the paper's choice, :func:`bt_rule`)
     The reduced model's first-order realization (for a second-order model of
@@ -37,8 +37,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from ..errors import InputError
-from ..linalg.dense import UnstableError, dense_bt, shift_distance
+from ...errors import InputError
+from ...linalg.dense import UnstableError, dense_bt, shift_distance
 
 __all__ = ["COMPLEX_TOL", "UpdateSchedule", "initial_shifts", "bt_rule", "residue_rule", "select_by_residue",
            "fill_odd_slot", "shifts_from_poles", "normalize_rows", "relaxed_update"]
@@ -153,7 +153,7 @@ def select_by_residue(lam, bres, cres, k, current=None, hysteresis=0.0, radius=0
     is only replaced by one that scores clearly higher. A pair that does not fit in
     the slots left is skipped, not split. ``weights`` (one per pole) multiply the scores
     instead of the hysteresis (the safeguard's matched hysteresis and tabu list,
-    :func:`~.irka_safeguards.guard_weights`).
+    :func:`~morsuite.reducers.irka.safeguards.guard_weights`).
     """
     score = (np.linalg.norm(bres, axis=1) * np.linalg.norm(cres, axis=1)
              / np.sqrt(2 * np.maximum(np.abs(lam.real), 1e-300)))

@@ -3,7 +3,7 @@ r"""IRKA's safeguards: from raw solutions to a well-posed projection.
 The raw bases of an IRKA iteration can be numerically rank deficient (shifts
 beyond the model's numerical order), ill-conditioned (localised solutions of
 chain-like models), or give an ill-conditioned oblique projection. These
-functions make the projection well posed; :class:`~.irka_engine.IRKABase`
+functions make the projection well posed; :class:`~morsuite.reducers.irka.engine.IRKABase`
 applies them (options of its table, defaults in brackets):
 
 * Orthonormalisation (``orthonormalization`` ["auto"], ``rank_tol`` [1e-14],
@@ -46,12 +46,13 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from ..errors import ModelError
-from ..linalg.dense import orth
-from ..linalg.orthonormal import gram_schmidt
-from .base import Option
+from ...errors import ModelError
+from ...linalg.dense import orth, shift_distance
+from ...linalg.orthonormal import gram_schmidt
+from ..base import Option
 
-__all__ = ["orthonormal_basis", "ill_conditioned", "oblique_selection", "perturb_shifts", "zero_transfer_error",
+__all__ = ["ITERATE_CYCLE", "GUARD_CYCLES", "ban_culprit", "is_cycle",
+           "orthonormal_basis", "ill_conditioned", "oblique_selection", "perturb_shifts", "zero_transfer_error",
            "GUARD_OPTIONS", "guard_weights", "shift_slots", "instability_culprit", "CycleGuard", "Shortlist"]
 
 _ZERO_MSG = ("{name}: {what}: the transfer function vanishes in the tangential directions (a zero input or "
@@ -120,7 +121,7 @@ def perturb_shifts(alpha, bad, eps):
 
 
 # -- the safeguard against cycling and unstable fixed points (option ``safeguard``) ------------
-#: the safeguard's options, part of the option table of :class:`~.irka_engine.IRKABase`
+#: the safeguard's options, part of the option table of :class:`~morsuite.reducers.irka.engine.IRKABase`
 GUARD_OPTIONS = {
     "safeguard": Option("auto", "choice", "safeguard against cycling and unstable fixed points "
                         "(irka_safeguards.CycleGuard): idle until the plain iteration cycles in its last "
@@ -166,7 +167,7 @@ def guard_weights(lam, current, hysteresis, radius, tabu=(), tabu_radius=0.01):
     within relative distance ``radius`` has its score multiplied by 1 + ``hysteresis``.
     One shift favours one pole: of two poles near one shift (a near-double resonance)
     only one keeps its place, which the radius rule of
-    :func:`~.shift_update.select_by_residue` cannot say. Tabu: a pole whose mirror lies
+    :func:`~morsuite.reducers.irka.shift_update.select_by_residue` cannot say. Tabu: a pole whose mirror lies
     within ``tabu_radius`` (relative) of a banned shift or its conjugate has its score
     multiplied by 1e-12, so it is chosen only when nothing else is left.
     """
@@ -223,7 +224,7 @@ def instability_culprit(slots, rom_without):
 
 
 class CycleGuard:
-    r"""State of the safeguard of :class:`~.irka_engine.IRKABase` (option ``safeguard``).
+    r"""State of the safeguard of :class:`~morsuite.reducers.irka.engine.IRKABase` (option ``safeguard``).
 
     Idle until the plain iteration shows that it will not converge; then *engaged*
     for the rest of the reduction. It engages when (the iteration's ``reason``):
@@ -361,3 +362,38 @@ class Shortlist:
         rank = {it: j for j, (_, it, _) in enumerate(self.stable)}
         it = min(scores, key=lambda k: (scores[k] if np.isfinite(scores[k]) else np.inf, rank[k]))
         return it, next(p for _, i, p in self.stable if i == it), scores
+
+
+#: engaged (option safeguard_stop), a relaxed iterate within ITERATE_CYCLE * cycle_tol of a recent one is a
+#: cycle too (measured on fem_block(1000), r = 6: its period-4 cycle closes to 1e-3 only after 25 iterations)
+ITERATE_CYCLE = 10.0
+#: engaged (option safeguard_stop), the iteration stops when a cycle forms again after this many reactions
+#: (stronger hysteresis, half the step; the recent sets forgotten) to earlier ones
+GUARD_CYCLES = 1
+
+
+def is_cycle(new_alpha, d_shift, recent, options, loose: float = 1.0) -> bool:
+    """Back to an earlier shift set of ``recent`` (within ``loose`` times ``cycle_tol``) while still far from
+    the current one (slow oscillating convergence has d_shift near tol instead). ``options``: the engine's
+    (``cycle_window``, ``cycle_tol``). Cost O(len(recent) r^2)."""
+    o = options
+    return bool(o["cycle_window"]) and d_shift > 100 * o["cycle_tol"] and any(
+        new_alpha.size == a.size and shift_distance(new_alpha, a) < loose * o["cycle_tol"] for a in recent)
+
+
+def ban_culprit(guard, it, alpha, rom_from_raw, Vraw, Wraw, left):
+    """Ban the shift or pair whose removal from this iteration's raw bases leaves the most
+    stable model (:func:`instability_culprit`; projections by ``rom_from_raw``, the engine's, no solve)."""
+    from .shift_update import COMPLEX_TOL  # it imports this module
+
+    def rom_without(cols):
+        keep = np.setdiff1d(np.arange(Vraw.shape[1]), cols)
+        try:
+            return rom_from_raw(Vraw[:, keep], Wraw[:, keep] if left else None, left)[0]
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError):
+            return None
+    slots = shift_slots(alpha, COMPLEX_TOL)
+    s, val = instability_culprit(slots, rom_without) if len(slots) > 1 else (None, None)
+    if s is not None:
+        guard.ban(it, alpha[slots[s][0][0]], val)
+

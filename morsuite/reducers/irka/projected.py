@@ -68,7 +68,7 @@ only a model with a general :math:`M` tells the two apart (see the tests).
 Iteration
 ---------
 The IRKA iteration (shift/direction update, convergence and cycle tests,
-stability handling, ``info`` layout) is :class:`~.irka_engine.IRKABase`, shared with
+stability handling, ``info`` layout) is :class:`~morsuite.reducers.irka.engine.IRKABase`, shared with
 ``"irka"``. Only the bases differ: one dense LU (``scipy.linalg.lu_factor``)
 of :math:`\alpha^2\tilde M + \alpha\tilde D + \tilde K` per real shift or
 conjugate pair, reused for the transposed (left) solve, and the reduced model
@@ -97,11 +97,11 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.linalg import lapack
 
-from ..errors import MemoryBudgetError, ModelError, SingularShiftError
-from ..linalg import kernels
-from . import base as _base
-from .base import Option, register
-from .irka_engine import IRKABase
+from ...errors import MemoryBudgetError, ModelError, SingularShiftError
+from ...linalg import kernels
+from .. import base as _base
+from ..base import Option, register
+from .engine import IRKABase
 
 __all__ = ["IRKAProjected", "ProjectedModel", "form_projector", "split_projector", "memory_estimate"]
 

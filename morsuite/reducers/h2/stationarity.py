@@ -3,7 +3,7 @@ r"""First-order optimality of a reduced model for the H2 error: the relative gra
 A reduced model of McMillan degree n with distinct poles is
 :math:`T_r(s) = \sum_k c_kb_k^T/(s - \lambda_k)`. Its tangent space, among models of that degree
 with :math:`C_rB_r = 0` (second-order models with :math:`\hat M = I`: the two sets coincide
-generically, :mod:`morsuite.linalg.h2_poles`), is spanned by
+generically, :mod:`morsuite.reducers.h2.poles`), is spanned by
 
 .. math::
 
@@ -36,9 +36,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
-from .h2 import modal_form, pole_residue_squared
-from .h2_orthonormal import TMRecursion, realization_tm_values, tm_realization, tm_rho
-from .refine import SaddleOperator, refined_solve
+from ...linalg.h2 import modal_form, pole_residue_squared
+from .orthonormal import TMRecursion, realization_tm_values, tm_realization, tm_rho
+from ...linalg.refine import SaddleOperator, refined_solve
 
 __all__ = ["relative_gradient_rank_one", "full_stationarity", "saddle_solver_refined", "TM_CONDITION"]
 
@@ -55,7 +55,7 @@ def relative_gradient_rank_one(poles, C, B, Eb, cE, dE, J) -> float:
     :math:`c_k^TE'(-\\lambda_k)b_k`); ``J`` = :math:`\\|E\\|^2`. The poles must be closed under
     conjugation with conjugate data. Returns ``inf`` for J <= 0. Eigenvalues of the scaled Gram
     matrix below 1e-12 of the largest are dropped: where poles cluster, rho can be underestimated
-    (:mod:`morsuite.linalg.h2_orthonormal`). Cost: an eigen-decomposition of order n(1 + m + p)."""
+    (:mod:`morsuite.reducers.h2.orthonormal`). Cost: an eigen-decomposition of order n(1 + m + p)."""
     if not J > 0:
         return np.inf
     lam = np.asarray(poles)
@@ -115,7 +115,7 @@ def saddle_solver_refined(full, steps: int):
 
 def full_stationarity(full, A, B, C, *, refine: int = 2, orthonormal: bool = True) -> dict:
     r"""J, its floor and ρ of the real first-order model (A, B, C) (E = I) against the index-3 model
-    ``full`` (a :class:`~morsuite.linalg.h2_gradient.FullTarget`): one LU per real pole or conjugate
+    ``full`` (a :class:`~morsuite.reducers.h2.gradient.FullTarget`): one LU per real pole or conjugate
     pair, right solves with :math:`Fb_k` and transposed solves with :math:`L^Tc_k`, each refined
     ``refine`` times in long double (at the mirrored poles of lightly damped reduced poles the
     unrefined solves' errors dominate E: on tcom(2000) at r = 22 they gave 12.76 for an error of
@@ -125,7 +125,7 @@ def full_stationarity(full, A, B, C, *, refine: int = 2, orthonormal: bool = Tru
     (``gram_condition``, the smallest over the largest eigenvalue of the scaled Gram matrix of
     :math:`1/(s - \lambda_k)`, :math:`\varphi_k/(s - \lambda_k)^2`, at most :data:`TM_CONDITION`):
     ``rho`` in the orthonormal Takenaka-Malmquist basis of the tangent space
-    (:mod:`morsuite.linalg.h2_orthonormal`; two more refined right solves per pole with the same LU,
+    (:mod:`morsuite.reducers.h2.orthonormal`; two more refined right solves per pole with the same LU,
     which triples the certificate's solves), accurate where poles cluster; ``rho_form`` says which.
     The partial-fraction form (:func:`relative_gradient_rank_one`) is ``rho_pole_residue``.
 

@@ -1,6 +1,6 @@
 r"""First-order tangential IRKA against a dense modal surrogate, and Newton on its fixed-point map.
 
-The first-order IRKA (:mod:`morsuite.reducers.irka_fo`) maps interpolation data
+The first-order IRKA (:mod:`morsuite.reducers.irka.first_order`) maps interpolation data
 :math:`x = (\sigma_i, b_i, c_i)` to the mirrored poles and residue directions
 of the reduced model that interpolates at :math:`x`; its fixed points are the
 stationary points of the H2 error (Meier-Luenberger conditions). On a lightly
@@ -40,10 +40,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from ..linalg.dense import shift_distance
-from ..linalg.h2 import Modal, modal_form, pole_residue_squared
-from ..rom import FirstOrderROM
-from .irka_jacobian import map_jacobian
+from ...linalg.dense import shift_distance
+from ...linalg.h2 import Modal, modal_form, pole_residue_squared
+from ...rom import FirstOrderROM
+from .jacobian import map_jacobian
 from .shift_update import COMPLEX_TOL, relaxed_update, shifts_from_poles
 
 __all__ = ["ModalSurrogate", "Chart", "SurrogateMap", "NewtonResult", "newton_fixed_point", "fixed_point_jacobian",
@@ -295,7 +295,7 @@ def newton_fixed_point(smap: SurrogateMap, alpha, bdir, cdir, *, tol=1e-10, maxi
                        stall_tol=None) -> NewtonResult:
     r"""Newton's method on :math:`F(x) = f(x) - x` for the surrogate's IRKA map.
 
-    The Jacobian :math:`f'` is the closed form of :func:`~.irka_jacobian.map_jacobian` where it
+    The Jacobian :math:`f'` is the closed form of :func:`~morsuite.reducers.irka.jacobian.map_jacobian` where it
     applies, else forward differences (one map evaluation per real coordinate, steps ``fd_step``
     times the coordinate's scale); each Newton step
     :math:`\Delta = -(f' - I)^{-1}F` is backtracked (halving, at most 6 times) until the
@@ -381,7 +381,7 @@ def fixed_point_jacobian(smap: SurrogateMap, alpha, bdir, cdir, fd_step=1e-7):
 
 
 def _jacobian(smap, chart, x, F, sc, h):
-    """f'(x) in chart coordinates: in closed form (:func:`~.irka_jacobian.map_jacobian`), else
+    """f'(x) in chart coordinates: in closed form (:func:`~morsuite.reducers.irka.jacobian.map_jacobian`), else
     (where that does not apply) by forward differences; None if a perturbed point breaks the chart."""
     if smap.analytic:
         J = map_jacobian(smap.s.mu, smap.s.B, smap.s.C, chart, x, F + x)
@@ -406,7 +406,7 @@ def iterate(smap: SurrogateMap, alpha, bdir, cdir, *, maxit=300, tol=1e-10, plai
             keep=4, stop_below=0.0, start=0, best=None, stall=0):
     """IRKA against the surrogate: plain steps x <- f(x), then (no convergence after ``plain``
     steps) relaxed ones, each shift moved the fraction ``relaxation`` towards its matched new value
-    (:func:`~.shift_update.relaxed_update`), until the matched relative shift change is below ``tol``.
+    (:func:`~morsuite.reducers.irka.shift_update.relaxed_update`), until the matched relative shift change is below ``tol``.
 
     ``stop_below`` > 0: stop early (``stopped_early`` True) once the shift change is below it and
     has decreased over the last three steps (a contracting iteration near a fixed point: Newton's

@@ -1,10 +1,10 @@
 r"""The relative gradient of a SISO reduced model in an orthonormal basis of its tangent space.
 
 The tangent space, at :math:`T_r = p/q` (McMillan degree n, distinct poles, relative degree 2:
-the second-order models with :math:`\hat M = I`, :mod:`morsuite.linalg.h2_poles`), of the reduced
+the second-order models with :math:`\hat M = I`, :mod:`morsuite.reducers.h2.poles`), of the reduced
 models is :math:`V = \{u/q^2 : \deg u \le 2n - 2\}`: the span of :math:`1/(s - \lambda_k)` and
 :math:`1/(s - \lambda_k)^2` with the constraint that :math:`s\,f(s) \to 0`. The pole-residue form
-of :math:`\rho = \|\Pi E\|/\|E\|` (:func:`~morsuite.linalg.h2_stationarity.relative_gradient_rank_one`)
+of :math:`\rho = \|\Pi E\|/\|E\|` (:func:`~morsuite.reducers.h2.stationarity.relative_gradient_rank_one`)
 inverts the Gram matrix of that partial-fraction basis, which is singular to working precision
 where poles cluster (the residues grow as the inverse of the gaps and cancel): its eigenvalues
 below 1e-13 of the largest are dropped, and :math:`\rho` can be underestimated there (measured:
@@ -90,7 +90,7 @@ def modal_tm_values(A_tm, beta, mu, psi):
 def projection_value(poles, mu, b, c, qfactor):
     r"""The H2 error of the best model with the given poles, :math:`J = \|T - \Pi_{V_0}T\|^2`
     (:math:`V_0 = \{p/q: \deg p \le n - 2\}`, :math:`q` the poles' polynomial: the variable projection value
-    of :mod:`morsuite.linalg.h2_clusters`), for a modal target :math:`T = \sum_j c_jb_j/(s - \mu_j)`
+    of :mod:`morsuite.reducers.h2.clusters`), for a modal target :math:`T = \sum_j c_jb_j/(s - \mu_j)`
     with observability Gramian :math:`Q = FF^H` (``qfactor`` F), without the cancellation of
     :math:`\|T\|^2 - \|\Pi_{V_0}T\|^2`.
 

@@ -9,7 +9,7 @@ second-order realizations (:func:`second_order_of`: pick rows :math:`U` with :ma
 dimension :math:`4r - 1`, so the second-order H2 problem is the first-order one under the linear
 constraint :math:`\sum_k\varphi_k = 0`, in coordinates with no redundancy (the :math:`2r^2 + 2r`
 entries of :math:`\hat K, \hat D, \hat F, \hat L` have :math:`2r^2 - 2r + 1` directions that leave
-:math:`T_r` unchanged). The descent is in :mod:`.h2_poles_descent`.
+:math:`T_r` unchanged). The descent is in :mod:`~morsuite.reducers.h2.poles_descent`.
 
 With :math:`E = T - T_r` and the holomorphic extension over all 2r poles,
 
@@ -52,7 +52,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
-from ..errors import InputError
+from ...errors import InputError
 
 __all__ = ["Coordinates", "ModalValues", "FullValues", "PoleEvaluation", "evaluate", "optimal_residues",
            "chord_step", "relative_gradient", "second_order_of", "EPS"]
@@ -159,18 +159,18 @@ class ModalValues:
 
     def precise(self, co, x):
         r"""(J, floor) at x without the cancellation of the pole-residue formula: the residual form of
-        :func:`~morsuite.linalg.h2_gradient.h2_value` on a real realization (its rounding
+        :func:`~morsuite.reducers.h2.gradient.h2_value` on a real realization (its rounding
         :math:`\varepsilon\kappa\|T\|\|E\|` instead of :math:`\varepsilon\|T\|^2`)."""
-        from .h2_gradient import h2_value
+        from .gradient import h2_value
         ev = h2_value(self.target, *_real_modal(co, x)[:1], *_bc(co, x))
         return ev.value, ev.floor
 
     def projected(self, co, x):
         r"""(J, floor) of the best model with the poles of x (the residues the optimal ones, as variable
-        projection makes them): :func:`~.h2_orthonormal.projection_value`, cancellation-free like
+        projection makes them): :func:`~morsuite.reducers.h2.orthonormal.projection_value`, cancellation-free like
         :meth:`precise` and without its Schur forms, Lyapunov solves and balancing (timings:
         ``docs/design/so_h2.md``, 2026-11-26, third session)."""
-        from .h2_orthonormal import projection_value
+        from .orthonormal import projection_value
         t = self.target
         return projection_value(co.split(x)[0], t.poles, t.B[:, 0], t.C[0], t.gramian_factor)
 
@@ -192,11 +192,11 @@ def _bc(co, x):
 class FullValues:
     r"""The index-3 model as target: :math:`T(\sigma) = Lx`, :math:`T'(\sigma) = -w^T(2\sigma M + D)x` from
     the saddle-point solves :math:`P(\sigma)x = F`, :math:`P(\sigma)^Tw = L^T` (one LU per real point or
-    conjugate pair, through the :class:`~morsuite.linalg.h2_gradient.FullTarget`'s solver), refined
+    conjugate pair, through the :class:`~morsuite.reducers.h2.gradient.FullTarget`'s solver), refined
     ``refine`` times in long double."""
 
     def __init__(self, full, refine: int = 2):
-        from .h2_stationarity import saddle_solver_refined
+        from .stationarity import saddle_solver_refined
         self.full = full
         self.norm2, self.norm2_floor = full.norm2, full.norm2_floor
         self._solves = saddle_solver_refined(full, refine)

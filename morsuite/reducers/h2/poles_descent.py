@@ -1,8 +1,8 @@
-r"""The trust-region descent of the H2 error in pole-residue coordinates (:mod:`.h2_poles`), with the
+r"""The trust-region descent of the H2 error in pole-residue coordinates (:mod:`~morsuite.reducers.h2.poles`), with the
 residues eliminated (variable projection), and its restarts across changes of the pole split.
 
 For fixed poles J is quadratic in the residues, with the Gauss-Newton block as Hessian
-(:func:`~.h2_poles.optimal_residues`): the descent runs over the poles alone, with the Schur
+(:func:`~morsuite.reducers.h2.poles.optimal_residues`): the descent runs over the poles alone, with the Schur
 complement of the exact Hessian. Where a conjugate pair meets the real axis or two real poles meet,
 the coordinates break down (the residues grow without bound); :func:`pole_descent` then changes the
 split (:func:`restructure`) and restarts. Cost per iteration: one evaluation of the target's values
@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InputError
-from .h2_poles import Coordinates, _scaling, optimal_residues
+from ...errors import InputError
+from .poles import Coordinates, _scaling, optimal_residues
 
 __all__ = ["varpro_descent", "pole_descent", "restructure", "SPLIT_TOL"]
 

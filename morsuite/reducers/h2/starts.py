@@ -5,7 +5,7 @@ fv; one set of Gramian factors, shared through the model's cache) and the paper'
 IRKA (``irka``), each at the requested r. Unstable ones are dropped.
 
 **Surrogate.** A first-order BT model :math:`T_N` from the same factors, in modal
-form (:class:`~morsuite.linalg.h2_gradient.ModalTarget`): every evaluation of the
+form (:class:`~morsuite.reducers.h2.gradient.ModalTarget`): every evaluation of the
 H2 error against it is dense, :math:`O(N(2r)^2)`, no LU. Its own distance to the
 model, :math:`\delta_N = \|T - T_N\|`, is estimated by :math:`\|T_{2N} - T_N\|`
 (dense, cancellation-free; where BT errors shrink fast with N this is close) and N is
@@ -14,7 +14,7 @@ candidate's error against :math:`T_{2N}`, or until :math:`T_{2N}` holds every Ha
 singular value above ``hsv_tol`` (then :math:`T_{2N}` is the surrogate).
 Since :math:`|\,\|T - T_r\| - \|T_N - T_r\|\,| \le \delta_N` for every reduced model,
 ranking against :math:`T_N` can only confuse candidates closer than :math:`2\delta_N`:
-those are ranked by their exact error (:class:`~morsuite.linalg.h2_gradient.FullTarget`,
+those are ranked by their exact error (:class:`~morsuite.reducers.h2.gradient.FullTarget`,
 r LUs each).
 """
 
@@ -25,11 +25,11 @@ import warnings
 
 import numpy as np
 
-from ..errors import ConvergenceWarning, RankWarning, StabilityWarning
-from ..linalg.h2 import modal_form
-from ..linalg.h2_gradient import ModalTarget, h2_value, second_order_realization
-from .base import make
-from .outcome import SetupLedger
+from ...errors import ConvergenceWarning, RankWarning, StabilityWarning
+from ...linalg.h2 import modal_form
+from .gradient import ModalTarget, h2_value, second_order_realization
+from ..base import make
+from ..outcome import SetupLedger
 
 __all__ = ["LEVELS", "STARTS", "candidate_roms", "Surrogates", "standard_realization"]
 

@@ -39,8 +39,8 @@ Strategy (``strategy``):
 ``"surrogate"`` (default)
     The iteration runs first against a dense surrogate, the first-order BT with N states
     (``surrogate_states``; 0 chooses N by the Hankel singular values, ``surrogate_tol``),
-    where an iteration costs dense work only (:mod:`.irka_surrogate`): plain IRKA, handed
-    over to Newton's method on the fixed-point map (closed-form Jacobian, :mod:`.irka_jacobian`)
+    where an iteration costs dense work only (:mod:`~morsuite.reducers.irka.surrogate`): plain IRKA, handed
+    over to Newton's method on the fixed-point map (closed-form Jacobian, :mod:`~morsuite.reducers.irka.jacobian`)
     once its shift change is below ``newton_early`` and decreasing; if it does not converge,
     relaxed steps (``surrogate_relaxation``, stopped by ``surrogate_stall``) and Newton from its
     best iterates (``newton_starts``). The full model then iterates from the surrogate's fixed point;
@@ -49,7 +49,7 @@ Strategy (``strategy``):
     less than the step).
 ``"plain"``
     The plain iteration against the full model from the start (the engine's loop,
-    :mod:`.irka_engine`).
+    :mod:`~morsuite.reducers.irka.engine`).
 
 Exact H2 error of every iterate (``track_h2``): the solves of the next iteration are at
 exactly the mirrored poles :math:`-\lambda_k` of the current reduced model with its
@@ -83,7 +83,7 @@ one sparse LU per real shift or conjugate pair per full-model iteration plus the
 point whose certificate failed). Surrogate: its BT projection
 (:math:`O(n_1\,\mathrm{rank}\,N)`, cached with headroom across r: ``time_breakdown["surrogate_projection"]``,
 part of ``setup_cost``), :math:`O(Nr^2 + r^3)` per step, about the same per Newton step (closed-form
-Jacobian, :mod:`.irka_jacobian`; forward differences, :math:`r(m+p)` steps' worth, where it does not apply).
+Jacobian, :mod:`~morsuite.reducers.irka.jacobian`; forward differences, :math:`r(m+p)` steps' worth, where it does not apply).
 Design notes and measurements: ``docs/design/irka_fo.md`` (own time over the LU floor:
 ``morsuite bench irka-fo-floor``, 2026-11-26).
 """
@@ -96,13 +96,13 @@ from numbers import Integral
 
 import numpy as np
 
-from ..errors import ConvergenceWarning, InputError, SingularShiftError
-from ..linalg.h2 import modal_form, norm_squared, pole_residue_squared
-from ..rom import FirstOrderROM
-from .base import Option, make, register
-from .h2_decision import decision_h2
-from .irka import IRKA
-from .irka_fo_surrogate import SurrogatePhase
+from ...errors import ConvergenceWarning, InputError, SingularShiftError
+from ...linalg.h2 import modal_form, norm_squared, pole_residue_squared
+from ...rom import FirstOrderROM
+from ..base import Option, make, register
+from ..h2_decision import decision_h2
+from .second_order import IRKA
+from .first_order_surrogate import SurrogatePhase
 from .shift_update import COMPLEX_TOL, shifts_from_poles
 
 __all__ = ["IRKAFO"]

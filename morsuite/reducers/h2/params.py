@@ -29,8 +29,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InputError
-from ..rom import SecondOrderROM
+from ...errors import InputError
+from ...rom import SecondOrderROM
 
 __all__ = ["General", "Passive", "PARAMETRISATIONS"]
 

@@ -66,8 +66,8 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.linalg.lapack import ztrsyl as _trsyl
 
-from ..errors import InputError
-from .system import check_system, new_solver
+from ...errors import InputError
+from ...linalg.system import check_system, new_solver
 
 __all__ = ["second_order_realization", "ModalTarget", "FullTarget", "H2Evaluation", "h2_value", "h2_objective",
            "gauss_newton_diagonal", "EPS"]

@@ -1,7 +1,7 @@
 r"""The pole-residue phase of ``so-h2`` for SISO models: variable projection and Newton, then chord steps.
 
 A second-order SISO reduced model of order r is, generically, a first-order model of degree 2r
-whose residues sum to zero, and back (:mod:`morsuite.linalg.h2_poles`): the descent runs in those
+whose residues sum to zero, and back (:mod:`morsuite.reducers.h2.poles`): the descent runs in those
 4r - 1 coordinates, with no redundancy, where the second-order entries have about
 :math:`(r - 1)^2` redundant directions that make every first-order method crawl.
 
@@ -11,14 +11,14 @@ whose residues sum to zero, and back (:mod:`morsuite.linalg.h2_poles`): the desc
    to a surrogate relative gradient of ``1e-3 * gtol``, for ``probe`` iterations each; the best by
    surrogate error continues up to ``maxit``, and the second if the first does not converge. If
    none converges, optionally (``cluster_rounds``) rounds alternating Gauss-Newton in cluster-polynomial
-   coordinates with this descent (:func:`~morsuite.linalg.h2_clusters.alternating_descent`), from the best
+   coordinates with this descent (:func:`~morsuite.reducers.h2.clusters.alternating_descent`), from the best
    start that stalled (else the best), their result polished on a closer surrogate (``tighter``: Newton,
    then one more round if that does not converge) so that the chord steps start within that surrogate's
    distance of the model's stationary point.
 2. Chord steps against the full model: its gradient (one LU per pole pair) with the surrogate's
    Hessian, until the full model's relative gradient is at most ``gtol`` or ``chord_maxit`` steps.
    They converge at the rate of the surrogate's error relative to the model's error.
-3. The second-order realization of the result (:func:`~morsuite.linalg.h2_poles.second_order_of`).
+3. The second-order realization of the result (:func:`~morsuite.reducers.h2.poles.second_order_of`).
 
 Cost: dense, :math:`O(r^3 + rN)` per Newton iteration and start; r LUs per chord step.
 Measurements: ``docs/design/so_h2.md``.
@@ -28,12 +28,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InputError
-from ..linalg.h2_poles import (Coordinates, FullValues, ModalValues, chord_step, evaluate, optimal_residues,
-                               second_order_of)
-from ..linalg.h2_clusters import alternating_descent
-from ..linalg.h2_poles_descent import pole_descent
-from .so_h2_starts import standard_realization
+from ...errors import InputError
+from .poles import Coordinates, FullValues, ModalValues, chord_step, evaluate, optimal_residues, second_order_of
+from .clusters import alternating_descent
+from .poles_descent import pole_descent
+from .starts import standard_realization
 
 __all__ = ["pole_phase"]
 
@@ -58,7 +57,7 @@ def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
     finalists : starts continued, best first, until one reaches stationarity on the surrogate; the
         result is the best converged one, or the best of all if none converged
     cluster_rounds : when the result has not converged on the surrogate, at most this many rounds of
-        :func:`~morsuite.linalg.h2_clusters.alternating_descent` from it (0: none)
+        :func:`~morsuite.reducers.h2.clusters.alternating_descent` from it (0: none)
     tighter : None, or a function returning a closer surrogate (ModalTarget); called only when the
         rounds ran: their result is then polished against it (:func:`_polish`) before the chord steps
     polish_maxit : Newton iterations of the polish (and the iterations of its one alternation round)
@@ -162,8 +161,8 @@ def pole_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
 
 def _polish(co, ev, tighter, *, gtol, maxit):
     r"""The rounds' result moved to a closer surrogate: residues re-optimised, the pole descent
-    (:func:`~morsuite.linalg.h2_poles_descent.pole_descent`) for at most ``maxit`` iterations and, if that does
-    not converge, one alternation round (:func:`~morsuite.linalg.h2_clusters.alternating_descent`). The chord
+    (:func:`~morsuite.reducers.h2.poles_descent.pole_descent`) for at most ``maxit`` iterations and, if that does
+    not converge, one alternation round (:func:`~morsuite.reducers.h2.clusters.alternating_descent`). The chord
     steps then start within the closer surrogate's distance of the model's stationary point (their rate is
     that distance over the error). Returns ``(Coordinates, evaluation, iterations, reason, record)``
     (on a failure, the input poles with their residues for the closer surrogate)."""

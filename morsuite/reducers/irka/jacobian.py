@@ -9,7 +9,7 @@ The interpolant of the surrogate :math:`T_s(s) = C_s(sI - \mathrm{diag}(\mu))^{-
 
     E_c = W^TV,\quad A_c = W^T\mathrm{diag}(\mu)V,\quad B_c = W^TB_s,\quad C_c = C_sV,
 
-congruent to the real interpolant of :meth:`~.irka_surrogate.ModalSurrogate.interpolant`
+congruent to the real interpolant of :meth:`~morsuite.reducers.irka.surrogate.ModalSurrogate.interpolant`
 (same poles and residues). A parameter of slot i (its shift, an entry of :math:`b_i` or of
 :math:`c_i`) moves only column i of V and of W, by :math:`\delta v` and :math:`\delta w`
 (:math:`\partial v_i/\partial\sigma_i = -R_{:,i}\circ v_i`, :math:`\partial v_i/\partial b_{iq} = R_{:,i}\circ B_{s,:q}`,
@@ -30,7 +30,7 @@ and the residue directions :math:`c_k \propto C_cx_k`, :math:`b_k \propto B_c^Ty
 :math:`\delta C x_k + C_c\delta x_k` and :math:`\delta B^Ty_k + B_c^T\delta y_k` (the
 components along :math:`x_k`, :math:`y_k` only rescale them, which the chart's pivot
 normalisation removes). The map sends the data to :math:`(-\lambda_k, b_k, c_k)`. In the real
-coordinates of :class:`~.irka_surrogate.Chart` a pair's upper member :math:`z` and its conjugate
+coordinates of :class:`~morsuite.reducers.irka.surrogate.Chart` a pair's upper member :math:`z` and its conjugate
 are independent complex parameters with :math:`\partial/\partial\mathrm{Re}\,z = \partial_z + \partial_{\bar z}`,
 :math:`\partial/\partial\mathrm{Im}\,z = i(\partial_z - \partial_{\bar z})`; an output coordinate's
 derivative is the real or imaginary part of the holomorphic one.

@@ -97,10 +97,10 @@ from numbers import Integral
 
 import numpy as np
 
-from ..errors import ConvergenceWarning, InputError, OptionError, RankWarning, StabilityWarning
-from ..linalg.gramians import gramian_factors
-from ..rom import FirstOrderROM, SecondOrderROM
-from .base import Option, Reducer, register
+from ...errors import ConvergenceWarning, InputError, OptionError, RankWarning, StabilityWarning
+from ...linalg.gramians import gramian_factors
+from ...rom import FirstOrderROM, SecondOrderROM
+from ..base import Option, Reducer, register
 
 __all__ = ["BT", "FORMS", "SquareRootBT", "level_products"]
 
