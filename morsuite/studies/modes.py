@@ -28,8 +28,11 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 
 import numpy as np
+
+from ..errors import ConvergenceWarning
 
 __all__ = ["MAX_MODES", "MODES_MAXITER", "MODES_TOL", "MODES_COLUMNS", "STRUCTURE_COLUMNS", "compute_modes"]
 
@@ -91,7 +94,9 @@ def compute_modes(scene, study, res) -> dict:
     lo, hi, _ = grid.bounds_for(entry)
     band = (float(lo), float(hi))
     t0 = time.perf_counter()
-    full = model_modes(fom, band, max_poles=MAX_MODES, tol=MODES_TOL, maxiter=MODES_MAXITER)
+    with warnings.catch_warnings():  # the eigensolver's budget warnings: said once, in the note (covered)
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        full = model_modes(fom, band, max_poles=MAX_MODES, tol=MODES_TOL, maxiter=MODES_MAXITER)
     t_full = time.perf_counter() - t0
     in_band = np.flatnonzero(full.in_band)
     rows, poles, structure, notes = [], [_pole_list("full", full)], [], []
