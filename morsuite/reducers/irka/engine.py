@@ -419,9 +419,9 @@ class IRKABase(Reducer):
                 guard.new_stage()
             elif guard.active and not guard.engaged and not schedule.can_switch() and guard.stalled():
                 reason = "stall"
-            elif guard.engaged and o["safeguard_stop"] and guard.stalled():
+            elif guard.engaged and o["safeguard_stop"] and guard.stalled(o["safeguard_stall"]):
                 stalled = True  # engaged and no new smallest measure for a window: stop
-                guard.events.append((it, f"no new smallest measure in {guard.window} iterations: stopped"))
+                guard.events.append((it, f"no new smallest measure in {o['safeguard_stall']} iterations: stopped"))
                 break
             how, relax = schedule.rule
             if reason is not None:
@@ -478,7 +478,7 @@ class IRKABase(Reducer):
                       RankWarning, stacklevel=4)
         if not converged:
             why = ("a cycle of shift sets was detected" if cycled else
-                   f"the safeguard made no progress in {o['safeguard_window']} iterations"
+                   f"the safeguard made no progress in {o['safeguard_stall']} iterations"
                    if getattr(self, "_stalled", False) else f"maxit = {o['maxit']} was reached")
             what = (f"iteration {best_it} (shift change {history[best_it - 1]['measure']:.2e}, tol {o['tol']:g})"
                     if best_it else "its start")

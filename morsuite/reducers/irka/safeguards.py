@@ -146,8 +146,11 @@ GUARD_OPTIONS = {
     "safeguard_stop": Option(True, "bool", "the engaged safeguard stops the iteration when a cycle of shift "
                              "sets (of the proposed sets, or of the relaxed iterates within 10 cycle_tol) forms "
                              "again after a reaction (stronger hysteresis, smaller step, recent sets forgotten) "
-                             "to an earlier one (status cycle) or after safeguard_window iterations without a new smallest measure "
-                             "(status stalled), returning the best iterate, instead of running to maxit"),
+                             "to an earlier one (status cycle) or after safeguard_stall iterations without a new smallest "
+                             "measure (status stalled), returning the best iterate, instead of running to maxit"),
+    "safeguard_stall": Option(30, "int", "iterations of the engaged safeguard without a new smallest measure after "
+                              "which safeguard_stop stops (30: tcom(2000) at r = 26 converges 14 iterations after its "
+                              "last new smallest measure, 2026-11-27; fem_block(4000) at r = 6 never does)", low=2),
     "shortlist": Option(5, "int", "stable iterates kept (with their models) for the final choice "
                         "without convergence (safeguard on)", low=1),
     "shortlist_score": Option("h2", "choice", "how the shortlisted iterates are ranked without convergence: "
@@ -290,9 +293,9 @@ class CycleGuard:
         """The update schedule moved on: progress is counted afresh."""
         self._best, self._since_best = np.inf, 0
 
-    def stalled(self) -> bool:
-        """Whether ``window`` iterations have passed without a new smallest measure."""
-        return self._since_best >= self.window
+    def stalled(self, window: int | None = None) -> bool:
+        """Whether ``window`` (default the guard's) iterations have passed without a new smallest measure."""
+        return self._since_best >= (self.window if window is None else window)
 
     def on_cycle(self, it):
         """A further cycle while engaged: fourfold hysteresis, half the step."""
