@@ -1,0 +1,64 @@
+"""Figures quoted in README.md and docs/ agree with the results files they name (issue 36).
+
+Each quoted figure carries its source (``morsuite.report.quoted``); a regenerated
+``results/`` that no longer says what the prose says fails here, on every CI run.
+"""
+
+from pathlib import Path
+
+import pytest
+
+from morsuite.errors import InputError
+from morsuite.report.quoted import check_text, evaluate, find_quotes
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = [ROOT / "README.md"] + sorted(p for p in (ROOT / "docs").rglob("*.md") if "_build" not in p.parts)
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_every_quoted_figure_matches_its_source(page):
+    bad = [q for q in check_text(page.read_text(encoding="utf-8"), ROOT) if not q.ok]
+    assert not bad, "\n".join(f"{page.name}:{q.line}: {q.text} <- {q.expr}: "
+                              f"{q.error or f'value {q.value:.6g} outside [{q.low:.6g}, {q.high:.6g}]'}"
+                              for q in bad)
+
+
+def test_the_readme_headline_figures_are_quoted_with_their_source():
+    quotes = find_quotes((ROOT / "README.md").read_text(encoding="utf-8"))
+    assert len(quotes) >= 10
+
+
+def _csv(tmp_path):
+    (tmp_path / "r.csv").write_text("model,method,r,h2_error\ntcom,irka,30,1024.2475\ntcom,bt,30,92.83\n"
+                                    "tcom,bt,20,92.83\n")
+    (tmp_path / "b.json").write_text('{"rows": [{"t": 0.25}, {"t": 0.05}]}')
+    return tmp_path
+
+
+def test_a_quote_is_judged_at_the_digits_it_shows(tmp_path):
+    root = _csv(tmp_path)
+    src = 'csv("r.csv", "h2_error", method="irka", r=30)'
+    ok = check_text(f"IRKA 1024<!-- = {src} --> and 1024.2<!-- = {src} -->, 1.02e3<!-- = {src} -->", root)
+    assert [q.ok for q in ok] == [True, True, True]
+    bad = check_text(f"IRKA 1025<!-- = {src} -->, 1024.3<!-- = {src} -->", root)
+    assert [q.ok for q in bad] == [False, False]
+    ratio = 'csv("r.csv", "h2_error", method="irka", r=30) / csv("r.csv", "h2_error", method="bt", r=30)'
+    assert [q.ok for q in check_text(f"11x<!-- = {ratio} --> 12x<!-- = {ratio} -->", root)] == [True, False]
+    loose = check_text(f"about 10<!-- = {ratio} | rel=0.15 -->", root)
+    assert loose[0].ok and loose[0].value == pytest.approx(1024.2475 / 92.83)
+    assert check_text('1/20<!-- = 1 / json("b.json", "rows", 1, "t") -->', root)[0].ok
+
+
+def test_a_source_that_selects_no_row_or_several_is_an_error_not_a_guess(tmp_path):
+    root = _csv(tmp_path)
+    many = check_text('92.8<!-- = csv("r.csv", "h2_error", method="bt") -->', root)
+    none = check_text('92.8<!-- = csv("r.csv", "h2_error", method="so_h2") -->', root)
+    missing = check_text('92.8<!-- = csv("nope.csv", "h2_error") -->', root)
+    assert all(not q[0].ok and q[0].error for q in (many, none, missing))
+    assert "2 rows" in many[0].error and "0 rows" in none[0].error
+
+
+def test_the_expression_language_refuses_anything_else(tmp_path):
+    for expr in ('__import__("os").getcwd()', 'csv.__class__', 'open("r.csv")'):
+        with pytest.raises(InputError):
+            evaluate(expr, _csv(tmp_path))
