@@ -78,9 +78,10 @@ def machine_info() -> dict:
 #: edited while a long benchmark runs)
 _KEY_MODULES = ("linalg/saddle.py", "linalg/saddle_lu.py", "linalg/lradi.py", "linalg/adi_iteration.py",
                 "linalg/adi_shifts.py", "linalg/manifold.py", "linalg/system.py", "linalg/dense.py",
-                "linalg/orthonormal.py", "linalg/refine.py", "reducers/irka.py", "reducers/irka_engine.py",
-                "reducers/shift_update.py", "reducers/irka_safeguards.py", "reducers/bt.py",
-                "reducers/irka_projected.py", "reducers/base.py", "models/index3.py", "rom.py")
+                "linalg/orthonormal.py", "linalg/refine.py", "linalg/backends.py", "linalg/backends_ext.py",
+                "reducers/irka/second_order.py", "reducers/irka/engine.py", "reducers/irka/shift_update.py",
+                "reducers/irka/safeguards.py", "reducers/bt/balanced.py", "reducers/irka/projected.py",
+                "reducers/base.py", "models/index3.py", "rom.py")
 
 
 def code_state(git: bool = True) -> dict:
