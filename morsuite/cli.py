@@ -271,6 +271,10 @@ def _add_compare_parser(sub):
                                name=args.name, quiet=args.quiet)
         print("\n".join(verdict_lines(result)))
         print(f"report: {result.outdir / 'index.html'}\nstudy:  {path} (morsuite run {path} --out {args.out})")
+        status = result.summary["status"].astype(str)
+        if len(status) and not (status == "ok").any():  # every reduction failed: say why, exit non-zero
+            print(f"morsuite compare: every reduction failed; the first: {status.iloc[0]}", file=sys.stderr)
+            return 1
         return 0
 
     from .studies.compare import DEFAULT_METHODS, INPUTS, METHODS

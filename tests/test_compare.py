@@ -157,3 +157,22 @@ def test_run_failing_in_a_reducer_leaves_nothing_half_written(tmp_path, monkeypa
     assert (folder / "compare_dsms_g60.toml").read_text() == old
     assert (folder / "summary.csv").read_text() == "method\nirka\n"
     assert not list(folder.glob("*.tmp*")) and not list(folder.glob(".*.toml*"))
+
+
+def test_a_run_in_which_every_method_fails_exits_non_zero(tmp_path, monkeypatch, capsys):
+    """Every reduction failing (recorded, not raised: a MorsuiteError in each reducer) is a failed
+    command: exit 1 and the first reason on stderr, the report still written (issue 34 item 6)."""
+    from morsuite.errors import ModelError
+
+    def fails(self, r):
+        raise ModelError("saddle-point matrix exactly singular: the shift is a pole of the system")
+    for name in ("bt", "irka"):
+        monkeypatch.setattr(ms.reducers.get_class(name), "_reduce", fails)
+    rc = main(["compare", "dsms:g=40", "--states", "4", "--methods", "bt", "irka", "--out", str(tmp_path),
+               "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 1 and "every reduction failed" in err and "exactly singular" in err
+    assert (tmp_path / "compare_dsms_g40" / "index.html").exists()
+    monkeypatch.undo()
+    assert main(["compare", "dsms:g=40", "--states", "4", "--methods", "bt", "--out", str(tmp_path / "ok"),
+                 "--quiet"]) == 0
