@@ -89,9 +89,13 @@ def test_reducer_band_hsv_match_dense(dsms20, dense):
     N, E, Pb, Qb = dense
     red = ms.reducers.make("bt-fl", dsms20, band=BAND)  # adaptive node count (default)
     info = red.reduce(4).info
-    hsv_ref = np.sqrt(np.sort(np.linalg.eigvals(Pb @ E.T @ Qb @ E).real)[::-1].clip(0))
-    k = 8
-    np.testing.assert_allclose(info["hsv"][:k], hsv_ref[:k], rtol=10 * info["quad_tol"])
+    hsv_ref = np.sqrt(np.linalg.eigvals(Pb @ E.T @ Qb @ E).real.clip(0))   # the dense band HSVs, unordered
+    k, tol = 8, 10 * info["quad_tol"]
+    got = np.asarray(info["hsv"][:k])
+    # matched, not sorted: each leading value has a dense one within tol, and no dense value above the
+    # k-th is missing (at most k of them exceed it)
+    assert all(np.min(np.abs(hsv_ref - h)) <= tol * h for h in got)
+    assert np.count_nonzero(hsv_ref > got[-1] * (1 + tol)) <= k - 1
     assert info["converged"] and info["quad_change"] <= info["quad_tol"]
     # the doubling: each level twice the last, every node one LU, the conjugate nodes none
     nodes = [lv["nodes"] for lv in info["quad_levels"]]

@@ -1,4 +1,4 @@
-"""Exact H2 and Hinf norms (morsuite.analysis.h2 / hinf) against independent dense references.
+"""Exact H2 and Hinf norms (morsuite.norms.h2, morsuite.analysis.hinf) against independent dense references.
 
 References, all built from the model's matrices without morsuite's solvers:
 - the hidden-manifold realization through an explicit null(G) basis (scipy.linalg.null_space)
@@ -23,7 +23,7 @@ import scipy.integrate as si
 import scipy.linalg as sla
 
 import morsuite as ms
-from morsuite.analysis._quad import integrate_half_axis
+from morsuite.norms._quad import integrate_half_axis
 from morsuite.linalg.gramians import ADI_DEFAULTS, cached_gramian_factors
 
 LD, CLD = np.longdouble, np.clongdouble

@@ -11,7 +11,7 @@
 A name is documented once, in the module that defines it (the place the
 docstrings' own cross references point to, e.g.
 ``:class:`~morsuite.linalg.saddle.SaddlePointSolver```); names a package
-exports from a private module (``analysis._fom``) or defines itself are
+exports from a private module (``norms._fom``) or defines itself are
 documented in the package section. For a plain module (``morsuite.rom``) only
 step 2 is done. The module list is read from the package when the docs are
 built, so a new module appears without editing the docs.
@@ -268,7 +268,7 @@ _ABBREVIATIONS = {"np.": "numpy.", "pd.": "pandas.", "sp.": "scipy.sparse.", "sl
 
 def canonical_name(target: str) -> str | None:
     """Where the morsuite object ``target`` is documented: the defining module's name of it
-    (``morsuite.analysis.h2_norm`` -> ``morsuite.analysis.h2.h2_norm``), or None."""
+    (``morsuite.analysis.h2_norm`` -> ``morsuite.norms.h2.h2_norm``), or None."""
     if not target.startswith("morsuite."):
         return None
     parts = target.split(".")

@@ -1,7 +1,7 @@
 """Frequency responses, errors and norms; time-domain simulation (data only, no plotting)."""
 
 from .response import band_response, errors, freq_grid, sigma_max
-from .h2 import h2_error, h2_norm, h2_rel_error
+from ..norms.h2 import h2_error, h2_norm, h2_rel_error
 from .hinf import hinf_error, hinf_norm, hinf_rel_error
 from .simulate import output_errors, simulate
 from . import signals

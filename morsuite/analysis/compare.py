@@ -42,8 +42,8 @@ import numpy as np
 from ..errors import InputError, OptionError
 from ..linalg.gramians import gramian_factors
 from . import signals
-from ._common import adi_options
-from .h2 import h2_error, h2_norm
+from ..norms._common import adi_options
+from ..norms.h2 import h2_error, h2_norm
 from .hinf import hinf_error, hinf_norm
 from .simulate import simulate
 

@@ -68,7 +68,7 @@ order :math:`2(2(n_1 - n_2) + r)` a round, :math:`O((n_1 - n_2)^3)`; its measure
 cost, the threshold and the measured gaps: ``docs/design/norms.md``.
 
 Responses are refined in extended precision and subtracted in long double
-(:class:`~morsuite.analysis._fom.FomResponse`), so that an error of 1e-12 of
+(:class:`~morsuite.norms._fom.FomResponse`), so that an error of 1e-12 of
 :math:`\|T\|` keeps its digits.
 """
 
@@ -82,12 +82,12 @@ import numpy as np
 from ..errors import OptionError
 from ..linalg.gramians import cached_gramian_factors
 from ..utils import blas_threads
-from ._common import adi_options, check_fom, infinite, validate_rom
-from ._fom import FomResponse
+from ..norms._common import adi_options, check_fom, infinite, validate_rom
+from ..norms._fom import FomResponse
 from ._hinf_certify import certificate as _certificate, refine_peak as _refine
 from ._hinf_dense import error_realization, hidden_realization
-from ._rom import RomResponse
-from .h2 import breakpoints, resonances
+from ..norms._rom import RomResponse
+from ..norms.h2 import breakpoints, resonances
 from .response import freq_grid
 
 __all__ = ["hinf_norm", "hinf_error", "hinf_rel_error"]
@@ -343,7 +343,7 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
     band_grid : (float, float, int), optional
         ``(lo, hi, n)``: the frequencies of a band response of the model (``n`` log-spaced in
         [lo, hi], :func:`~morsuite.analysis.freq_grid`), sampled too and drawn from the model's memo of
-        :math:`T(j\omega)` (:class:`~morsuite.analysis._fom.FomResponse`) that the band response
+        :math:`T(j\omega)` (:class:`~morsuite.norms._fom.FomResponse`) that the band response
         fills (``morsuite compare`` sets it to its band grid). They replace the log grid inside
         [lo, hi] (outside it, ``per_decade`` points a decade anchored at lo and hi, the same
         for every search) and are not counted in ``grid_lus`` and ``max_lus``, which count

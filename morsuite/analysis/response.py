@@ -62,7 +62,7 @@ def band_response(fom, omega, *, progress: bool = False):
 
     The values of :meth:`Index3Model.freqresp <morsuite.models.Index3Model.freqresp>` (one LU per
     frequency, the LU's solution), computed through
-    :meth:`FomResponse.sample <morsuite.analysis._fom.FomResponse.sample>`: each sample is also
+    :meth:`FomResponse.sample <morsuite.norms._fom.FomResponse.sample>`: each sample is also
     refined in extended precision and given its derivative :math:`T'(j\omega)` (one transposed
     solve), and kept in ``fom.cache``, so that the H-infinity searches of the model and of its
     reduced models (:func:`~morsuite.analysis.hinf_norm` and :func:`~morsuite.analysis.hinf_error`
@@ -83,7 +83,7 @@ def band_response(fom, omega, *, progress: bool = False):
         LUs made by this call (at most ``len(omega)``).
     """
     from ..utils import blas_threads
-    from ._fom import FomResponse
+    from ..norms._fom import FomResponse
 
     w = np.atleast_1d(np.asarray(omega, dtype=float))
     if w.ndim != 1 or w.size == 0 or not np.all(np.isfinite(w)) or np.any(w < 0):
