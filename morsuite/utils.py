@@ -81,16 +81,30 @@ def strict_json(x):
     return x
 
 
-def band_pair(band) -> tuple[float, float]:
-    """``(lo, hi)`` of a frequency band, checked: ``0 < lo < hi < inf`` (InputError otherwise)."""
+def band_pair(band, *, name: str = "band", allow_zero: bool = False) -> tuple[float, float]:
+    """``(lo, hi)`` of a frequency band, checked, else an InputError naming ``name``.
+
+    ``0 < lo < hi < inf``; with ``allow_zero`` (a band from zero: modes, band Gramians)
+    ``0 <= lo < hi < inf``, each failure said apart (not a pair, not finite, negative, empty).
+    Cost O(1).
+    """
     from .errors import InputError
 
     try:
         lo, hi = (float(b) for b in band)
     except (TypeError, ValueError) as exc:
-        raise InputError(f"band must be a pair (lo, hi) of numbers; got {band!r}") from exc
-    if not (0 < lo < hi < np.inf):
-        raise InputError(f"band must satisfy 0 < lo < hi < inf; got {band}")
+        raise InputError(f"{name} must be a pair (lo, hi) of numbers in rad/s; got {band!r}") from exc
+    if not allow_zero:
+        if not (0 < lo < hi < np.inf):
+            raise InputError(f"{name} must satisfy 0 < lo < hi < inf; got {band}")
+        return lo, hi
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        raise InputError(f"{name} must be finite; got {band!r}")
+    if lo < 0:
+        raise InputError(f"{name} must lie in [0, inf) (negative frequencies are included by symmetry); "
+                         f"got w1 = {lo:g}")
+    if not lo < hi:
+        raise InputError(f"{name} must satisfy 0 <= w1 < w2 (finite, rad/s): the band is empty; got {band!r}")
     return lo, hi
 
 

@@ -25,6 +25,7 @@ import scipy.linalg as sla
 from scipy.optimize import linear_sum_assignment
 
 from ..errors import InputError, ShapeError
+from ..utils import band_pair
 from ..linalg.eigen import PolesResult, damped_poles
 from ..rom import FirstOrderROM, SecondOrderROM
 
@@ -36,13 +37,7 @@ def _band(band, fom=None):
         if fom is None:
             return None
         band = fom.band
-    try:
-        w1, w2 = (float(b) for b in band)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"band must be a pair (w1, w2) in rad/s; got {band!r}") from exc
-    if not (0 <= w1 < w2 and np.isfinite(w2)):
-        raise InputError(f"band must satisfy 0 <= w1 < w2; got {band!r}: the band is empty")
-    return w1, w2
+    return band_pair(band, allow_zero=True)
 
 
 def model_modes(fom, band=None, **options) -> PolesResult:

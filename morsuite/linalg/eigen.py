@@ -58,6 +58,7 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse.linalg as spla
 
+from ..utils import band_pair
 from ..errors import ConvergenceWarning, InputError
 from ..utils import blas_threads
 from .system import check_system, new_solver
@@ -147,13 +148,7 @@ def _positive_int(name, value, allow_none=True):
 
 
 def _band(band, name="band"):
-    try:
-        w1, w2 = (float(w) for w in band)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"{name} must be a pair (w1, w2) of frequencies in rad/s; got {band!r}") from exc
-    if not (math.isfinite(w1) and math.isfinite(w2) and 0 <= w1 < w2):
-        raise InputError(f"{name} must satisfy 0 <= w1 < w2 (finite, rad/s); got {band!r}: the band is empty")
-    return w1, w2
+    return band_pair(band, name=name, allow_zero=True)
 
 
 def _start_vector(n, dtype=float):

@@ -94,12 +94,13 @@ import numpy as np
 import scipy.linalg as sla
 
 from ...errors import ConvergenceWarning, InputError
+from ...utils import band_pair
 from ...linalg.gramians import gramian_factors
 from ..base import Option, register
 from .balanced import FORMS, SquareRootBT, level_products
 from ..irka.shift_solves import default_threads, map_threads
 
-__all__ = ["BTFL", "BandFactor", "band_nodes", "band_factors", "check_band", "compress"]
+__all__ = ["BTFL", "BandFactor", "band_nodes", "band_factors", "compress"]
 
 VARIABLES = ("auto", "log", "linear")
 
@@ -138,22 +139,6 @@ class BandFactor:
         return int(self.position.shape[1])
 
 
-def check_band(band) -> tuple[float, float]:
-    """``(w1, w2)`` with ``0 <= w1 < w2 < inf``, else an :class:`InputError` naming ``band``."""
-    try:
-        w1, w2 = (float(b) for b in band)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"band must be a pair (w1, w2) of numbers in rad/s; got {band!r}") from exc
-    if not (math.isfinite(w1) and math.isfinite(w2)):
-        raise InputError(f"band must be finite; got {band!r}")
-    if w1 < 0:
-        raise InputError(f"band must lie in [0, inf) (the negative frequencies are included by symmetry); "
-                         f"got w1 = {w1:g}")
-    if not w1 < w2:
-        raise InputError(f"band is empty: it needs w1 < w2; got ({w1:g}, {w2:g})")
-    return w1, w2
-
-
 def band_nodes(band, n: int, variable: str = "log") -> tuple[np.ndarray, np.ndarray]:
     r"""Gauss-Legendre nodes and weights for :math:`\int_{\omega_1}^{\omega_2} f(\omega)\,d\omega`.
 
@@ -173,7 +158,7 @@ def band_nodes(band, n: int, variable: str = "log") -> tuple[np.ndarray, np.ndar
     omega, weights : ndarray (n,)
         Positive nodes in the open band and positive weights (sum :math:`\omega_2 - \omega_1`).
     """
-    w1, w2 = check_band(band)
+    w1, w2 = band_pair(band, allow_zero=True)
     t, c = np.polynomial.legendre.leggauss(int(n))
     if variable == "log":
         if w1 <= 0:
@@ -288,7 +273,7 @@ class BTFL(SquareRootBT):
 
     def _check_options(self):
         o = self.options
-        o["band"] = check_band(self.fom.band if o["band"] is None else o["band"])
+        o["band"] = band_pair(self.fom.band if o["band"] is None else o["band"], allow_zero=True)
         if o["variable"] == "log" and o["band"][0] <= 0:
             raise InputError(f"variable='log' needs band w1 > 0; got band = {o['band']} (use 'linear' or 'auto')")
         if o["nodes"] is None and o["max_nodes"] < o["nodes_start"]:
