@@ -88,6 +88,20 @@ class _ROMBase:
         return path
 
 
+def _lift(basis, r):
+    """A reduced model's position lift checked: None, or a real 2-D array with ``r`` columns."""
+    if basis is None:
+        return None
+    basis = np.asarray(basis)
+    if basis.ndim != 2 or basis.shape[1] != r:
+        raise ShapeError(f"basis has shape {basis.shape}; expected (n1, {r})")
+    if np.iscomplexobj(basis):
+        if np.any(basis.imag != 0):
+            raise InputError("basis is complex; the lift of a real reduced model is real")
+        basis = basis.real
+    return basis
+
+
 class SecondOrderROM(_ROMBase):
     r"""Dense second-order model :math:`\hat M \ddot x + \hat D \dot x + \hat K x = \hat F u`, :math:`y = \hat L x`.
 
@@ -115,12 +129,8 @@ class SecondOrderROM(_ROMBase):
             raise ShapeError(f"matrix F has {self.F.shape[0]} rows; expected {r}")
         if self.L.shape[1] != r:
             raise ShapeError(f"matrix L has {self.L.shape[1]} columns; expected {r}")
-        if basis is not None:
-            basis = np.asarray(basis)
-            if basis.ndim != 2 or basis.shape[1] != r:
-                raise ShapeError(f"basis has shape {basis.shape}; expected (n1, {r})")
         #: the lift V (n1 x r) of a projection-based model, or None
-        self.basis = basis
+        self.basis = _lift(basis, r)
 
     @property
     def order(self) -> int:
@@ -206,12 +216,19 @@ class SecondOrderROM(_ROMBase):
 
 
 class FirstOrderROM(_ROMBase):
-    r"""Dense descriptor model :math:`E \dot x = A x + B u`, :math:`y = C x + D u`."""
+    r"""Dense descriptor model :math:`E \dot x = A x + B u`, :math:`y = C x + D u`.
+
+    ``basis``, optional: the n1 x n position lift :math:`V_1` of a projection-based reduced
+    model of the first-order realization (the full model's positions are :math:`x \approx V_1
+    \hat x`; irka-fo, first-order BT). Used for mode-shape comparisons
+    (:func:`morsuite.analysis.modes.rom_modes`); None (default) otherwise; not written by
+    :meth:`save`.
+    """
 
     kind = "first-order"
     _fields = ("E", "A", "B", "C", "D")
 
-    def __init__(self, E, A, B, C, D=None):
+    def __init__(self, E, A, B, C, D=None, *, basis=None):
         self.A = _mat("A", A)
         n = self.A.shape[0]
         if self.A.shape != (n, n):
@@ -228,6 +245,8 @@ class FirstOrderROM(_ROMBase):
         self.D = np.zeros((self.C.shape[0], self.B.shape[1])) if D is None else _mat("D", D)
         if self.D.shape != (self.C.shape[0], self.B.shape[1]):
             raise ShapeError(f"matrix D has shape {self.D.shape}; expected {(self.C.shape[0], self.B.shape[1])}")
+        #: the position lift V_1 (n1 x n) of a projection-based model, or None
+        self.basis = _lift(basis, n)
 
     @property
     def order(self) -> int:

@@ -142,11 +142,58 @@ def test_mac_against_its_formula():
         ms.analysis.mac(A, B[:-1])
 
 
-def test_rom_modes_of_a_first_order_rom_has_no_lift(tcom):
-    rom = ms.reducers.make("bt", tcom).reduce(6).rom
+def test_rom_modes_of_a_first_order_rom_lifts_its_positions(tcom):
+    rom = ms.reducers.make("bt", tcom, form="first-order").reduce(6).rom
     m = ms.analysis.rom_modes(rom)
-    assert m.shapes is None and not m.info["lift"]
+    assert m.shapes is not None and m.info["lift"] and m.shapes.shape == (tcom.n1, m.poles.size)
     assert_sets_close(m.poles, rom.poles()[rom.poles().imag >= 0], rtol=1e-12, what="first-order poles")
+    assert m.residuals.max() < 1e-10
+    bare = ms.rom.FirstOrderROM(rom.E, rom.A, rom.B, rom.C)  # no lift: no shapes
+    assert ms.analysis.rom_modes(bare).shapes is None
+
+
+@pytest.mark.parametrize("method, options, r", [
+    ("irka", {}, 6), ("irka-projected", {}, 6), ("irka-fo", {}, 12), ("bt", {}, 6),
+    ("bt", {"form": "first-order"}, 12), ("bt-fl", {"band": (0.01, 1.0)}, 6), ("krylov", {}, 6),
+    ("modal", {}, 6), ("so-h2", {}, 4)])
+def test_every_projection_reducer_returns_its_lift(tcom, method, options, r):
+    """The lift V (positions x = V q) lies on the hidden manifold (G V = 0, which the reducers do not
+    impose on it directly) and reproduces the output map (L V = the ROM's output matrix); so-h2's
+    reduced model is not a projection: no lift."""
+    rom = ms.reducers.make(method, tcom, **options).reduce(r).rom
+    if method == "so-h2":
+        assert rom.basis is None
+        return
+    V = rom.basis
+    assert V is not None and V.shape == (tcom.n1, rom.order) and np.isrealobj(V)
+    G = tcom.G.toarray()
+    assert np.linalg.norm(G @ V) <= 1e-12 * np.linalg.norm(G) * np.linalg.norm(V)
+    C = rom.L if isinstance(rom, ms.rom.SecondOrderROM) else rom.C
+    assert np.linalg.norm(tcom.L @ V - C) <= 1e-12 * np.linalg.norm(np.asarray(tcom.L)) * np.linalg.norm(V)
+
+
+def test_irka_rom_mode_shapes_against_the_full_model(block):
+    """IRKA interpolates two of the block's modes to rounding: on the simple one its lifted shape has
+    MAC 1 with the full model's (1e-8); on a double pole the full shapes lie in the span of the lifted ones."""
+    band = (0.5, 3.0)
+    full = ms.analysis.model_modes(block, band)
+    red = ms.analysis.rom_modes(ms.reducers.make("irka", block).reduce(10).rom, band)
+    t = ms.analysis.match_modes(full, red, band)
+    exact = t[(t.status == "matched") & (t.rel_freq_error < 1e-8)]
+    assert len(exact) >= 2
+    checked = 0
+    for i, j in zip(exact.full_index, exact.rom_index):
+        twins = np.flatnonzero(np.abs(full.frequencies - full.frequencies[i]) < 1e-6 * full.frequencies[i])
+        rtwins = np.flatnonzero(np.abs(red.frequencies - red.frequencies[j]) < 1e-6 * red.frequencies[j])
+        if twins.size == 1:
+            assert abs(ms.analysis.mac(full.shapes[:, [i]], red.shapes[:, [j]])[0, 0] - 1) < 1e-8
+            checked += 1
+        elif rtwins.size == twins.size:
+            Q, _ = np.linalg.qr(red.shapes[:, rtwins])
+            X = full.shapes[:, twins]
+            assert np.linalg.norm(X - Q @ (Q.conj().T @ X)) < 1e-8
+            checked += 1
+    assert checked >= 1
 
 
 def test_structure_checks(block):

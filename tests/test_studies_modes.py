@@ -15,7 +15,7 @@ from morsuite.cli import main
 @pytest.fixture(scope="module")
 def compared(tmp_path_factory):
     out = tmp_path_factory.mktemp("cmp") / "out"
-    rc = main(["compare", "dsms:g=40", "--states", "8", "--methods", "modal", "krylov", "bt", "irka",
+    rc = main(["compare", "dsms:g=40", "--states", "8", "--methods", "modal", "krylov", "bt", "irka", "so-h2",
                "--out", str(out), "--quiet"])
     assert rc == 0
     return out / "compare_dsms_g40"
@@ -55,8 +55,12 @@ def test_modal_reduced_model_keeps_its_own_modes_with_mac_one(compared):
     assert (np.abs(own.mac - 1) < 1e-8).all()
     # the static correction's Ritz pair is no mode of the model: matched loosely, and its MAC says so
     assert (modal.drop(own.index).mac < 0.9).all()
-    # a method without a lift V has no MAC: the table says so rather than inventing one
-    assert modes[modes.method == "irka"].mac.isna().all()
+    # a method without a lift V (so-h2: no projection) has no MAC: the table says so rather than inventing
+    # one; the projection methods have one on every matched mode, a MAC in [0, 1]
+    assert modes[modes.method == "so-h2"].mac.isna().all()
+    for m in ("irka", "bt", "krylov"):
+        mac = modes[(modes.method == m) & (modes.status == "matched")].mac
+        assert mac.notna().all() and ((mac >= 0) & (mac <= 1 + 1e-12)).all()
 
 
 def test_structure_checks_of_each_reduced_model(compared):

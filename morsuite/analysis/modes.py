@@ -6,7 +6,7 @@ What engineers check before they trust a reduced model (issue 35), as data:
   right mode shapes (shift-invert Arnoldi on saddle solves,
   :func:`morsuite.linalg.eigen.damped_poles`; a few LUs), memoised per model and band.
 - :func:`rom_modes`: a reduced model's poles and, where it has a lift ``rom.basis`` (a
-  projection-based second-order model), its mode shapes lifted to the full model, :math:`Vq`.
+  projection-based model, either order), its mode shapes lifted to the full model, :math:`Vq`.
 - :func:`match_modes`: the two sets matched by pole distance (optimal assignment), with
   frequency and damping errors and the missing and spurious modes, as a DataFrame.
 - :func:`mac`: the modal assurance criterion matrix.
@@ -78,8 +78,10 @@ def rom_modes(rom, band=None) -> PolesResult:
 
     Second order: the eigenpairs of :math:`(\lambda^2\hat M + \lambda\hat D + \hat K)q = 0`
     (:meth:`SecondOrderROM.eig`), shapes :math:`Vq` (unit 2-norm) where ``rom.basis`` = V is
-    known, else None. First order: the eigenvalues of :math:`(A, E)`; shapes None (a
-    first-order state has no position lift).
+    known, else None. First order: the eigenpairs of :math:`(A, E)`, shapes :math:`V_1 q` where
+    ``rom.basis`` = :math:`V_1` (the position lift of irka-fo and first-order BT) is known.
+    Reducers with a lift: modal, krylov, irka, irka-projected, irka-fo, bt and bt-fl (both
+    forms); without one: so-h2 (its reduced model is not a projection).
 
     Parameters
     ----------
@@ -91,9 +93,10 @@ def rom_modes(rom, band=None) -> PolesResult:
     -------
     PolesResult
         One entry per conjugate pair, sorted by frequency; ``shapes`` None without a lift;
-        ``residuals`` of the reduced eigenproblem (second order) or NaN.
+        ``residuals``: the reduced eigenproblem's relative residuals.
 
-    Cost: one dense QZ of order 2r (or the first-order state count).
+    Cost: one dense QZ of order 2r (or the first-order state count), plus an n1 x r by r x r
+    product for the lift.
     """
     b = _band(band)
     if isinstance(rom, SecondOrderROM):
@@ -106,17 +109,20 @@ def rom_modes(rom, band=None) -> PolesResult:
         scale = (np.abs(lam) ** 2 * np.linalg.norm(rom.M, 1) + np.abs(lam) * np.linalg.norm(rom.D, 1)
                  + np.linalg.norm(rom.K, 1))
         res = np.linalg.norm(R, axis=0) / scale
-        basis = getattr(rom, "basis", None)
-        shapes = None
-        if basis is not None:
-            shapes = basis @ Q
-            shapes = shapes / np.linalg.norm(shapes, axis=0)
     elif isinstance(rom, FirstOrderROM):
-        lam = rom.poles()
-        lam = lam[lam.imag >= 0]
-        shapes, res = None, np.full(lam.size, np.nan)
+        lam, Q = sla.eig(rom.A, rom.E, check_finite=False)
+        keep = np.isfinite(lam) & (lam.imag >= 0)
+        lam, Q = lam[keep], Q[:, keep]
+        Q = Q / np.linalg.norm(Q, axis=0)
+        R = rom.A @ Q - (rom.E @ Q) * lam
+        res = np.linalg.norm(R, axis=0) / (np.abs(lam) * np.linalg.norm(rom.E, 1) + np.linalg.norm(rom.A, 1))
     else:
         raise InputError(f"rom must be a SecondOrderROM or FirstOrderROM; got {type(rom).__name__}")
+    basis = getattr(rom, "basis", None)
+    shapes = None
+    if basis is not None:
+        shapes = basis @ Q
+        shapes = shapes / np.linalg.norm(shapes, axis=0)
     order = np.argsort(np.abs(lam), kind="stable")
     lam, res = lam[order], res[order]
     if shapes is not None:

@@ -231,8 +231,8 @@ class SquareRootBT(Reducer):
             R = min(n_max, max(r, int(np.ceil(headroom * r)) if headroom else 2 * (cache["R"] if cache else 8)))
             cache = {"R": R, "mats": build(R)}
             self._gram["projected"][form] = cache
-        *square, rows, cols = cache["mats"]  # build() returns the r x r ones, then W^T F, then L V
-        return [X[:r, :r] for X in square] + [rows[:r], cols[:, :r]]
+        *square, rows, cols, lift = cache["mats"]  # build(): the r x r ones, W^T F, L V, then the lift V
+        return [X[:r, :r] for X in square] + [rows[:r], cols[:, :r], lift[:, :r]]
 
     def _first_order(self, r, U, hsv, Vt, headroom=None):
         n_ok = self._cap(len(hsv), hsv, None)
@@ -245,10 +245,10 @@ class SquareRootBT(Reducer):
             Tl1, Tl2 = ob.position_unprojected @ Ul, ob.velocity @ Ul  # T_l1 meets only T_r2 in ker G
             Tr1, Tr2 = c.position @ Vr, c.velocity @ Vr
             # A T_r = [T_r2; -K T_r1 - D T_r2]; the G^T z part is annihilated by T_l2 in ker G
-            return [Tl1.T @ Tr2 - Tl2.T @ (fom.K @ Tr1 + fom.D @ Tr2), Tl2.T @ fom.F, fom.L @ Tr1]
+            return [Tl1.T @ Tr2 - Tl2.T @ (fom.K @ Tr1 + fom.D @ Tr2), Tl2.T @ fom.F, fom.L @ Tr1, Tr1]
 
-        A, B, C = self._projected("first-order", r, n_ok, build, headroom)
-        return FirstOrderROM(None, A, B, C), r
+        A, B, C, lift = self._projected("first-order", r, n_ok, build, headroom)
+        return FirstOrderROM(None, A, B, C, basis=lift), r
 
     def _second_order(self, r, form):
         c, ob, fom = self._gram["c"], self._gram["o"], self.fom
@@ -268,10 +268,10 @@ class SquareRootBT(Reducer):
         def build(R):
             V = _orthonormal(Zb @ Vt[:R].T)
             W = V if key_w is None else _orthonormal(ob.velocity @ Uw[:, :R])
-            return [W.T @ (fom.M @ V), W.T @ (fom.D @ V), W.T @ (fom.K @ V), W.T @ fom.F, fom.L @ V]
+            return [W.T @ (fom.M @ V), W.T @ (fom.D @ V), W.T @ (fom.K @ V), W.T @ fom.F, fom.L @ V, V]
 
-        Mr, Dr, Kr, Fr, Lr = self._projected(form, r, n_ok, build)
-        return SecondOrderROM(Mr, Dr, Kr, Fr, Lr), level_sv
+        Mr, Dr, Kr, Fr, Lr, lift = self._projected(form, r, n_ok, build)
+        return SecondOrderROM(Mr, Dr, Kr, Fr, Lr, basis=lift), level_sv
 
 
 class BT(SquareRootBT):

@@ -187,9 +187,15 @@ class IRKABase(Reducer):
         return X
 
     def _project(self, V, W) -> SecondOrderROM:
-        """The reduced model W^T (M, D, K) V, W^T F, L V."""
+        """The reduced model W^T (M, D, K) V, W^T F, L V, with its lift (:meth:`_lift`)."""
         M, D, K, F, L = self._system()
-        return SecondOrderROM(W.T @ (M @ V), W.T @ (D @ V), W.T @ (K @ V), W.T @ F, L @ V)
+        return SecondOrderROM(W.T @ (M @ V), W.T @ (D @ V), W.T @ (K @ V), W.T @ F, L @ V,
+                              basis=self._lift(V))
+
+    def _lift(self, V):
+        """The right basis V in the index-3 model's positions (the reduced model's ``basis``):
+        V itself here; the projected IRKA maps it back from null(G) coordinates."""
+        return V
 
     def _realization(self, rom):
         """(E, A, B, C): the first-order realization of the reduced model the update reduces."""

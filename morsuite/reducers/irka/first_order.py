@@ -205,7 +205,7 @@ class IRKAFO(SurrogatePhase, IRKA):
         V1, V2, W1, W2 = V[:n1], V[n1:], W[:n1], W[n1:]
         E = W1.T @ V1 + W2.T @ (f.M @ V2)
         A = W1.T @ V2 - W2.T @ (f.K @ V1 + f.D @ V2)
-        return FirstOrderROM(E, A, W2.T @ f.F, f.L @ V1)
+        return FirstOrderROM(E, A, W2.T @ f.F, f.L @ V1, basis=V1)
 
     def _realization(self, rom):
         return rom.E, rom.A, rom.B, rom.C

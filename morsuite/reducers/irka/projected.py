@@ -389,6 +389,10 @@ class IRKAProjected(IRKABase):
         pm = self._model
         return pm.M, pm.D, pm.K, pm.F, pm.L
 
+    def _lift(self, V):
+        """:math:`\Psi_r V`: the basis in the index-3 model's positions."""
+        return self._model.lift(V)
+
     def _begin_bases(self):
         self._lu_times.append(0.0)
 
