@@ -61,11 +61,15 @@ def test_constrained_modes_refuses_bad_input(tcom):
         constrained_modes(tcom, k=0)
 
 
-@pytest.mark.parametrize("name", ["tcom", "block", "dsms"])
-def test_damped_poles_against_the_dense_first_order_realization(name, block, tcom):
+@pytest.mark.parametrize("name, proportional", [("tcom", None), ("block", False), ("dsms", False),
+                                                 ("block", None), ("dsms", None)])
+def test_damped_poles_against_the_dense_first_order_realization(name, proportional, block, tcom):
+    """Both paths (Arnoldi on the first-order pencil; the Rayleigh-damping path from the undamped modes,
+    taken by default on the block and the DSMS) against the dense QZ of the first-order realization."""
     fom, band = {"tcom": (tcom, (0.05, 1.0)), "block": (block, (0.5, 3.0)),
                  "dsms": (ms.models.dsms(g=60), (0.1, 0.2))}[name]
-    res = damped_poles(fom, band)
+    res = damped_poles(fom, band, proportional=proportional)
+    assert res.info["method"] == ("proportional" if name != "tcom" and proportional is None else "arnoldi")
     ref = dense_poles(fom)
     f = np.abs(ref)
     inside = ref[(f >= band[0]) & (f <= band[1])]
@@ -78,6 +82,23 @@ def test_damped_poles_against_the_dense_first_order_realization(name, block, tco
     assert np.allclose(res.damping, -res.poles.real / np.abs(res.poles))
     with pytest.raises(InputError, match="band must satisfy"):
         damped_poles(fom, (1.0, 1.0))
+
+
+def test_proportional_damping_detection(block, tcom):
+    """Rayleigh coefficients recovered to rounding where D = alpha M + beta K was assembled (the block:
+    0.001, 0.01; the DSMS: D = 2.5 K), None where it is not (the TCOM; the block with one entry of D
+    perturbed by 1e-9 of its norm), and proportional=True refused there."""
+    a, b = ms.linalg.eigen.proportional_damping(block)
+    assert abs(a - 1e-3) < 1e-12 and abs(b - 1e-2) < 1e-12
+    a, b = ms.linalg.eigen.proportional_damping(ms.models.dsms(g=60))
+    assert abs(a) < 1e-12 and abs(b - 2.5) < 1e-12
+    assert ms.linalg.eigen.proportional_damping(tcom) is None
+    D = block.D.tolil(copy=True)
+    D[3, 3] += 1e-9 * abs(block.D).max()
+    bent = ms.models.Index3Model(block.M, D.tocsr(), block.K, block.G, block.F, block.L, band=block.band)
+    assert ms.linalg.eigen.proportional_damping(bent) is None
+    with pytest.raises(InputError, match="proportional=True"):
+        damped_poles(tcom, (0.05, 1.0), proportional=True)
 
 
 def test_model_modes_is_memoised_and_matches_a_modal_rom(block):
