@@ -144,8 +144,10 @@ def compute_modes(scene, study, res) -> dict:
     if nolift:
         notes.append("no lift V (no MAC): " + ", ".join(nolift))
     if not full.info.get("covered", True):
-        notes.append("the full model's list may miss modes in the band (the eigensolver's budget, "
-                     f"{MAX_MODES} poles per shift and {MODES_MAXITER} restarts, was reached)")
+        budget = (f"{MAX_MODES} modes per decade of the band" if full.info.get("method") == "proportional"
+                  else f"{MAX_MODES} poles per shift and {MODES_MAXITER} restarts")
+        notes.append(f"the full model's list may miss modes in the band (the eigensolver's budget, {budget}, "
+                     "was reached)")
     info = {"band": list(band), "modes_in_band": int(in_band.size), "time_s": t_full,
             **{k: full.info.get(k) for k in ("lu_count", "shifts", "covered", "max_residual", "method")}}
     how = ("from the undamped modes under Rayleigh damping, the lowest from the band's lower edge up"
@@ -153,7 +155,7 @@ def compute_modes(scene, study, res) -> dict:
            else f"at most {MAX_MODES} per shift, nearest each")
     note = (f"The full model's {in_band.size} modes found in [{band[0]:.3g}, {band[1]:.3g}] rad/s "
             f"({how}) "
-            f"({info['lu_count']} LUs, {t_full:.2f} s). " + "; ".join(notes))
+            f"({info['lu_count']} LU{'' if info['lu_count'] == 1 else 's'}, {t_full:.2f} s). " + "; ".join(notes))
     return {"rows": rows, "poles": poles, "structure": structure, "note": note.strip(), "info": info}
 
 
