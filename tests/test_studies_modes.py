@@ -80,3 +80,22 @@ def test_the_page_shows_the_modes_section(compared):
     rows = pd.read_csv(compared / "modes_8.csv")
     for w in rows.full_frequency.dropna().unique()[:3]:
         assert f"{w:.4g}" in html
+
+
+def test_the_first_screen_says_which_models_keep_the_modes(compared):
+    """The line under the scoreboard (before the figures) counts, per method, the matched modes and those with
+    MAC >= 0.9, from the same data as the structure table and the modes table."""
+    html = (compared / "index.html").read_text(encoding="utf-8")
+    start = html.index('<p class="glance">')
+    assert start < html.index('id="figures"')
+    line = html[start:html.index("</p>", start)]
+    s = pd.read_csv(compared / "modes_8_structure.csv").set_index("method")
+    modes = pd.read_csv(compared / "modes_8.csv")
+    for m in ("modal", "krylov", "bt", "irka"):
+        mac = modes[(modes.method == m) & (modes.status == "matched")].mac
+        if len(mac) == int(s.loc[m, "matched"]):  # every matched mode shown in the table: count it from there
+            assert int(s.loc[m, "mac_kept"]) == int((mac >= 0.9).sum())
+        assert (f"{m} (r = {int(s.loc[m, 'r'])}): {int(s.loc[m, 'matched'])} matched, MAC ≥ 0.9 on "
+                f"{int(s.loc[m, 'mac_kept'])}, {int(s.loc[m, 'spurious'])} spurious") in line
+    assert f"so_h2 (r = {int(s.loc['so_h2', 'r'])}): " in line and "no lift, no MAC" in line
+    assert "Structure kept: " in line and "modal" in line.split("Structure kept: ")[1]

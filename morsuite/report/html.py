@@ -37,6 +37,7 @@ from numbers import Integral, Real
 from pathlib import Path
 
 __all__ = ["TEMPLATES", "template_digest", "cell", "table_view", "MARKS", "SCOREBOARD_MEASURES", "scoreboard_view",
+           "modes_glance",
            "headline", "modes_view", "pole_svg", "render_study", "render_index"]
 
 #: the folder of the page templates (package data)
@@ -240,6 +241,36 @@ def modes_view(modes) -> dict | None:
     return view
 
 
+_BROKEN = {"M_spd": "M_r not SPD", "K_spd": "K_r not SPD", "D_psd": "D_r not PSD", "stable": "unstable"}
+
+
+def modes_glance(modes) -> str:
+    """One line for the first screen of a page, under the scoreboard: how many of the full model's modes in
+    the band each reduced model keeps (matched in frequency, and with MAC at or above ``glance_mac`` where
+    it has a lift) and which keep the structure (symmetric positive definite mass and stiffness,
+    semidefinite damping, stable; first-order models: stable). Read from ``modes["structure"]`` and
+    ``modes["info"]`` (:func:`morsuite.studies.modes.compute_modes`: ``modes_in_band``, ``glance_mac``);
+    "" without them."""
+    rows = (modes or {}).get("structure") or []
+    info = (modes or {}).get("info") or {}
+    n, level = info.get("modes_in_band"), info.get("glance_mac", 0.9)
+    if not rows or not n:
+        return ""
+    kept, phys, broke = [], [], []
+    for r in rows:
+        shape = "no lift, no MAC" if r.get("mac_kept") is None else f"MAC ≥ {level:g} on {r['mac_kept']}"
+        kept.append(f"{r['method']} (r = {r['r']}): {r['matched']} matched, {shape}, {r['spurious']} spurious")
+        checks = ("M_spd", "K_spd", "D_psd", "stable") if r.get("kind") == "second-order" else ("stable",)
+        bad = [_BROKEN[c] for c in checks if r.get(c) is False]
+        (broke if bad else phys).append(r["method"] + (f" ({', '.join(bad)})" if bad else ""))
+    text = f"Modes: of the full model's {n} in the band, " + "; ".join(kept) + "."
+    if phys:
+        text += " Structure kept: " + ", ".join(phys) + "."
+    if broke:
+        text += " Not kept: " + ", ".join(broke) + "."
+    return text
+
+
 _COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22")
 
 
@@ -328,7 +359,7 @@ def render_study(page: dict) -> str:
         poles["svg"] = markupsafe.Markup(poles["svg"])  # built here from numbers and escaped labels only
     return _environment().get_template("study.html.j2").render(
         page=page, tables=tables, boards=boards, marks=MARKS, modes=modes_view(modes), poles=poles,
-        modes_note=modes.get("note") or "")
+        modes_note=modes.get("note") or "", glance=modes_glance(modes))
 
 
 def render_index(index: dict) -> str:

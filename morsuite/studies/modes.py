@@ -34,7 +34,7 @@ import numpy as np
 
 from ..errors import ConvergenceWarning
 
-__all__ = ["MAX_MODES", "MODES_MAXITER", "MODES_TOL", "MODES_COLUMNS", "STRUCTURE_COLUMNS", "compute_modes"]
+__all__ = ["MAX_MODES", "MODES_MAXITER", "MODES_TOL", "GLANCE_MAC", "MODES_COLUMNS", "STRUCTURE_COLUMNS", "compute_modes"]
 
 #: the full model's modes a table shows: those some reduced model matches, then the lowest others, at most
 #: this many; also the cap of the poles computed per shift (``max_poles`` of
@@ -56,9 +56,12 @@ MODES_MAXITER = 30
 #: columns of the modes table (and of the page's rows)
 MODES_COLUMNS = ["model", "method", "r", "mode", "status", "full_frequency", "reduced_frequency",
                  "rel_frequency_error", "full_damping", "damping_error", "mac"]
+#: the MAC at or above which a matched mode counts as kept in shape (``mac_kept`` of the structure table and
+#: the page's line at a glance under the scoreboard); a common acceptance level in test-analysis correlation
+GLANCE_MAC = 0.9
 #: columns of the structure table
 STRUCTURE_COLUMNS = ["model", "method", "r", "kind", "symmetric", "M_spd", "K_spd", "D_psd", "stable",
-                     "lift", "matched", "missing", "spurious", "worse_than_zero"]
+                     "lift", "matched", "missing", "spurious", "mac_kept", "worse_than_zero"]
 
 
 def _num(x):
@@ -129,10 +132,12 @@ def compute_modes(scene, study, res) -> dict:
                          "mac": value})
         checks = structure_checks(rom)
         counts = df["status"].value_counts()
+        macs = [row["mac"] for row in rows if row["method"] == method and row["mac"] is not None]
         zero = res.summary_row(scene.model, method, r, scene.grid).get("worse_than_zero")
         structure.append({"model": scene.model, "method": method, "r": int(r), "kind": rom.kind,
                           **{k: checks.get(k) for k in ("symmetric", "M_spd", "K_spd", "D_psd", "stable")},
                           "lift": lift, **{k: int(counts.get(k, 0)) for k in ("matched", "missing", "spurious")},
+                          "mac_kept": sum(1 for v in macs if v >= GLANCE_MAC) if lift else None,
                           "worse_than_zero": zero or ""})
         poles.append(_pole_list(f"{method} r = {r}", rm))
     shown = _shown_modes(matched, in_band)
@@ -148,7 +153,7 @@ def compute_modes(scene, study, res) -> dict:
                   else f"{MAX_MODES} poles per shift and {MODES_MAXITER} restarts")
         notes.append(f"the full model's list may miss modes in the band (the eigensolver's budget, {budget}, "
                      "was reached)")
-    info = {"band": list(band), "modes_in_band": int(in_band.size), "time_s": t_full,
+    info = {"band": list(band), "modes_in_band": int(in_band.size), "time_s": t_full, "glance_mac": GLANCE_MAC,
             **{k: full.info.get(k) for k in ("lu_count", "shifts", "covered", "max_residual", "method")}}
     how = ("from the undamped modes under Rayleigh damping, the lowest from the band's lower edge up"
            if full.info.get("method") == "proportional"
