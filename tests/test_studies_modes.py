@@ -99,3 +99,20 @@ def test_the_first_screen_says_which_models_keep_the_modes(compared):
                 f"{int(s.loc[m, 'mac_kept'])}, {int(s.loc[m, 'spurious'])} spurious") in line
     assert f"so_h2 (r = {int(s.loc['so_h2', 'r'])}): " in line and "no lift, no MAC" in line
     assert "Structure kept: " in line and "modal" in line.split("Structure kept: ")[1]
+
+
+def test_a_cached_rerun_takes_the_modes_from_the_cache(compared, monkeypatch):
+    """A second run of the same study reads the modes data from the cache (no eigensolve: a cached re-run
+    stays cheap) and writes the same tables and the same line at a glance."""
+    import morsuite.analysis.modes as am
+
+    before = [(compared / f).read_text() for f in ("modes_8.csv", "modes_8_structure.csv")]
+    glance = lambda: (compared / "index.html").read_text(encoding="utf-8").split('<p class="glance">')[1].split("</p>")[0]
+    line = glance()
+
+    def no_eigensolve(*args, **kwargs):
+        raise AssertionError("the modes were recomputed")
+    monkeypatch.setattr(am, "model_modes", no_eigensolve)
+    ms.studies.run(compared / "compare_dsms_g40.toml", out=compared.parent, quiet=True, jobs=1)
+    assert [(compared / f).read_text() for f in ("modes_8.csv", "modes_8_structure.csv")] == before
+    assert glance() == line

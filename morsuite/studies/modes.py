@@ -34,7 +34,8 @@ import numpy as np
 
 from ..errors import ConvergenceWarning
 
-__all__ = ["MAX_MODES", "MODES_MAXITER", "MODES_TOL", "GLANCE_MAC", "MODES_COLUMNS", "STRUCTURE_COLUMNS", "compute_modes"]
+__all__ = ["MAX_MODES", "MODES_MAXITER", "MODES_TOL", "GLANCE_MAC", "MODES_COLUMNS", "STRUCTURE_COLUMNS", "compute_modes",
+           "modes_key"]
 
 #: the full model's modes a table shows: those some reduced model matches, then the lowest others, at most
 #: this many; also the cap of the poles computed per shift (``max_poles`` of
@@ -72,6 +73,29 @@ def _num(x):
 def _pole_list(label, result):
     return {"label": label, "real": [float(v) for v in result.poles.real],
             "imag": [float(v) for v in result.poles.imag]}
+
+
+def modes_key(scene, study, res) -> str | None:
+    """The cache key of a ``modes`` scene's data: the model, the band, the scene's methods with the cache
+    keys of their reductions (a new reduced model is a new key) and their ``worse_than_zero`` flags, the
+    report's eigensolver settings, the
+    numerical code (:func:`~morsuite.studies.cache.cache_key`) and this module's source. None when a
+    reduction has no key (then nothing is cached)."""
+    from .cache import cache_key, source_digest
+
+    entry = study.models[scene.model]
+    reds = []
+    for method in scene.methods:
+        r = scene.rs_of(method)[0]
+        red = res.reduction(scene.model, method, r) or {}
+        if "error" not in red and not red.get("key"):
+            return None
+        zero = res.summary_row(scene.model, method, r, scene.grid).get("worse_than_zero")
+        reds.append([method, int(r), red.get("key"), red.get("error"), zero])
+    grid = study.grids[scene.grid]
+    return cache_key("modes", model=str(entry.source), band=list(grid.bounds_for(entry)[:2]), reductions=reds,
+                     settings=[MAX_MODES, MODES_TOL, MODES_MAXITER, GLANCE_MAC],
+                     source=source_digest("studies/modes.py"))
 
 
 def compute_modes(scene, study, res) -> dict:

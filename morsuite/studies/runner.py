@@ -190,7 +190,7 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
                           {k: v for k, v in e.items() if k not in METRIC_ARRAYS})
     _store_new(cache, plan, computed, norms, norm_errors, missing_norms, sims, sim_errors, missing_sims)
     res = Results(study, plan, foms, reductions, metrics, norms, norm_errors, sims, sim_errors)
-    _modes(study, res)
+    _modes(study, res, cache)
 
     # -- outputs: figures and tables, each reused when its content did not change
     t1 = time.perf_counter()
@@ -244,14 +244,23 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
     return RunResult(study, outdir, manifest, summary, files, notes)
 
 
-def _modes(study, res):
-    """The ``modes`` scenes' data (a few LUs of the full model each, in this process); the first is the
-    page's modes section."""
-    from .modes import compute_modes
+def _modes(study, res, cache=None):
+    """The ``modes`` scenes' data (a few LUs of the full model each, in this process), taken from ``cache``
+    when it holds them (:func:`morsuite.studies.modes.modes_key`); the first is the page's modes section."""
+    from .modes import compute_modes, modes_key
 
     for scene in study.scenes:
         if scene.kind == "modes":
-            res.modes_of[scene.name] = compute_modes(scene, study, res)
+            key = modes_key(scene, study, res)
+            hit = cache.get_json("modes", key) if cache is not None and key is not None else None
+            if hit is not None:
+                data = {k: v for k, v in hit.items() if k != "key"}
+                data["info"] = {**data.get("info", {}), "cached": True}
+            else:
+                data = compute_modes(scene, study, res)
+                if cache is not None and key is not None:
+                    cache.put_json("modes", key, data)
+            res.modes_of[scene.name] = data
             if res.modes is None:
                 res.modes = res.modes_of[scene.name]
 
