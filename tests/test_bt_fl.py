@@ -87,7 +87,7 @@ def test_band_factors_match_the_dense_closed_form(dsms20, dense, variable):
 
 def test_reducer_band_hsv_match_dense(dsms20, dense):
     N, E, Pb, Qb = dense
-    red = ms.reducers.make("bt-fl", dsms20, band=BAND)  # adaptive node count (default)
+    red = ms.reducers.make("bt-fl", dsms20, limited="both", band=BAND)  # adaptive node count (default)
     info = red.reduce(4).info
     hsv_ref = np.sqrt(np.linalg.eigvals(Pb @ E.T @ Qb @ E).real.clip(0))   # the dense band HSVs, unordered
     k, tol = 8, 10 * info["quad_tol"]
@@ -113,7 +113,7 @@ def test_lu_count_is_one_per_node_and_factors_are_kept(dsms20, monkeypatch):
 
     warm_kernels()  # its own small solves, once per process, before counting
     monkeypatch.setattr(SaddlePointSolver, "factor", counted)
-    red = ms.reducers.make("bt-fl", dsms20, band=BAND, nodes=48)
+    red = ms.reducers.make("bt-fl", dsms20, limited="both", band=BAND, nodes=48)
     first = red.reduce(3).info
     assert len(calls) == first["lu_count"] == first["lu_count_shared"] == first["nodes"] == 48
     assert np.all(np.real(calls[0][0]) == 0) and first["quad_change"] is None and first["converged"]
@@ -139,7 +139,7 @@ SUB_BAND = (0.3, 0.6)  # four of tcom(20)'s modes; BT spends its states on the t
 ])
 def test_band_error_at_most_that_of_bt(tcom20, form, orders):
     bt = ms.reducers.make("bt", tcom20, form=form)
-    fl = ms.reducers.make("bt-fl", tcom20, band=SUB_BAND, form=form)
+    fl = ms.reducers.make("bt-fl", tcom20, limited="both", band=SUB_BAND, form=form)
     for r in orders:
         e_bt = _band_error(tcom20, bt.reduce(r).rom, SUB_BAND)
         e_fl = _band_error(tcom20, fl.reduce(r).rom, SUB_BAND)
@@ -152,7 +152,7 @@ def test_first_order_fl_bt_need_not_be_stable(tcom20):
     exceeds bt's (measured: 2.0e2 against 4.3e1, the same with 128 or 256 nodes, in log(w) or w),
     which is said by a StabilityWarning and info["stable"]; the stable fv level is then the choice."""
     with pytest.warns(ms.StabilityWarning, match="does not preserve stability"):
-        info = ms.reducers.make("bt-fl", tcom20, band=SUB_BAND).reduce(4).info
+        info = ms.reducers.make("bt-fl", tcom20, limited="both", band=SUB_BAND).reduce(4).info
     assert info["stable"] is False and info["unstable_poles"] >= 1
 
 
@@ -169,7 +169,7 @@ def test_one_sided_is_stable_and_beats_bt_where_two_sided_does_not(tcom20, monke
     bt = ms.reducers.make("bt", tcom20)
     bt.reduce(4)  # its LR-ADI (and the kernels' warm-up) before counting
     monkeypatch.setattr(SaddlePointSolver, "factor", counted)
-    fl = ms.reducers.make("bt-fl", tcom20, band=SUB_BAND, limited="controllability")
+    fl = ms.reducers.make("bt-fl", tcom20, band=SUB_BAND)  # the default since 2026-11-27
     info = fl.reduce(4).info  # every LU counted: the quadrature's nodes and a fresh LR-ADI run (observability)
     assert info["lu_count"] == info["lu_count_shared"] == len(calls) > info["nodes_evaluated"]
     for r in (4, 6, 8, 10):
@@ -182,7 +182,7 @@ def test_default_band_is_the_models_and_every_form_reduces(dsms20):
     for form in ("first-order", "pp", "pv", "vp", "vv", "fv"):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ms.StabilityWarning)
-            res = ms.reducers.make("bt-fl", dsms20, form=form, nodes=64).reduce(3)
+            res = ms.reducers.make("bt-fl", dsms20, limited="both", form=form, nodes=64).reduce(3)
         assert res.info["band"] == list(dsms20.band) and res.info["form"] == form
         assert res.rom.order == 3 and res.info["error_bound"] is None
 
@@ -191,7 +191,7 @@ def test_mimo_model():
     fom = ms.models.dsms(g=40)  # m = 1, p = 3; and a two-input one:
     fom2 = ms.models.Index3Model(fom.M, fom.D, fom.K, fom.G, np.hstack([fom.F, fom.L[:1].T]), fom.L,
                                  band=fom.band)
-    res = ms.reducers.make("bt-fl", fom2, nodes=64).reduce(6)
+    res = ms.reducers.make("bt-fl", fom2, limited="both", nodes=64).reduce(6)
     assert res.rom.transfer(0.3j).shape == (3, 2)
     assert res.info["factor_columns"] == {"controllability": 2 * 2 * 64, "observability": 2 * 3 * 64}
 
@@ -220,12 +220,12 @@ def test_bad_options_are_refused(dsms20):
     with pytest.raises(ms.OptionError, match="unknown option"):
         ms.reducers.make("bt-fl", dsms20, tol=1e-10)
     # w1 = 0 is a low-pass band: the automatic variable is then linear
-    info = ms.reducers.make("bt-fl", dsms20, band=(0.0, 0.5), nodes=64).reduce(2).info
+    info = ms.reducers.make("bt-fl", dsms20, limited="both", band=(0.0, 0.5), nodes=64).reduce(2).info
     assert info["variable"] == "linear"
 
 
 def test_cap_warns_and_says_so(dsms20):
     with pytest.warns(ms.ConvergenceWarning, match="max_nodes"):
-        info = ms.reducers.make("bt-fl", dsms20, band=BAND, nodes_start=4, max_nodes=8).reduce(2).info
+        info = ms.reducers.make("bt-fl", dsms20, limited="both", band=BAND, nodes_start=4, max_nodes=8).reduce(2).info
     assert info["status"] == "cap" and not info["converged"] and info["nodes"] == 8
     assert info["quad_change"] > info["quad_tol"]

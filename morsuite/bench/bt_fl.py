@@ -38,7 +38,7 @@ ORDERS = (4, 6, 8, 10)
 
 def _variants(band):
     """(label, options) of the compared runs: bt, bt-fl (two-sided), bt-fl with limited='controllability'."""
-    return [("bt", {"gramian_cache": "reducer"}), ("bt-fl", {"band": band}),
+    return [("bt", {"gramian_cache": "reducer"}), ("bt-fl", {"band": band, "limited": "both"}),
             ("bt-fl one-sided", {"band": band, "limited": "controllability"})]
 
 

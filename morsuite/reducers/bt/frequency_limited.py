@@ -66,7 +66,9 @@ The factors are kept on the reducer: later ``reduce(r)`` calls cost the projecti
 There is no error bound (``error_bound`` None): FL-BT is judged by its band error, and
 its first-order reduced models need not be stable (a :class:`StabilityWarning` says so).
 
-``limited="controllability"``: only :math:`P_\Omega` is band-limited; :math:`Q` is the
+``limited="controllability"`` (the default since 2026-11-27; ``"both"`` is the two-sided
+FL-BT of the literature, whose first-order models were unstable at every order on
+tcom(2000) on a sub-band: ``docs/design/bt_fl.md``): only :math:`P_\Omega` is band-limited; :math:`Q` is the
 full observability Gramian from a fresh LR-ADI run with ``bt``'s ADI defaults
 (:func:`~morsuite.linalg.gramians.gramian_factors`, its LUs counted in ``lu_count``).
 This is Enns' one-sided frequency weighting: in the balanced basis :math:`Q` still
@@ -262,9 +264,10 @@ class BTFL(SquareRootBT):
                           "(caps r)", low=0, high=1, open_high=True),
         "solver_threads": Option(0, "int", "threads that factor and solve nodes concurrently (0: 2 on two or "
                                  "more cores, 1 for KLU)", low=0),
-        "limited": Option("both", "choice", "which Gramians are band-limited: both (FL-BT), or only the "
-                          "controllability one with the full observability Gramian from bt's LR-ADI (Enns' "
-                          "one-sided weighting: first-order models stable)", choices=("both", "controllability")),
+        "limited": Option("controllability", "choice", "which Gramians are band-limited: only the "
+                          "controllability one, with the full observability Gramian from bt's LR-ADI (default; "
+                          "Enns' one-sided weighting: first-order models stable), or both (the two-sided FL-BT "
+                          "of the literature: no stability guarantee)", choices=("controllability", "both")),
     }
 
     def __init__(self, fom, **options):
