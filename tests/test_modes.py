@@ -9,7 +9,8 @@ import scipy.linalg as sla
 
 import morsuite as ms
 from morsuite.errors import InputError, ShapeError
-from morsuite.linalg.eigen import constrained_modes, damped_poles
+from morsuite.linalg.eigen import constrained_modes
+from morsuite.linalg.poles import damped_poles
 from support import assert_sets_close, dense_modes
 
 
@@ -88,15 +89,15 @@ def test_proportional_damping_detection(block, tcom):
     """Rayleigh coefficients recovered to rounding where D = alpha M + beta K was assembled (the block:
     0.001, 0.01; the DSMS: D = 2.5 K), None where it is not (the TCOM; the block with one entry of D
     perturbed by 1e-9 of its norm), and proportional=True refused there."""
-    a, b = ms.linalg.eigen.proportional_damping(block)
+    a, b = ms.linalg.poles.proportional_damping(block)
     assert abs(a - 1e-3) < 1e-12 and abs(b - 1e-2) < 1e-12
-    a, b = ms.linalg.eigen.proportional_damping(ms.models.dsms(g=60))
+    a, b = ms.linalg.poles.proportional_damping(ms.models.dsms(g=60))
     assert abs(a) < 1e-12 and abs(b - 2.5) < 1e-12
-    assert ms.linalg.eigen.proportional_damping(tcom) is None
+    assert ms.linalg.poles.proportional_damping(tcom) is None
     D = block.D.tolil(copy=True)
     D[3, 3] += 1e-9 * abs(block.D).max()
     bent = ms.models.Index3Model(block.M, D.tocsr(), block.K, block.G, block.F, block.L, band=block.band)
-    assert ms.linalg.eigen.proportional_damping(bent) is None
+    assert ms.linalg.poles.proportional_damping(bent) is None
     with pytest.raises(InputError, match="proportional=True"):
         damped_poles(tcom, (0.05, 1.0), proportional=True)
 
@@ -134,7 +135,7 @@ def test_match_modes_reports_missing_and_spurious(tcom):
     rom = ms.reducers.make("modal", tcom, static_correction=False).reduce(3).rom
     red = ms.analysis.rom_modes(rom, band)
     # a spurious pole: the reduced poles moved by 20 %
-    moved = ms.linalg.eigen.PolesResult(red.poles * 1.2, red.shapes, red.frequencies * 1.2, red.damping,
+    moved = ms.linalg.poles.PolesResult(red.poles * 1.2, red.shapes, red.frequencies * 1.2, red.damping,
                                         red.in_band, red.residuals, red.info)
     t = ms.analysis.match_modes(full, moved, band)
     n_in = int(full.in_band.sum())

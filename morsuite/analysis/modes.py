@@ -4,7 +4,7 @@ What engineers check before they trust a reduced model (issue 35), as data:
 
 - :func:`model_modes`: the full model's poles in and near a band, with damping ratios and
   right mode shapes (shift-invert Arnoldi on saddle solves,
-  :func:`morsuite.linalg.eigen.damped_poles`; a few LUs), memoised per model and band.
+  :func:`morsuite.linalg.poles.damped_poles`; a few LUs), memoised per model and band.
 - :func:`rom_modes`: a reduced model's poles and, where it has a lift ``rom.basis`` (a
   projection-based model, either order), its mode shapes lifted to the full model, :math:`Vq`.
 - :func:`match_modes`: the two sets matched by pole distance (optimal assignment), with
@@ -26,7 +26,7 @@ from scipy.optimize import linear_sum_assignment
 
 from ..errors import InputError, ShapeError
 from ..utils import band_pair
-from ..linalg.eigen import PolesResult, damped_poles
+from ..linalg.poles import PolesResult, damped_poles
 from ..rom import FirstOrderROM, SecondOrderROM
 
 __all__ = ["model_modes", "rom_modes", "match_modes", "mac", "structure_checks"]
@@ -49,7 +49,7 @@ def model_modes(fom, band=None, **options) -> PolesResult:
     band : (w1, w2), optional
         rad/s; default ``fom.band``.
     **options
-        Passed to :func:`morsuite.linalg.eigen.damped_poles` (``k``, ``shifts``, ``n_shifts``,
+        Passed to :func:`morsuite.linalg.poles.damped_poles` (``k``, ``shifts``, ``n_shifts``,
         ``max_poles``, ``tol``).
 
     Returns

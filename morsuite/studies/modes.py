@@ -39,17 +39,17 @@ __all__ = ["MAX_MODES", "MODES_MAXITER", "MODES_TOL", "GLANCE_MAC", "MODES_COLUM
 
 #: the full model's modes a table shows: those some reduced model matches, then the lowest others, at most
 #: this many; also the cap of the poles computed per shift (``max_poles`` of
-#: :func:`~morsuite.linalg.eigen.damped_poles`): a lightly damped model has hundreds in its band
+#: :func:`~morsuite.linalg.poles.damped_poles`): a lightly damped model has hundreds in its band
 #: (406 on the DSMS g = 600, 80 s), and a report needs the dominant few at a few percent of its time.
 #: The Arnoldi asks for this many from the start (``k``): a first run at 10 and a rerun at the cap cost
 #: 3301 solves for 10 poles on the DSMS g = 600, one run at 24 cost 1966 for 24 (2.0-2.4x faster; tcom(2000)
 #: 1.7x; fem_block(4000) 0.86x; one run, load 7, 2026-11-27)
 MAX_MODES = 24
 #: ARPACK's relative accuracy of the full model's poles in a report (``tol`` of
-#: :func:`~morsuite.linalg.eigen.damped_poles`; its default 0, machine precision, took 3x the solves on the
+#: :func:`~morsuite.linalg.poles.damped_poles`; its default 0, machine precision, took 3x the solves on the
 #: clustered spectrum of the DSMS g = 600, 2026-11-27): frequencies to about 1e-9, residuals are reported
 MODES_TOL = 1e-9
-#: ARPACK's restarts per run in a report (``maxiter`` of :func:`~morsuite.linalg.eigen.damped_poles`): the
+#: ARPACK's restarts per run in a report (``maxiter`` of :func:`~morsuite.linalg.poles.damped_poles`): the
 #: DSMS g = 6000 took 84,000 solves (138 s, loaded machine) for 3 poles in its band without a cap; a pole
 #: not converged within it is left out and the note says the list may be incomplete
 MODES_MAXITER = 30

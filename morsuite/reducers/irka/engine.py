@@ -189,12 +189,10 @@ class IRKABase(Reducer):
     def _project(self, V, W) -> SecondOrderROM:
         """The reduced model W^T (M, D, K) V, W^T F, L V, with its lift (:meth:`_lift`)."""
         M, D, K, F, L = self._system()
-        return SecondOrderROM(W.T @ (M @ V), W.T @ (D @ V), W.T @ (K @ V), W.T @ F, L @ V,
-                              basis=self._lift(V))
+        return SecondOrderROM(W.T @ (M @ V), W.T @ (D @ V), W.T @ (K @ V), W.T @ F, L @ V, basis=self._lift(V))
 
     def _lift(self, V):
-        """The right basis V in the index-3 model's positions (the reduced model's ``basis``):
-        V itself here; the projected IRKA maps it back from null(G) coordinates."""
+        """The right basis in the index-3 model's positions (``rom.basis``); projected IRKA maps it back."""
         return V
 
     def _realization(self, rom):
