@@ -34,8 +34,10 @@ import scipy.linalg as sla
 from ...errors import InputError
 from .poles import Coordinates, PoleEvaluation, _real_modal, chord_step, evaluate, relative_gradient
 from .poles_descent import varpro_descent
+from .starts import standard_realization
 
-__all__ = ["SimoCoordinates", "SimoModalValues", "SimoFullValues", "simo_evaluate", "simo_optimal_residues", "simo_descent",
+__all__ = ["SimoCoordinates", "SimoModalValues", "SimoFullValues", "simo_evaluate", "simo_optimal_residues",
+           "simo_descent",
            "simo_second_order_of", "simo_phase"]
 
 
@@ -220,10 +222,12 @@ class SimoFullValues:
         return t0, t1, None
 
 
-def simo_evaluate(co: SimoCoordinates, x, target, *, hessian: bool = True, values=None) -> PoleEvaluation | None:
+def simo_evaluate(co: SimoCoordinates, x, target, *, hessian: bool = True, values=None,
+                  precise: bool = True) -> PoleEvaluation | None:
     """J and its derivatives at x (module docstring: the outputs' SISO evaluations assembled); None
     outside the domain. Where the pole-residue value of J is below ten of its floors and the target has a
-    cancellation-free value (:meth:`SimoModalValues.precise`), J and its floor are that value's."""
+    cancellation-free value (:meth:`SimoModalValues.precise`), J and its floor are that value's (``precise``;
+    False keeps the pole-residue value, for intermediate evaluations)."""
     if not co.valid(x):
         return None
     lam = co.split(x)[0]
@@ -247,7 +251,7 @@ def simo_evaluate(co: SimoCoordinates, x, target, *, hessian: bool = True, value
             H[np.ix_(idx, idx)] += ev.H[np.ix_(order, order)]
         J += ev.value
         floor += ev.floor
-    if not J > 10.0 * floor and hasattr(target, "precise"):
+    if precise and not J > 10.0 * floor and hasattr(target, "precise"):
         # the pole-residue value is rounding (errors near sqrt(eps) ||T||): the cancellation-free one, so that
         # the relative gradient and the trust region's decisions see J
         J, floor = target.precise(co, x)
@@ -260,7 +264,7 @@ def simo_optimal_residues(co: SimoCoordinates, x, target, *, hessian: bool = Tru
     if not co.valid(x):
         return None
     vals = target.values(-co.split(x)[0], second=hessian)
-    ev = simo_evaluate(co, x, target, hessian=False, values=vals)
+    ev = simo_evaluate(co, x, target, hessian=False, values=vals, precise=False)
     y = ~co.lam_mask
     try:
         dy = -np.linalg.solve(ev.G[np.ix_(y, y)], ev.g[y])
@@ -337,7 +341,8 @@ def simo_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
     steps against the full model (its gradient, one LU per pole pair; the surrogate's Hessian) until the
     full model's relative gradient is at most ``gtol`` or ``chord_maxit`` steps or no step decreases J
     beyond twice its floor (where J is below ten floors of the pole-residue formula: no step decreases the
-    relative gradient, whose :math:`\|E\|^2` is then the surrogate's cancellation-free value); then the second-order realization (:func:`simo_second_order_of`).
+    relative gradient, whose :math:`\|E\|^2` is then the surrogate's cancellation-free value); then the
+    second-order realization (:func:`simo_second_order_of`).
 
     Ties between starts (results equal to the surrogate's floor, as every start reaches the same
     minimum) are broken by the order of ``order``, not by rounding: a start replaces an earlier one only
@@ -347,7 +352,7 @@ def simo_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
     tv = SimoModalValues(sur)
     runs, results = {}, {}
     for label in list(order)[:starts]:
-        A, B, C = _standard(roms[label])
+        A, B, C = standard_realization(roms[label])
         try:
             co, x = SimoCoordinates.of_model(A, B, C)
             ev, its, reason, hist = simo_descent(co, x, tv, maxit=min(probe, maxit), gtol=1e-3 * gtol)
@@ -363,7 +368,7 @@ def simo_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
 
     def pick():
         best, bv = None, None
-        for label in order:              # the order of the candidates breaks ties (module docstring)
+        for label in order:              # the order of the candidates breaks ties (docstring)
             if label not in results:
                 continue
             v = scores[label]
@@ -440,7 +445,3 @@ def simo_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
 #: relative margin by which a start's surrogate value must beat an earlier one's (beyond their floors)
 TIE = 1e-9
 
-
-def _standard(rom):
-    from .starts import standard_realization
-    return standard_realization(rom)

@@ -13,9 +13,9 @@ Sato, arXiv 1803.04097; Schwerdtner and Voigt's SOBMOR, arXiv 2011.07567).
    get an exact error (:func:`.h2_decision.decision_h2`, r LUs each).
 2. **Descent** (``descent``). ``"varpro"`` (one input, ``parametrization="general"``; the
    default there; several outputs: :mod:`~morsuite.reducers.h2.simo`): a second-order model of
-   order r is a first-order one of degree 2r whose residues sum to zero (:mod:`morsuite.reducers.h2.poles`); from the ``starts`` candidates,
-   variable projection (the residues by one linear solve) and trust-region Newton over the
-   poles against :math:`T_N` (:mod:`morsuite.reducers.h2.poles_descent`), then chord steps on
+   order r is a first-order one of degree 2r whose residues sum to zero
+   (:mod:`morsuite.reducers.h2.poles`); from the ``starts`` candidates, variable projection (the
+   residues by one linear solve) and trust-region Newton over the poles against :math:`T_N` (:mod:`morsuite.reducers.h2.poles_descent`), then chord steps on
    the full model's gradient (r LUs each, at most ``chord_maxit``) (:mod:`~morsuite.reducers.h2.siso`).
    ``"lbfgs"`` (the default otherwise): monotone preconditioned L-BFGS in the entries of
    :math:`\hat K, \hat D, \hat F, \hat L` against :math:`T_N`, then at most ``full_maxit``
@@ -28,7 +28,11 @@ Sato, arXiv 1803.04097; Schwerdtner and Voigt's SOBMOR, arXiv 2011.07567).
    limit was reached first), ``"stalled"`` (no further decrease at the objective's accuracy,
    or the result was worse than the start, which is then returned) or ``"skipped"`` (the
    start's exact error is below what the formula resolves: its floor above ``resolution``
-   of it; the start is returned with an :class:`~morsuite.errors.AccuracyWarning`).
+   of it; or the surrogate's error of the start differs from the exact one by more than
+   ``SURROGATE_MISMATCH`` of it, so that the surrogate does not resolve the model at that error:
+   the DSMS from r = 18; the start is returned with an :class:`~morsuite.errors.AccuracyWarning`).
+   :math:`\|E\|^2` in :math:`\rho` is the exact evaluator's where the pole-residue value is rounding
+   (``info["relative_gradient_norm"]``).
    Anything but ``"converged"`` comes with ``converged=False`` and a warning.
 
 The result is never worse than the start in exact H2 error (:func:`.h2_decision.decision_h2`).
@@ -106,7 +110,8 @@ class SOH2(Reducer):
                              "(its LUs are counted)"),
         "descent": Option("auto", "choice", "varpro: pole-residue variable projection and Newton (one "
                           "input, general parametrization; several outputs: reducers/h2/simo.py); lbfgs: "
-                          "L-BFGS in the parametrization's entries; auto: varpro where it applies", choices=("auto", "varpro", "lbfgs")),
+                          "L-BFGS in the parametrization's entries; auto: varpro where it applies",
+                          choices=("auto", "varpro", "lbfgs")),
         "gtol": Option(1e-4, "float", "converged when the relative gradient ||Pi E|| / ||E|| against the full "
                        "model is at most this", low=0, high=1, open_low=True, open_high=True),
         "starts": Option(5, "int", "varpro: candidates (best by surrogate error first) descended from", low=1),
