@@ -71,7 +71,7 @@ def _tr_step(S, D, g, radius):
     return p, -(g @ p + 0.5 * p @ (S @ p))
 
 
-def varpro_descent(co: Coordinates, x, target, *, maxit: int = 300, gtol: float = 1e-8):
+def varpro_descent(co: Coordinates, x, target, *, maxit: int = 300, gtol: float = 1e-8, optimal=optimal_residues):
     r"""Trust-region Newton over the poles alone, the residues eliminated (variable projection):
     :math:`J(\lambda) = \min_\varphi J(\lambda, \varphi)`, gradient :math:`g_\lambda` at the optimal
     residues, Hessian the Schur complement :math:`S = H_{\lambda\lambda} - H_{\lambda\varphi}
@@ -82,8 +82,10 @@ def varpro_descent(co: Coordinates, x, target, *, maxit: int = 300, gtol: float 
     decrease (below the pole-residue formula's rounding, J is compared without its cancellation
     where the target can, else the relative gradient must decrease). Stops when the relative gradient
     is at most ``gtol`` (``"converged"``), when the radius has shrunk below 1e-12 of the start's
-    (``"stalled"``), or at ``maxit`` (``"cap"``). Returns ``(evaluation, iterations, reason, history)``."""
-    ev = optimal_residues(co, x, target)
+    (``"stalled"``), or at ``maxit`` (``"cap"``). ``optimal``: the variable projection (coordinates, x,
+    target) -> evaluation (:func:`~morsuite.reducers.h2.poles.optimal_residues`; the SIMO one of
+    :mod:`~morsuite.reducers.h2.simo`). Returns ``(evaluation, iterations, reason, history)``."""
+    ev = optimal(co, x, target)
     if ev is None:
         raise InputError("the start is outside the domain (unstable, or a pair on the real axis)")
     lm = co.lam_mask
@@ -106,7 +108,7 @@ def varpro_descent(co: Coordinates, x, target, *, maxit: int = 300, gtol: float 
         accepted = None
         while radius > 1e-12 * r0:
             p, pred = _tr_step(S, D, gl, radius)
-            trial = optimal_residues(co, ev.x + Zl @ p, target)
+            trial = optimal(co, ev.x + Zl @ p, target)
             if trial is None:
                 radius *= 0.25
                 continue

@@ -11,11 +11,11 @@ Sato, arXiv 1803.04097; Schwerdtner and Voigt's SOBMOR, arXiv 2011.07567).
    :math:`T_N` (first-order BT of the cached Gramian factors, at most ``surrogate_tol``
    times the best candidate's error from the model); those the surrogate cannot separate
    get an exact error (:func:`.h2_decision.decision_h2`, r LUs each).
-2. **Descent** (``descent``). ``"varpro"`` (SISO, ``parametrization="general"``; the
-   default there): a second-order model of order r is a first-order one of degree 2r whose
-   residues sum to zero (:mod:`morsuite.reducers.h2.poles`); from the ``starts`` candidates,
-   variable projection (the residues by one linear solve) and trust-region Newton over the
-   poles against :math:`T_N` (:mod:`morsuite.reducers.h2.poles_descent`), then chord steps on
+2. **Descent** (``descent``). ``"varpro"`` (one input, ``parametrization="general"``; the
+   default there; several outputs: :mod:`~morsuite.reducers.h2.simo`): a second-order model of
+   order r is a first-order one of degree 2r whose residues sum to zero
+   (:mod:`morsuite.reducers.h2.poles`); from the ``starts`` candidates, variable projection (the
+   residues by one linear solve) and trust-region Newton over the poles against :math:`T_N` (:mod:`morsuite.reducers.h2.poles_descent`), then chord steps on
    the full model's gradient (r LUs each, at most ``chord_maxit``) (:mod:`~morsuite.reducers.h2.siso`).
    ``"lbfgs"`` (the default otherwise): monotone preconditioned L-BFGS in the entries of
    :math:`\hat K, \hat D, \hat F, \hat L` against :math:`T_N`, then at most ``full_maxit``
@@ -28,7 +28,11 @@ Sato, arXiv 1803.04097; Schwerdtner and Voigt's SOBMOR, arXiv 2011.07567).
    limit was reached first), ``"stalled"`` (no further decrease at the objective's accuracy,
    or the result was worse than the start, which is then returned) or ``"skipped"`` (the
    start's exact error is below what the formula resolves: its floor above ``resolution``
-   of it; the start is returned with an :class:`~morsuite.errors.AccuracyWarning`).
+   of it; or the surrogate's error of the start differs from the exact one by more than
+   ``SURROGATE_MISMATCH`` of it, so that the surrogate does not resolve the model at that error:
+   the DSMS from r = 18; the start is returned with an :class:`~morsuite.errors.AccuracyWarning`).
+   :math:`\|E\|^2` in :math:`\rho` is the exact evaluator's where the pole-residue value is rounding
+   (``info["relative_gradient_norm"]``).
    Anything but ``"converged"`` comes with ``converged=False`` and a warning.
 
 The result is never worse than the start in exact H2 error (:func:`.h2_decision.decision_h2`).
@@ -74,6 +78,7 @@ from ..base import Option, Reducer, register
 from ..h2_decision import decision_h2
 from .params import PARAMETRISATIONS
 from .siso import pole_phase
+from .simo import simo_phase
 from ..outcome import SetupLedger
 from .starts import LEVELS, STARTS, Surrogates, candidate_roms, standard_realization
 
@@ -83,6 +88,9 @@ __all__ = ["SOH2"]
 #: tcom(2000)); pv was never the best start, vp only on tcom(200) (docs/design/so_h2.md)
 DEFAULT_LEVELS = ("pp", "vv", "fv")
 ADI_OPTIONS = ("tol", "maxiter", "shifts", "num_shifts", "selection", "refine")
+#: the descent is skipped when the surrogate's H2 error of the start differs from its exact error by more than this
+#: fraction of it (the surrogate does not resolve the model at that error)
+SURROGATE_MISMATCH = 0.5
 #: start chosen when no candidate's exact error is resolved: the paper's level first
 PREFERENCE = ("vv", "pp", "vp", "pv", "fv", "irka")
 
@@ -100,9 +108,10 @@ class SOH2(Reducer):
                          "tuple of pp, pv, vp, vv, fv; each level costs one SVD of a product of the factors)"),
         "irka_start": Option(False, "bool", "include the paper's IRKA among the candidates of start='best' "
                              "(its LUs are counted)"),
-        "descent": Option("auto", "choice", "varpro: pole-residue variable projection and Newton (SISO, "
-                          "general parametrization); lbfgs: L-BFGS in the parametrization's entries; auto: "
-                          "varpro where it applies", choices=("auto", "varpro", "lbfgs")),
+        "descent": Option("auto", "choice", "varpro: pole-residue variable projection and Newton (one "
+                          "input, general parametrization; several outputs: reducers/h2/simo.py); lbfgs: "
+                          "L-BFGS in the parametrization's entries; auto: varpro where it applies",
+                          choices=("auto", "varpro", "lbfgs")),
         "gtol": Option(1e-4, "float", "converged when the relative gradient ||Pi E|| / ||E|| against the full "
                        "model is at most this", low=0, high=1, open_low=True, open_high=True),
         "starts": Option(5, "int", "varpro: candidates (best by surrogate error first) descended from", low=1),
@@ -168,9 +177,9 @@ class SOH2(Reducer):
         if o["parametrization"] == "passive" and o["start"] not in ("best", "fv"):
             raise InputError(f"parametrization='passive' starts from the fv level only (symmetric M, D, K); "
                              f"got start={o['start']!r}")
-        if o["descent"] == "varpro" and (self.fom.m != 1 or self.fom.p != 1 or o["parametrization"] != "general"):
-            raise InputError(f"descent='varpro' needs a SISO model and parametrization='general'; got m = "
-                             f"{self.fom.m}, p = {self.fom.p}, parametrization={o['parametrization']!r}")
+        if o["descent"] == "varpro" and (self.fom.m != 1 or o["parametrization"] != "general"):
+            raise InputError(f"descent='varpro' needs a single-input model and parametrization='general'; got "
+                             f"m = {self.fom.m}, parametrization={o['parametrization']!r}")
 
     # -- pieces ---------------------------------------------------------------
     def _labels(self):
@@ -334,7 +343,7 @@ class SOH2(Reducer):
         o, fom = self.options, self.fom
         if o["descent"] != "auto":
             return o["descent"]
-        return "varpro" if (fom.m == 1 and fom.p == 1 and o["parametrization"] == "general") else "lbfgs"
+        return "varpro" if (fom.m == 1 and o["parametrization"] == "general") else "lbfgs"
 
     def _reduce(self, r):
         o, fom = self.options, self.fom
@@ -358,13 +367,31 @@ class SOH2(Reducer):
         param = param_cls(start_rom.order, fom.m, fom.p)
         theta0 = param.from_rom(start_rom)
         descent = self._descent()
+        # the descents keep the order of their start: candidates of another order (capped by the Gramians'
+        # rank) are not descended from
+        order = [k for k in order if roms[k].order == start_rom.order]
         rec = {"iterations_surrogate": 0, "iterations_full": 0, "evaluations": 0, "refinements": 0,
                "history": [], "history_full": [], "stop_reason": None, "stop_reason_full": None, "surrogate": srec}
         theta, skipped, gnorm = theta0, None, None
+        e_sur = cands[start]["surrogate_h2_error"]
         if not resolved:
             skipped = (f"the start's exact H2 error {e0:.3e} is below the resolution of the objective (its "
                        f"floor {f0:.1e} > {o['resolution']:g} of it): returned unchanged")
             rec.update(stop_reason="skipped", stop_reason_full="skipped")
+        elif not abs(e_sur - e0) <= SURROGATE_MISMATCH * e0:
+            # the most accurate surrogate the Gramian factors give is farther from the model than the start's
+            # error (the DSMS from r = 18: 24 states, all Hankel values above hsv_tol): no descent against it
+            skipped = (f"the surrogate ({srec['states']} states) gives the start an H2 error of {e_sur:.3e}, its "
+                       f"exact error is {e0:.3e}: the surrogate does not resolve the model at this error; the "
+                       f"start is returned unchanged")
+            rec.update(stop_reason="skipped", stop_reason_full="skipped")
+        elif descent == "varpro" and fom.p > 1:
+            with blas_threads(1):
+                kdfl, prec = simo_phase(roms, order, sur, self._full, gtol=o["gtol"], maxit=o["newton_maxit"],
+                                        chord_maxit=o["chord_maxit"], starts=o["starts"])
+            rec.update(prec)
+            if kdfl is not None:
+                theta = np.concatenate([np.asarray(X, dtype=float).ravel() for X in kdfl])
         elif descent == "varpro":
             with blas_threads(1):
                 kdfl, prec = pole_phase(roms, order, sur, self._full, gtol=o["gtol"], maxit=o["newton_maxit"],
@@ -387,15 +414,16 @@ class SOH2(Reducer):
         if skipped:
             e, floor, st = e0, f0, {"rho": None, "value": e0 ** 2, "lu_count": 0}
         else:
-            st = full_stationarity(self._full, *standard_realization(rom))
             # the start returned unchanged: its exact evaluation stands (no second quadrature)
             e, floor, _ = (e0, f0, None) if returned_start else decision_h2(fom, rom, counter=self._decision_lus)
             if not returned_start and e > e0 + floor + f0:
                 # never worse than the start (at the decision's accuracy)
                 rec["stop_reason_full"] = f"result ({e:.6e}) worse than the start ({e0:.6e}): start returned"
                 theta, rom, returned_start = theta0, param.rom(theta0), True
-                st = full_stationarity(self._full, *standard_realization(rom))
                 e, floor, _ = decision_h2(fom, rom, counter=self._decision_lus)
+            # ||E||^2 for rho from the H2 evaluator where the pole-residue formula's value is rounding
+            st = full_stationarity(self._full, *standard_realization(rom),
+                                   reference=(e * e, 2.0 * e * floor + floor ** 2))
         rho = st["rho"]
         converged = bool(not skipped and rho is not None and rho <= o["gtol"])
         reasons = (rec.get("stop_reason"), rec.get("stop_reason_full"))
@@ -413,6 +441,7 @@ class SOH2(Reducer):
             "iterations": rec["iterations_surrogate"] + rec["iterations_full"],
             "converged": converged, "status": status, "relative_gradient": rho, "gtol": o["gtol"],
             "relative_gradient_pole_residue": st.get("rho_pole_residue"), "relative_gradient_form": st.get("rho_form"),
+            "relative_gradient_norm": st.get("value_form"),
             "gram_condition": st.get("gram_condition"),
             "gradient_norm": gnorm, "max_pole_real": float(np.max(rom.poles().real)),
             "lu_count": lu_gram + lu_irka + lu_exact,

@@ -113,7 +113,7 @@ def saddle_solver_refined(full, steps: int):
     return solves
 
 
-def full_stationarity(full, A, B, C, *, refine: int = 2, orthonormal: bool = True) -> dict:
+def full_stationarity(full, A, B, C, *, refine: int = 2, orthonormal: bool = True, reference=None) -> dict:
     r"""J, its floor and ρ of the real first-order model (A, B, C) (E = I) against the index-3 model
     ``full`` (a :class:`~morsuite.reducers.h2.gradient.FullTarget`): one LU per real pole or conjugate
     pair, right solves with :math:`Fb_k` and transposed solves with :math:`L^Tc_k`, each refined
@@ -129,7 +129,12 @@ def full_stationarity(full, A, B, C, *, refine: int = 2, orthonormal: bool = Tru
     which triples the certificate's solves), accurate where poles cluster; ``rho_form`` says which.
     The partial-fraction form (:func:`relative_gradient_rank_one`) is ``rho_pole_residue``.
 
-    Returns a dict: ``value`` (J), ``floor``, ``rho``, ``rho_pole_residue``, ``rho_form``,
+    ``reference``: None, or ``(J, floor)`` of the same model from a more accurate evaluator
+    (:func:`~morsuite.reducers.h2_decision.decision_h2`); used as :math:`\|E\|^2` in :math:`\rho` where its
+    floor is below the pole-residue formula's (errors near :math:`\sqrt\varepsilon\|T\|`, where that
+    formula's value is rounding: the DSMS from r = 10; ``value_form`` says which).
+
+    Returns a dict: ``value`` (J), ``floor``, ``value_form``, ``rho``, ``rho_pole_residue``, ``rho_form``,
     ``gram_condition``, ``lu_count``, ``kappa`` (of the reduced
     model's eigenvectors)."""
     sysm = full.system
@@ -184,11 +189,14 @@ def full_stationarity(full, A, B, C, *, refine: int = 2, orthonormal: bool = Tru
     terms = np.array([Cm[:, k] @ Tb[:, k] for k in range(n)])
     e2, floor, _ = pole_residue_squared(full.norm2, full.norm2_floor, complex(np.sum(terms)),
                                         float(np.sum(np.abs(terms))), md)
+    form = "pole-residue"
+    if reference is not None and reference[1] < floor:
+        e2, floor, form = float(reference[0]), float(reference[1]), "reference"
     rho_pr = relative_gradient_rank_one(lam, Cm, Bm, Tb - TrB, cT - cTr, dT - dTr, e2)
     rho = rho_pr
     if siso:
         rho = tm_rho(v_tm - realization_tm_values(A_tm, beta, A, B, C), beta, e2)
-    return {"value": float(e2), "floor": float(floor), "rho": rho, "rho_pole_residue": rho_pr,
+    return {"value": float(e2), "floor": float(floor), "value_form": form, "rho": rho, "rho_pole_residue": rho_pr,
             "rho_form": "orthonormal" if siso else "pole-residue", "gram_condition": cond,
             "lu_count": full.lu_count - lu0, "kappa": float(md.kappa)}
 
