@@ -149,11 +149,17 @@ def cmd_info(args) -> int:
     """``morsuite info MODEL``: print the model's summary (sizes, band, name) as JSON; returns 0.
 
     Builds the model (a catalog spec or a file) and analyses its sparsity pattern for
-    the LU backend (``lu_backend``: one RCM ordering, no factorization).
+    the LU backend (``lu_backend``: one RCM ordering, no factorization). Detects
+    rigid-body modes (``rigid_body_modes``; :mod:`morsuite.models.rigid`: one sparse LU unless K
+    is positive definite by diagonal dominance) and says in one line on stderr what it found.
     """
     from . import models
+    from .models.rigid import rigid_body_modes
     model = models.parse(args.model)
-    print(json.dumps({**model.summary(), "lu_backend": model.lu_analysis()}, indent=2))
+    rigid = rigid_body_modes(model)
+    print(json.dumps({**model.summary(), "lu_backend": model.lu_analysis(), "rigid_body_modes": rigid.summary()},
+                     indent=2, default=str))
+    print(rigid.line(model.name), file=sys.stderr)
     return 0
 
 
@@ -265,8 +271,11 @@ def _add_compare_parser(sub):
     (see :mod:`morsuite.studies.compare`)."""
 
     def cmd_compare(args) -> int:
-        from .studies.compare import compare, verdict_lines
+        from .studies.compare import compare, rigid_line, verdict_lines
 
+        line = rigid_line(args.model)
+        if line:
+            print(line)
         result, path = compare(args.model, args.states, args.methods, args.band, args.input, out=args.out,
                                name=args.name, quiet=args.quiet)
         print("\n".join(verdict_lines(result)))

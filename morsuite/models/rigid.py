@@ -100,7 +100,8 @@ class RigidModes:
         Angular frequency (rad/s) of the lowest flexible mode found (nan if none was).
     info : dict
         Plain data: ``method`` ("diagonal-dominance", "lanczos" or "dense"), ``sigma``,
-        ``rho``, ``rtol``, ``lu_count``, ``solves``, ``time_s``, ``max_residual``.
+        ``rho``, ``rtol``, ``lu_count``, ``solves``, ``time_s``, ``max_rigid_eigenvalue``
+        (largest :math:`|\lambda|/\rho` of the rigid modes: rounding, about 1e-16).
     """
 
     shapes: np.ndarray
@@ -202,7 +203,7 @@ def rigid_body_modes(model, *, rtol: float = RTOL, refresh: bool = False) -> Rig
     t0 = time.perf_counter()
     rho = _scale(model)
     n1, limit = model.n1, model.order - 1
-    info = {"rtol": float(rtol), "rho": rho, "sigma": None, "lu_count": 0, "solves": 0, "max_residual": 0.0}
+    info = {"rtol": float(rtol), "rho": rho, "sigma": None, "lu_count": 0, "solves": 0}
     lu = None
     if _positive_definite_by_dominance(model.K):
         info["method"] = "diagonal-dominance"
@@ -226,13 +227,13 @@ def rigid_body_modes(model, *, rtol: float = RTOL, refresh: bool = False) -> Rig
                 break
             kk = min(limit, 2 * kk)
         lam, Phi = res.eigenvalues, res.shapes
-        info.update(sigma=sigma, lu_count=int(solver.stats.factorizations),
-                    max_residual=float(res.info["max_residual"]))
+        info.update(sigma=sigma, lu_count=int(solver.stats.factorizations))
     if info["method"] != "diagonal-dominance":
         rigid = np.abs(lam) <= rtol * rho
         flex = lam[~rigid]
         low = float(np.sqrt(max(flex.min(), 0.0))) if flex.size else float("nan")
         lam, Phi = lam[rigid], Phi[:, rigid]
+        info["max_rigid_eigenvalue"] = float(np.max(np.abs(lam), initial=0.0) / rho)  # relative to rho
         if Phi.shape[1]:
             # one M-orthonormalisation of the (near-degenerate) rigid block: Phi^T M Phi = I to rounding
             Mr = Phi.T @ (model.M @ Phi)
@@ -378,6 +379,8 @@ def split(model, rom):
         return model, rom, 0
     flex_rom = getattr(rom, "flexible", None)
     k = getattr(rom, "rigid_order", None)
+    if flex_rom is None:  # e.g. read back from a file: the block structure of with_rigid, exactly
+        flex_rom, k = _recover(rom, rigid.k), rigid.k
     if flex_rom is None or k != rigid.k:
         raise InputError(f"rom: model {model.name} has {rigid.k} rigid-body modes and this reduced model does not "
                          "carry them as a separate block (reducers add them back; morsuite.models.rigid.with_rigid): "
@@ -387,8 +390,31 @@ def split(model, rom):
         Dh, Fh, Lh = rom.D[:k, :k], rom.F[:k], rom.L[:, :k]
     else:
         Dh, Fh, Lh = -rom.A[k:2 * k, k:2 * k], rom.B[k:2 * k], rom.C[:, :k]
+    scale = np.linalg.norm(Lr) * np.linalg.norm(Fr) * max(1.0, np.linalg.norm(Dr))
     for a, b, what in ((Lh @ Fh, Lr @ Fr, "L F"), (Lh @ Dh @ Fh, Lr @ Dr @ Fr, "L D F")):
-        if np.linalg.norm(a - b) > 1e-10 * max(np.linalg.norm(b), 1e-300):
+        if np.linalg.norm(a - b) > 1e-10 * scale:
             raise InputError(f"rom: its rigid block's {what} differs from the model's rigid part "
                              f"({np.linalg.norm(a - b):.2e}): it is not the rigid part of {model.name}")
     return flexible_part(model), flex_rom, k
+
+
+def _recover(rom, k):
+    """The flexible block of a model written by :func:`with_rigid` and read back (its rigid block
+    is exactly decoupled: zero off-diagonal blocks, identity mass, zero stiffness), else None."""
+    from ..rom import FirstOrderROM, SecondOrderROM
+
+    def zero(*blocks):
+        return all(not np.any(b) for b in blocks)
+
+    if isinstance(rom, SecondOrderROM) and rom.order > k:
+        M, D, K = rom.M, rom.D, rom.K
+        if (zero(M[:k, k:], M[k:, :k], D[:k, k:], D[k:, :k], K[:k], K[:, :k])
+                and np.array_equal(M[:k, :k], np.eye(k))):
+            return SecondOrderROM(M[k:, k:], D[k:, k:], K[k:, k:], rom.F[k:], rom.L[:, k:])
+    if isinstance(rom, FirstOrderROM) and rom.order > 2 * k:
+        j = 2 * k
+        E, A = rom.E, rom.A
+        if (zero(E[:j, j:], E[j:, :j], A[:j, j:], A[j:, :j], A[:k, :k], A[k:j, :k], rom.B[:k], rom.C[:, k:j])
+                and np.array_equal(E[:j, :j], np.eye(j)) and np.array_equal(A[:k, k:j], np.eye(k))):
+            return FirstOrderROM(E[j:, j:], A[j:, j:], rom.B[j:], rom.C[:, j:], rom.D)
+    return None
