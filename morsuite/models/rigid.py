@@ -57,14 +57,16 @@ carry k dense border rows (O(k n1) more fill). Design note: ``docs/design/free_f
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.csgraph as csgraph
+import scipy.sparse.linalg as spla
 
-from ..errors import InputError, ModelError
+from ..errors import ConvergenceWarning, InputError, ModelError, MorsuiteError
 
 __all__ = ["RigidModes", "rigid_body_modes", "flexible_part", "with_rigid", "split", "RTOL", "COUPLING_TOL"]
 
@@ -99,7 +101,8 @@ class RigidModes:
     lowest_flexible : float
         Angular frequency (rad/s) of the lowest flexible mode found (nan if none was).
     info : dict
-        Plain data: ``method`` ("diagonal-dominance", "lanczos" or "dense"), ``sigma``,
+        Plain data: ``method`` ("diagonal-dominance", "lanczos", "dense", or "failed" with
+        ``error``: the detection raised, a :class:`ConvergenceWarning` said so, k = 0), ``sigma``,
         ``rho``, ``rtol``, ``lu_count``, ``solves``, ``time_s``, ``max_rigid_eigenvalue``
         (largest :math:`|\lambda|/\rho` of the rigid modes: rounding, about 1e-16).
     """
@@ -218,15 +221,23 @@ def rigid_body_modes(model, *, rtol: float = RTOL, refresh: bool = False) -> Rig
         info["method"] = "lanczos"
         sigma = -SHIFT * rho
         solver = model.new_solver(cache_size=1)
-        lu = solver.factor(coeffs=(-sigma, 0.0, 1.0))
-        kk = min(PROBE, limit)
-        while True:
-            res = constrained_modes(model, k=kk, sigma=sigma, factorization=lu)
-            info["solves"] += res.info["solves"]
-            if kk >= limit or np.any(np.abs(res.eigenvalues) > rtol * rho):
-                break
-            kk = min(limit, 2 * kk)
-        lam, Phi = res.eigenvalues, res.shapes
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", ConvergenceWarning)  # a partial Lanczos run still shows rigid modes
+                lu = solver.factor(coeffs=(-sigma, 0.0, 1.0))
+                kk = min(PROBE, limit)
+                while True:
+                    res = constrained_modes(model, k=kk, sigma=sigma, factorization=lu)
+                    info["solves"] += res.info["solves"]
+                    if kk >= limit or np.any(np.abs(res.eigenvalues) > rtol * rho):
+                        break
+                    kk = min(limit, 2 * kk)
+            lam, Phi = res.eigenvalues, res.shapes
+        except (MorsuiteError, spla.ArpackError) as exc:  # e.g. K indefinite: sigma < 0 is an eigenvalue
+            warnings.warn(f"rigid_body_modes: detection on {model.name} failed ({exc}); treated as having no "
+                          "rigid-body modes", ConvergenceWarning, stacklevel=2)
+            info.update(method="failed", error=str(exc))
+            lam, Phi, lu = np.zeros(0), np.zeros((n1, 0)), None
         info.update(sigma=sigma, lu_count=int(solver.stats.factorizations))
     if info["method"] != "diagonal-dominance":
         rigid = np.abs(lam) <= rtol * rho
@@ -250,8 +261,6 @@ def _coupling(model, Phi, Dphi, lu) -> float:
     r""":math:`\|Z(Z^TAZ)^{-1}Z^TR\|_F / (\delta\,\|Z(Z^TAZ)^{-1}Z^TM\Phi\|_F)`, :math:`R = D\Phi - M\Phi D_\Phi`,
     :math:`A = K - \sigma M`, :math:`\delta = \|D\|_1/\|M\|_1` (the damping's scale): zero iff
     :math:`Z_f^TD\Phi = 0` (:math:`\Phi^TR = 0` by construction); rounding gives about 1e-16."""
-    import scipy.sparse.linalg as spla
-
     if not Phi.shape[1]:
         return 0.0
     delta = spla.norm(model.D, 1) / spla.norm(model.M, 1)
