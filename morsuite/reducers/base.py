@@ -255,6 +255,10 @@ class Reducer:
             t0 = time.perf_counter()
             rom, info = self._reduce(r)
             elapsed = time.perf_counter() - t0
+        if rom.order == 0:  # every basis vector vanished: nothing of T reaches the inputs and outputs
+            raise InputError(f"r = {r}: {self.name} found no direction to keep (reduced model of order 0): the "
+                             f"transfer function of {self.model.name} vanishes on ker G (inputs F or outputs L act "
+                             "only on constrained coordinates?)")
         rigid = {}
         if self._rigid.k:  # a free-floating model: the rigid part added back exactly, the flexible part's stability
             from ..models.rigid import with_rigid
