@@ -182,3 +182,13 @@ def test_cli_compare_on_a_free_free_chain(tmp_path, capsys):
     assert main(["info", "dsms:g=40,free=true"]) == 0
     captured = capsys.readouterr()
     assert "1 rigid-body mode" in captured.err and '"count": 1' in captured.out
+
+
+def test_cli_reduce_json_on_a_free_free_chain(capsys):
+    import json
+
+    from morsuite.cli import main
+
+    assert main(["reduce", "--model", "dsms:g=40,free=true", "--method", "bt", "--r", "4", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["rigid_modes"] == 1 and out["states"] == 6 and np.isfinite(out["h2_error"]) and out["stable"]
