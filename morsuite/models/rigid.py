@@ -343,7 +343,7 @@ def with_rigid(model, rom):
     A :class:`~morsuite.rom.SecondOrderROM` of order r becomes one of order r + k (rigid
     coordinates first: :math:`\hat M = \mathrm{blkdiag}(I, \hat M_f)`, ...); a
     :class:`~morsuite.rom.FirstOrderROM` of N states one of N + 2k, the rigid block in the
-    realization of :meth:`SecondOrderROM.first_order`. The result carries ``flexible`` (the
+    realization of :meth:`~morsuite.rom.SecondOrderROM.first_order`. The result carries ``flexible`` (the
     given ``rom``) and ``rigid_order`` (k), which :func:`split` reads.
 
     Cost: O((r + k)^2) dense copies.
