@@ -70,7 +70,7 @@ from ..errors import ConvergenceWarning, InputError, ModelError, MorsuiteError
 
 __all__ = ["RigidModes", "rigid_body_modes", "flexible_part", "with_rigid", "split", "RTOL", "COUPLING_TOL"]
 
-#: eigenvalues |lambda| <= RTOL * rho (rho ~ the largest eigenvalue) are rigid-body modes
+#: eigenvalues with absolute value at most RTOL * rho (rho about the largest eigenvalue) are rigid-body modes
 RTOL = 1e-10
 #: largest relative damping coupling between rigid and flexible modes that deflation accepts
 #: (rounding gives 1e-16 and below; dsms(200) with its end dampers doubled, 6e-6)
