@@ -53,7 +53,9 @@ def cmd_reduce(args) -> int:
     """Reduce one model with one method; print one JSON object (band errors and, unless --no-norms,
     the H2 errors and the Hinf error's lower and, where certified, upper bound; ``status``,
     ``lu_count_shared`` and ``worse_than_zero``, the norms in which the reduced model's error is at or
-    above the full model's own norm, :func:`morsuite.analysis.worse_than_zero`)."""
+    above the full model's own norm, :func:`morsuite.analysis.worse_than_zero`; ``rigid_modes``, the
+    model's rigid-body modes, 0 for a supported model: with k > 0 the reduced model carries them
+    exactly and the norms are the flexible part's, :mod:`morsuite.models.rigid`)."""
     import numpy as np
 
     from . import analysis
@@ -68,7 +70,7 @@ def cmd_reduce(args) -> int:
            "iterations": info["iterations"], "stable": info["stable"], "time_s": info["time_s"],
            "lu_count": info.get("lu_count"), "lu_count_shared": info.get("lu_count_shared"),
            "max_abs_error": float(df.abs_error.max()), "max_rel_error": float(df.rel_error.max()),
-           "omega": [lo, hi, n]}
+           "omega": [lo, hi, n], "rigid_modes": (info.get("rigid_modes") or {}).get("count", 0)}
     # hinf_error is the peak found (a lower bound); hinf_upper_bound / hinf_certified: its level-set certificate
     keys = ("h2_error", "h2_rel_error", "hinf_error", "hinf_rel_error", "h2_route", "h2_trusted", "hinf_route",
             "hinf_peak_frequency", "hinf_upper_bound", "hinf_certified", "h2_lu_count", "hinf_lu_count", "h2_time_s",
@@ -149,11 +151,17 @@ def cmd_info(args) -> int:
     """``morsuite info MODEL``: print the model's summary (sizes, band, name) as JSON; returns 0.
 
     Builds the model (a catalog spec or a file) and analyses its sparsity pattern for
-    the LU backend (``lu_backend``: one RCM ordering, no factorization).
+    the LU backend (``lu_backend``: one RCM ordering, no factorization). Detects
+    rigid-body modes (``rigid_body_modes``; :mod:`morsuite.models.rigid`: one sparse LU unless K
+    is positive definite by diagonal dominance) and says in one line on stderr what it found.
     """
     from . import models
+    from .models.rigid import rigid_body_modes
     model = models.parse(args.model)
-    print(json.dumps({**model.summary(), "lu_backend": model.lu_analysis()}, indent=2))
+    rigid = rigid_body_modes(model)
+    print(json.dumps({**model.summary(), "lu_backend": model.lu_analysis(), "rigid_body_modes": rigid.summary()},
+                     indent=2, default=str))
+    print(rigid.line(model.name), file=sys.stderr)
     return 0
 
 
@@ -265,8 +273,11 @@ def _add_compare_parser(sub):
     (see :mod:`morsuite.studies.compare`)."""
 
     def cmd_compare(args) -> int:
-        from .studies.compare import compare, verdict_lines
+        from .studies.compare import compare, rigid_line, verdict_lines
 
+        line = rigid_line(args.model)
+        if line:
+            print(line)
         result, path = compare(args.model, args.states, args.methods, args.band, args.input, out=args.out,
                                name=args.name, quiet=args.quiet)
         print("\n".join(verdict_lines(result)))

@@ -197,14 +197,18 @@ class SecondOrderROM(_ROMBase):
         r"""Eigenvalues (and right eigenvectors of the first-order pencil (A, E)).
 
         :math:`\lambda = g\mu` with :math:`g = \sqrt{\|K\|/\|M\|}`: QZ runs on the
-        balanced pencil :math:`(g^2 M, g D, K)`; with M ~ 1e-7 and K ~ 1e9 the
+        balanced pencil :math:`(g^2 M, g D, K) / \|K\|`; with M ~ 1e-7 and K ~ 1e9 the
         raw pencil made LAPACK's ggev fail (stress suite, K6). Eigenvectors are
         returned in the coordinates of :meth:`first_order` (``[x; lambda x]``),
         infinite eigenvalues dropped.
         """
         nm, nk = np.linalg.norm(self.M, 1), np.linalg.norm(self.K, 1)
         g = np.sqrt(nk / nm) if nm > 0 and nk > 0 else 1.0
-        scaled = SecondOrderROM(g * g * self.M, g * self.D, self.K, self.F, self.L)
+        # and the pencil divided by ||K|| (= g^2 ||M||): E = blkdiag(I, M / ||M||) stays of norm 1; with
+        # (g^2 M, g D, K) alone, ||M|| = 1, ||K|| = 5e16 made E's blocks 1 and 5e16 and QZ returned a pole
+        # in the right half-plane for an SPD model (stress suite, modal on random units 1e-6 / 1e9)
+        c = 1.0 / nk if nk > 0 else 1.0
+        scaled = SecondOrderROM(c * g * g * self.M, c * g * self.D, c * self.K, self.F, self.L)
         E, A, _, _ = scaled.first_order()
         if not vectors:
             return g * _finite_eigs(A, E)

@@ -199,11 +199,11 @@ def test_mimo_model():
 @pytest.mark.parametrize("band, match", [
     ((0.5, 0.5), "band is empty"),
     ((0.6, 0.5), "band is empty"),
-    ((-1.0, 0.5), "band must lie in"),
-    ((0.1, np.inf), "band must be finite"),
-    ((np.nan, 1.0), "band must be finite"),
-    ("wide", "band must be a pair"),
-    ((1.0,), "band must be a pair"),
+    ((-1.0, 0.5), "'band' parameter of BTFL must lie in"),
+    ((0.1, np.inf), "'band' parameter of BTFL must be finite"),
+    ((np.nan, 1.0), "'band' parameter of BTFL must be finite"),
+    ("wide", "'band' parameter of BTFL must be a pair"),
+    ((1.0,), "'band' parameter of BTFL must be a pair"),
 ])
 def test_bad_band_is_refused_naming_it(dsms20, band, match):
     with pytest.raises(ms.InputError, match=match):

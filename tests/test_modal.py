@@ -132,7 +132,7 @@ def test_bad_input_is_refused_naming_the_argument():
         ms.reducers.make("modal", mimo).reduce(1)
 
 
-def test_free_floating_model_moves_the_shift_and_drops_the_static_correction():
+def test_free_floating_model_keeps_the_rigid_mode_and_corrects_the_flexible_part():
     import scipy.sparse as sp
     n = 30
     K = sp.diags([-np.ones(n - 1), 2 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1], format="lil")
@@ -142,10 +142,16 @@ def test_free_floating_model_moves_the_shift_and_drops_the_static_correction():
     G = sp.csr_matrix(([1.0, -1.0], ([0, 0], [3, 4])), shape=(1, n))  # a tie, not a clamp
     F = np.zeros((n, 1)); F[0] = 1.0
     fom = ms.models.Index3Model(M, 0.01 * K, K, G, F, F.T, band=(0.01, 2.0))
-    w_ref, _ = dense_modes(fom)
-    with warnings.catch_warnings(record=True) as rec:
-        warnings.simplefilter("always")
-        res = ms.reducers.make("modal", fom).reduce(5)
-    assert any("rigid-body" in str(w.message) for w in rec)
-    assert res.info["static_columns"] == 0 and res.info["sigma"] < 0 and res.info["static_dropped"]
-    assert_sets_close(res.info["omega"], w_ref[:5], rtol=1e-8, atol=1e-7, what="modes with a rigid-body mode")
+    w_ref, shapes = dense_modes(fom)
+    res = ms.reducers.make("modal", fom).reduce(5)  # the flexible part (models.rigid), the rigid mode added back
+    assert res.info["rigid_modes"]["count"] == 1 and res.rom.order == 6
+    assert res.info["static_columns"] == 1 and res.info["sigma"] == 0
+    # the reduced model's undamped frequencies: the rigid mode at 0, then the lowest flexible ones
+    w_rom = np.sqrt(np.abs(sla.eigvalsh(res.rom.K, res.rom.M)))
+    assert w_rom.min() == 0.0
+    assert_sets_close(res.info["omega"], w_ref[1:1 + len(res.info["omega"])], rtol=1e-8, atol=1e-7,
+                      what="flexible modes of a free-floating model")
+    # static correction of the flexible part: T_flex(0) from the dense flexible modes
+    Zf = shapes[:, 1:]
+    Tflex0 = fom.L @ Zf @ np.diag(1 / w_ref[1:] ** 2) @ Zf.T @ fom.F
+    assert np.allclose(res.rom.flexible.transfer(0.0), Tflex0, rtol=1e-10, atol=0)

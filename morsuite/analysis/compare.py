@@ -42,6 +42,7 @@ import numpy as np
 from ..errors import InputError, OptionError
 from ..linalg.gramians import gramian_factors
 from . import signals
+from ..models.rigid import flexible_part, rigid_body_modes
 from ..norms._common import adi_options
 from ..norms.h2 import h2_error, h2_norm
 from .hinf import hinf_error, hinf_norm
@@ -120,7 +121,10 @@ def model_norm(fom, kind: str, options=None) -> dict:
         ``value``, ``kind``, ``route``, ``lu_count``, ``trusted``, ``rel_floor``,
         ``time_s``, ``warnings``, ``options``; for ``"hinf"`` also ``lower_bound``,
         ``upper_bound`` (None where not certified) and ``certified`` (``trusted`` is
-        ``certified``; ``value`` is the lower bound).
+        ``certified``; ``value`` is the lower bound). For a model with rigid-body modes
+        (infinite norms) the norm of its flexible part
+        (:func:`~morsuite.models.rigid.flexible_part`), with ``part`` = ``"flexible"`` and
+        ``rigid_modes``: relative errors are then relative to the flexible part.
 
     Notes
     -----
@@ -130,6 +134,10 @@ def model_norm(fom, kind: str, options=None) -> dict:
     """
     opts = norm_options(kind, options)
     t0 = time.perf_counter()
+    part = {}
+    if rigid_body_modes(fom).k:  # a pole at 0: the norm of the flexible part, where T - T_r lives
+        part = {"part": "flexible", "rigid_modes": rigid_body_modes(fom).k}
+        fom = flexible_part(fom)
     if kind == "h2":
         (value, d), warned = _captured(h2_norm, fom, adi=opts["adi"], details=True)
         rec = {"route": "gramian", "lu_count": d["lu_count"], "trusted": d["trusted"], "rel_floor": d["rel_floor"],
@@ -139,8 +147,8 @@ def model_norm(fom, kind: str, options=None) -> dict:
         (value, d), warned = _captured(hinf_norm, fom, details=True, **opts)
         rec = {"lu_count": d["lu_count"], **_hinf_bounds(value, d), "peak_frequency": d["peak_frequency"],
                "samples": d.get("samples")}
-    return {"value": float(value), "kind": kind, **rec, "time_s": time.perf_counter() - t0, "warnings": warned,
-            "options": opts}
+    return {"value": float(value), "kind": kind, **rec, **part, "time_s": time.perf_counter() - t0,
+            "warnings": warned, "options": opts}
 
 
 def error_norm(fom, rom, kind: str, options=None) -> dict:

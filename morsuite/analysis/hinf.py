@@ -82,7 +82,7 @@ import numpy as np
 from ..errors import OptionError
 from ..linalg.gramians import cached_gramian_factors
 from ..utils import blas_threads
-from ..norms._common import adi_options, check_fom, infinite, validate_rom
+from ..norms._common import adi_options, check_fom, flexible_route, infinite, refuse_rigid, validate_rom
 from ..norms._fom import FomResponse
 from ._hinf_certify import certificate as _certificate, refine_peak as _refine
 from ._hinf_dense import error_realization, hidden_realization
@@ -366,6 +366,7 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
         The largest peak found: a lower bound of the norm (``details["lower_bound"]``).
     """
     check_fom(fom)
+    refuse_rigid(fom, "hinf_norm")
     _check(max_lus, rtol, per_decade, certify_dim, certify_tol, certify_lus, skip_factor)
     band_grid = _band_grid(band_grid)
     adi = adi_options(adi)
@@ -423,7 +424,8 @@ def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float
         The largest peak found, a lower bound (``details``: ``lower_bound``,
         ``upper_bound``, ``certified``, always present; ``upper_bound`` None where
         no certificate was computed); ``inf`` with a :class:`StabilityWarning` for an
-        unstable reduced model (then both bounds ``inf``).
+        unstable reduced model (then both bounds ``inf``). On a model with rigid-body
+        modes, the peak of the flexible parts' difference (as :func:`~morsuite.analysis.h2_error`).
 
     Raises
     ------
@@ -435,6 +437,12 @@ def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float
     _check(max_lus, rtol, per_decade, certify_dim, certify_tol, certify_lus, skip_factor)
     band_grid = _band_grid(band_grid)
     adi = adi_options(adi)
+    routed = flexible_route(fom, rom, hinf_error, details, max_lus=max_lus, grid_lus=grid_lus, rtol=rtol,
+                            per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi, certify_dim=certify_dim,
+                            certify_tol=certify_tol, certify_lus=certify_lus, band_grid=band_grid,
+                            skip_factor=skip_factor)
+    if routed is not None:  # rigid-body modes: T - T_r is the flexible parts' difference
+        return routed
     arrays, why = validate_rom(fom, rom, "rom")
     if why is not None:
         out = infinite(*why, details)

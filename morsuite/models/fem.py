@@ -3,7 +3,8 @@ r"""Finite-element models of constrained elastic structures (scikit-fem).
 A box :math:`[0, L_x] \times [0, L_y] \times [0, L_z]` of linear-elastic material
 (3D trilinear hexahedra, or 2D bilinear quadrilaterals in plane stress of
 thickness ``thickness``), meshed by a uniform tensor grid, clamped on its face
-:math:`x = 0`, optionally cut at mid-length into two separately meshed bodies
+:math:`x = 0` (or free: ``clamp="none"``, a free-free body with its rigid-body modes,
+:mod:`morsuite.models.rigid`), optionally cut at mid-length into two separately meshed bodies
 joined by tie constraints. All constraints are Lagrange multipliers in
 :math:`G`:
 
@@ -51,6 +52,8 @@ __all__ = ["fem_beam", "fem_block", "eigenfrequencies", "eb_cantilever_omega", "
 POINTS = {"tip": (1.0, 0.5, 0.5), "mid": (0.5, 0.5, 0.5), "quarter": (0.25, 0.5, 0.5),
           "corner": (1.0, 1.0, 1.0), "edge": (1.0, 1.0, 0.5)}
 _DIRS = {"x": 0, "y": 1, "z": 2}
+#: boundary conditions: clamped on the face x = 0, or none (free-free: 6 rigid-body modes in 3D, 3 in 2D)
+CLAMPS = ("x0", "none")
 #: Euler-Bernoulli cantilever eigenvalue parameters beta_k L (first two bending modes)
 EB_ROOTS = (1.8751040687119611, 4.6940911329741745)
 
@@ -92,8 +95,14 @@ def _assemble(dim, n, size, E, nu, rho, thickness, bodies):
     return parts, cut
 
 
+def _clamp(clamp):
+    if clamp not in CLAMPS:
+        raise InputError(f"clamp must be one of {', '.join(map(repr, CLAMPS))}; got {clamp!r}")
+    return clamp
+
+
 def _structure(*, dim, n, size, E, nu, rho, thickness, alpha, beta, bodies, inputs, outputs,
-               name, band):
+               name, band, clamp="x0"):
     import scipy.sparse as sp
     t0 = time.perf_counter()
     parts, cut = _assemble(dim, n, size, E, nu, rho, thickness, bodies)
@@ -103,7 +112,7 @@ def _structure(*, dim, n, size, E, nu, rho, thickness, alpha, beta, bodies, inpu
     K = sp.block_diag([b.K for b in parts], format="csr")
     M = sp.block_diag([b.M for b in parts], format="csr")
     tol = 1e-9 * max(size[:dim])
-    clamped = clamp_rows(parts[0], 0, 0, 0.0, tol)
+    clamped = clamp_rows(parts[0], 0, 0, 0.0, tol) if clamp == "x0" else np.zeros(0, dtype=np.int64)
     ta = tb = np.zeros(0, dtype=np.int64)
     if cut is not None:
         ta, tb = tie_rows(parts[0], offs[0], parts[1], offs[1], 0, cut, tol)
@@ -118,7 +127,7 @@ def _structure(*, dim, n, size, E, nu, rho, thickness, alpha, beta, bodies, inpu
     model = Index3Model(M, D, K, G, F, L, name=name, band=band, check_constraints=False)
     model.fem = {"dim": dim, "elements": list(n), "size": list(size[:dim]), "bodies": bodies,
                  "E": E, "nu": nu, "rho": rho, "thickness": thickness, "alpha": alpha, "beta": beta,
-                 "n_clamped": int(clamped.size), "n_tied": int(ta.size),
+                 "clamp": clamp, "n_clamped": int(clamped.size), "n_tied": int(ta.size),
                  "inputs": [f"{p}:{'xyz'[c]}" for p, c in inputs],
                  "outputs": [f"{p}:{'xyz'[c]}" for p, c in outputs],
                  "assembly_s": round(time.perf_counter() - t0, 4), "bodies_s": round(t_bodies, 4)}
@@ -171,7 +180,8 @@ def eb_cantilever_omega(k, *, length, width, height, E, rho, direction="z", dim=
 def fem_beam(nx: int = 40, ny: int = 4, nz: int = 4, *, dim: int = 3, length: float = 1.0,
              width: float = 0.1, height: float = 0.1, E: float = 1.0, nu: float = 0.3,
              rho: float = 1.0, thickness: float = 1.0, alpha: float = 1e-3, beta: float = 1e-2,
-             bodies: int = 1, inputs=None, outputs=None, name: str | None = None) -> Index3Model:
+             bodies: int = 1, inputs=None, outputs=None, clamp: str = "x0",
+             name: str | None = None) -> Index3Model:
     r"""Clamped elastic beam (cantilever): a finite-element :class:`Index3Model`.
 
     A box ``length`` x ``width`` x ``height`` (2D: ``length`` x ``height``)
@@ -201,6 +211,11 @@ def fem_beam(nx: int = 40, ny: int = 4, nz: int = 4, *, dim: int = 3, length: fl
     inputs, outputs : str or sequence of str
         ``"point:direction"`` items, ``;``-separated in one string; default
         ``"tip:z"`` and ``"tip:z;mid:z"`` (2D: ``y``).
+    clamp : {"x0", "none"}
+        ``"x0"`` (default): clamped on the face :math:`x = 0`. ``"none"``: free-free, no
+        clamp rows (only the ties of ``bodies=2``): K is singular on :math:`\ker G` with
+        the rigid-body modes (6 in 3D, 3 in 2D; :mod:`morsuite.models.rigid`); the band
+        stays the cantilever's.
     name : str, optional
         Label (default ``fem_beam(...)`` with the sizes).
 
@@ -218,6 +233,7 @@ def fem_beam(nx: int = 40, ny: int = 4, nz: int = 4, *, dim: int = 3, length: fl
     nx, ny = _int("nx", nx), _int("ny", ny)
     nz = _int("nz", nz) if dim == 3 else 1
     nu, E, rho, thickness, alpha, beta = _common(nu, E, rho, thickness, alpha, beta, bodies, nx, dim)
+    clamp = _clamp(clamp)
     length, width, height = (_positive("length", length), _positive("width", width),
                              _positive("height", height))
     d = "z" if dim == 3 else "y"
@@ -228,16 +244,17 @@ def fem_beam(nx: int = 40, ny: int = 4, nz: int = 4, *, dim: int = 3, length: fl
     w1 = min(eb_cantilever_omega(1, length=length, width=width, height=height, E=E, rho=rho,
                                  direction=c, dim=dim) for c in "yz")
     label = name or (f"fem_beam(nx={nx}, ny={ny}" + (f", nz={nz}" if dim == 3 else ", dim=2")
-                     + (", bodies=2" if bodies == 2 else "") + ")")
+                     + (", bodies=2" if bodies == 2 else "") + (", clamp=none" if clamp == "none" else "") + ")")
     return _structure(dim=dim, n=n, size=size, E=E, nu=nu, rho=rho, thickness=thickness,
                       alpha=alpha, beta=beta, bodies=bodies, inputs=ins, outputs=outs,
-                      name=label, band=(0.1 * w1, 30.0 * w1))
+                      name=label, band=(0.1 * w1, 30.0 * w1), clamp=clamp)
 
 
 def fem_block(n1: int = 20000, *, aspect=(1.0, 1.0, 1.0), E: float = 1.0, nu: float = 0.3,
               rho: float = 1.0, alpha: float = 1e-3, beta: float = 1e-2, bodies: int = 1,
-              inputs="corner:z", outputs="corner:z;mid:z", name: str | None = None) -> Index3Model:
-    r"""3D elastic block clamped on one face, sized by its number of positions.
+              inputs="corner:z", outputs="corner:z;mid:z", clamp: str = "x0",
+              name: str | None = None) -> Index3Model:
+    r"""3D elastic block clamped on one face (or free), sized by its number of positions.
 
     A box of sides ``aspect`` (default the unit cube) meshed by trilinear
     hexahedra of nearly cubic shape, clamped at :math:`x = 0`, with
@@ -254,9 +271,10 @@ def fem_block(n1: int = 20000, *, aspect=(1.0, 1.0, 1.0), E: float = 1.0, nu: fl
         beyond are typical).
     aspect : (float, float, float)
         Box sizes along x, y, z.
-    E, nu, rho, alpha, beta, bodies, inputs, outputs, name
+    E, nu, rho, alpha, beta, bodies, inputs, outputs, clamp, name
         As in :func:`fem_beam` (default input ``corner:z``, outputs ``corner:z``
-        and ``mid:z``).
+        and ``mid:z``; ``clamp="none"``: a free-free block with six rigid-body modes,
+        ``fem_block:n1=500,clamp=none``).
 
     Returns
     -------
@@ -285,12 +303,13 @@ def fem_block(n1: int = 20000, *, aspect=(1.0, 1.0, 1.0), E: float = 1.0, nu: fl
             break
     n = best[1]
     nu, E, rho, _t, alpha, beta = _common(nu, E, rho, 1.0, alpha, beta, bodies, n[0], 3)
+    clamp = _clamp(clamp)
     ins, outs = _points("inputs", inputs, 3), _points("outputs", outputs, 3)
     c = np.sqrt(E / rho) / sizes[0]
-    label = name or f"fem_block(n1={target})"
+    label = name or f"fem_block(n1={target}{', clamp=none' if clamp == 'none' else ''})"
     return _structure(dim=3, n=n, size=sizes, E=E, nu=nu, rho=rho, thickness=1.0, alpha=alpha,
                       beta=beta, bodies=bodies, inputs=ins, outputs=outs, name=label,
-                      band=(0.01 * c, 10.0 * c))
+                      band=(0.01 * c, 10.0 * c), clamp=clamp)
 
 
 def eigenfrequencies(model: Index3Model, k: int = 6, *, sigma: float = 0.0):

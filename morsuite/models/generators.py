@@ -43,7 +43,7 @@ def _chain_tridiag(n, diag, off):
 
 def dsms(g: int = 6000, *, mass: float = 100.0, k: float = 2.0, kappa: float = 2.0,
          kappa_end: float = 4.0, d: float = 5.0, delta: float = 5.0, delta_end: float = 10.0,
-         name: str | None = None) -> Index3Model:
+         free: bool = False, name: str | None = None) -> Index3Model:
     r"""Constrained damped mass-spring system of Mehrmann and Stykel (2005).
 
     ``g`` equal masses in a chain, springs ``k`` and dampers ``d`` between
@@ -55,12 +55,24 @@ def dsms(g: int = 6000, *, mass: float = 100.0, k: float = 2.0, kappa: float = 2
 
     With the defaults this reproduces the M.E.S.S. ``msd_ind3`` matrices
     (after the sign change of D and K described in models.md): n1 = g, n2 = 1.
+
+    ``free=True`` makes it a free-free chain (``dsms:g=200,free=true``): no springs
+    and no dampers to the ground (``kappa``, ``kappa_end``, ``delta``, ``delta_end`` are
+    set to 0), so K and D annihilate the common translation :math:`\mathbf 1`, which
+    satisfies the tie: one undamped rigid-body mode, a double pole of :math:`T` at
+    :math:`s = 0` (:mod:`morsuite.models.rigid`). Without ``free``, grounding springs of
+    0 give the same K; a ``delta`` other than ``delta_end`` then damps the rigid mode
+    unevenly (coupled to the flexible modes: refused by the deflation).
     """
     g = _positive("g", g, integer=True, minimum=4)
     mass = _positive("mass", mass)
     k, d = _nonneg("k", k), _nonneg("d", d)
     kappa, kappa_end = _nonneg("kappa", kappa), _nonneg("kappa_end", kappa_end)
     delta, delta_end = _nonneg("delta", delta), _nonneg("delta_end", delta_end)
+    if not isinstance(free, (bool, np.bool_)):
+        raise InputError(f"free must be a bool; got {free!r}")
+    if free:
+        kappa = kappa_end = delta = delta_end = 0.0
     M = sp.identity(g, format="csr") * mass
     kd = np.full(g, 2 * k + kappa)
     kd[[0, -1]] = k + kappa_end
@@ -73,7 +85,8 @@ def dsms(g: int = 6000, *, mass: float = 100.0, k: float = 2.0, kappa: float = 2
     F[0, 0] = 1.0
     L = np.zeros((3, g))
     L[0, 0] = L[1, 1] = L[2, g - 2] = 1.0
-    return Index3Model(M, D, K, G, F, L, name=name or f"dsms(g={g})", band=(1e-2, 1.0))
+    label = name or f"dsms(g={g}{', free' if free else ''})"
+    return Index3Model(M, D, K, G, F, L, name=label, band=(1e-2, 1.0))
 
 
 def tcom(nc: int = 2000, *, masses=(1.0, 2.0, 3.0), central_mass: float = 10.0,

@@ -44,6 +44,37 @@ def validate_rom(fom, rom, name="rom"):
     return arrays, None
 
 
+def flexible_route(fom, rom, fn, details, **options):
+    """Free-floating models (:mod:`morsuite.models.rigid`): ``fn`` on the flexible parts of ``fom`` and
+    ``rom``, where :math:`T - T_r` lives, with ``rigid_modes`` and ``part`` in the record; ``inf`` with
+    a :class:`StabilityWarning` when ``rom`` does not carry the model's rigid part. None for a model
+    without rigid-body modes (the caller goes on). Cost: the model's detection, once (cached)."""
+    from ..errors import InputError, StabilityWarning
+    from ..models.rigid import rigid_body_modes, split
+
+    if not hasattr(fom, "cache") or not rigid_body_modes(fom).k:
+        return None
+    try:
+        part_fom, part_rom, k = split(fom, rom)
+    except InputError as exc:
+        return infinite(str(exc), StabilityWarning, details, stacklevel=4)
+    out = fn(part_fom, part_rom, details=details, **options)
+    if details:
+        out[1].update(rigid_modes=k, part="flexible")
+    return out
+
+
+def refuse_rigid(fom, what):
+    """A model with rigid-body modes has a pole at 0: no finite norm; say so and name the flexible part."""
+    from ..errors import InputError
+    from ..models.rigid import rigid_body_modes
+
+    if hasattr(fom, "cache") and rigid_body_modes(fom).k:
+        raise InputError(f"fom: model {fom.name} has {rigid_body_modes(fom).k} rigid-body modes, a pole of T at "
+                         f"s = 0: its norm is infinite; {what} of its flexible part: "
+                         f"{what}(morsuite.models.rigid.flexible_part(fom))")
+
+
 def infinite(reason, category, details, stacklevel=3):
     """``inf`` with a warning (and, with ``details``, a record saying why)."""
     warnings.warn(reason, category, stacklevel=stacklevel)

@@ -103,7 +103,7 @@ from ..errors import AccuracyWarning, OptionError, StabilityWarning
 from ..linalg.gramians import cached_gramian_factors
 from ..linalg.h2 import UNREFINED_UNIT, norm_squared as _norm_squared
 from ..utils import blas_threads
-from ._common import adi_options, check_fom, infinite, validate_rom
+from ._common import adi_options, check_fom, flexible_route, infinite, refuse_rigid, validate_rom
 from .error_gramian import error_gramian
 from ._mirrored import mirrored_solves
 from ._fom import FomResponse
@@ -150,12 +150,19 @@ def h2_norm(fom, *, adi=None, details: bool = False):
     -------
     float, or (float, dict)
 
+    Raises
+    ------
+    InputError
+        For a model with rigid-body modes (a pole at 0: the norm is infinite); the
+        message names the flexible part's norm.
+
     Notes
     -----
     Cost: one lock-step LR-ADI run for both Gramians (one LU per shift) on
     the first call per model and options, nothing afterwards.
     """
     check_fom(fom)
+    refuse_rigid(fom, "h2_norm")
     with blas_threads(1):
         v2, floor2, rec, gf = _norm_squared(fom, adi_options(adi))
     value = float(np.sqrt(v2))
@@ -332,7 +339,11 @@ def h2_error(fom, rom, *, method: str = "auto", rtol: float = 1e-8, max_nodes: i
     -------
     float, or (float, dict)
         ``inf`` (with a :class:`StabilityWarning`) for an unstable reduced
-        model or one with a nonzero feedthrough ``D``.
+        model or one with a nonzero feedthrough ``D``. On a model with rigid-body
+        modes (:mod:`morsuite.models.rigid`), the H2 norm of the difference of the
+        flexible parts, which is :math:`T - T_r` when ``rom`` carries the model's
+        rigid part as the reducers return it (``details``: ``rigid_modes``, ``part``);
+        ``inf`` with a warning otherwise.
 
     Raises
     ------
@@ -361,6 +372,10 @@ def h2_error(fom, rom, *, method: str = "auto", rtol: float = 1e-8, max_nodes: i
     if isinstance(refine, bool) or not isinstance(refine, (int, np.integer)) or refine < 0:
         raise OptionError(f"refine must be an integer >= 0; got {refine!r}")
     adi = adi_options(adi)
+    routed = flexible_route(fom, rom, h2_error, details, method=method, rtol=rtol, max_nodes=max_nodes,
+                            refine=refine, adi=adi)
+    if routed is not None:  # rigid-body modes: T - T_r is the flexible parts' difference
+        return routed
     arrays, why = validate_rom(fom, rom, "rom")
     if why is not None:
         return infinite(*why, details)

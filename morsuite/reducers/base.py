@@ -181,8 +181,25 @@ class Reducer:
         self.options = {}
         for key, opt in self.OPTIONS.items():
             self.options[key] = opt.validate(type(self).__name__, key, options.get(key, opt.default))
+        self._deflate_rigid()
         self._check_options()
         self._warnings: list[str] = []
+
+    def _deflate_rigid(self):
+        """Free-floating models: bind the reducer to the flexible part (``morsuite.models.rigid``).
+
+        ``self.model`` is the model given; ``self.fom`` the one the method reduces: the model
+        itself, or for a model with rigid-body modes its flexible part (the rigid-body modes
+        deflated by k constraint rows :math:`\\Phi^TMx = 0`). :meth:`reduce` adds the rigid part
+        back exactly (:func:`~morsuite.models.rigid.with_rigid`). Refuses a model whose damping
+        couples rigid and flexible modes (:class:`~morsuite.errors.ModelError`).
+        """
+        from ..models.rigid import flexible_part, rigid_body_modes
+
+        self.model = self.fom
+        self._rigid = rigid_body_modes(self.fom)
+        if self._rigid.k:
+            self.fom = flexible_part(self.fom)
 
     def _check_options(self):
         """Hook: cross-option checks."""
@@ -220,6 +237,13 @@ class Reducer:
         Every ``info`` carries ``status`` and ``converged`` (consistent: checked), ``lu_count``,
         ``lu_count_shared`` (:mod:`morsuite.reducers.outcome`), ``time_s``, ``r``, ``states``,
         ``stable``, ``warnings`` and ``options``.
+
+        On a model with k rigid-body modes (:mod:`morsuite.models.rigid`) the method reduces the
+        flexible part to order r and the result is that model with the rigid part added back:
+        order r + k (N + 2k states for a first-order model), ``info["r_flexible"]``,
+        ``info["rigid_modes"]`` (their count and detection record: its LU is the model's,
+        paid once and not in ``lu_count``), ``stable`` of the flexible part (the rigid poles at
+        0 are kept by design), and ``rom.flexible`` the flexible part's reduced model.
         """
         r = self._validate_r(r)
         self._warnings = []
@@ -231,9 +255,19 @@ class Reducer:
             t0 = time.perf_counter()
             rom, info = self._reduce(r)
             elapsed = time.perf_counter() - t0
-        base = {"method": self.name, "model": self.fom.name, "r_requested": r,
+        if rom.order == 0:  # every basis vector vanished: nothing of T reaches the inputs and outputs
+            raise InputError(f"r = {r}: {self.name} found no direction to keep (reduced model of order 0): the "
+                             f"transfer function of {self.model.name} vanishes on ker G (inputs F or outputs L act "
+                             "only on constrained coordinates?)")
+        rigid = {}
+        if self._rigid.k:  # a free-floating model: the rigid part added back exactly, the flexible part's stability
+            from ..models.rigid import with_rigid
+            info.setdefault("stable", bool(rom.is_stable()))
+            rom = with_rigid(self.model, rom)
+            rigid = {"rigid_modes": self._rigid.summary(), "r_flexible": int(rom.flexible.order)}
+        base = {"method": self.name, "model": self.model.name, "r_requested": r,
                 "r": int(rom.order), "kind": rom.kind, "states": int(rom.states),
-                "time_s": elapsed}
+                "time_s": elapsed, **rigid}
         base.update(info)
         complete_outcome(base)  # status <-> converged, lu_count, lu_count_shared (reducers.outcome)
         check_outcome(base, self.name)

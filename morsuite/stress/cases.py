@@ -9,7 +9,9 @@ A case names a model of :func:`~morsuite.models.random_constrained` (n1 in
 damping ratio :math:`\zeta = 10^{U(-6, 1)}`; mass and stiffness spreads of 0, 3,
 6 or 12 decades; physical units g and kN/mm for 20 %), one check family
 (weights reduce 5, agreement 2, nullspace 1, g-invariance 1.5, bt-bound 1.5),
-a method, an order r in 1..12, an IRKA iteration count in 1..3 and a seed
+a method (for ``reduce``: irka, irka-projected or bt; in half of the reduce cases, drawn
+from the second stream ``default_rng([s, i, 34])`` so that every other draw of the case is
+unchanged, one of the engineering baselines modal, krylov, bt-fl), an order r in 1..12, an IRKA iteration count in 1..3 and a seed
 for the check's own draws. Drawing costs no factorization.
 """
 
@@ -20,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["FAMILIES", "RUNNER_MAXIT", "BT_MAXITER", "Case", "draw_model_params", "regime", "draw_case",
+__all__ = ["FAMILIES", "RUNNER_MAXIT", "BT_MAXITER", "ENGINEERING", "runner_options", "Case", "draw_model_params", "regime", "draw_case",
            "given_shifts", "transformed_g"]
 
 FAMILIES = ("reduce", "agreement", "nullspace", "g-invariance", "bt-bound")
@@ -28,6 +30,16 @@ FAMILIES = ("reduce", "agreement", "nullspace", "g-invariance", "bt-bound")
 RUNNER_MAXIT = 40
 #: LR-ADI iteration cap of "bt" in the runner; a capped run ends converged=False with a ConvergenceWarning
 BT_MAXITER = 150
+#: the engineering baselines of issue 34, drawn in half of the reduce cases
+ENGINEERING = ("modal", "krylov", "bt-fl")
+
+
+def runner_options(method: str) -> dict:
+    """The options of ``method`` in the runner's reduce family: IRKA's cap, LR-ADI's cap, bt-fl's
+    largest quadrature rule (256 nodes: a case stays within seconds), the defaults otherwise."""
+    if method.startswith("irka"):
+        return {"maxit": RUNNER_MAXIT}
+    return {"bt": {"maxiter": BT_MAXITER}, "bt-fl": {"max_nodes": 256}}.get(method, {})
 
 
 def draw_model_params(rng: np.random.Generator, *, n1_range=(20, 300)) -> dict:
@@ -90,6 +102,10 @@ def draw_case(index: int, master_seed: int = 0, families=None) -> Case:
     r = int(rng.integers(1, 13))
     maxit = int(rng.integers(1, 4))
     seed = int(rng.integers(0, 2**31 - 1))
+    if family == "reduce":
+        extra = np.random.default_rng([master_seed, index, 34])
+        if extra.random() < 0.5:
+            method = str(extra.choice(ENGINEERING))
     if family == "bt-bound":
         # the bound is a statement about converged Gramians; the reduce family runs bt on everything else
         kw.update(n1=min(kw["n1"], 150), n2=min(kw["n2"], min(kw["n1"], 150) // 2),

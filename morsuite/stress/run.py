@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .cases import BT_MAXITER, FAMILIES, RUNNER_MAXIT, Case, draw_case, given_shifts, regime
+from .cases import FAMILIES, Case, draw_case, given_shifts, regime, runner_options
 from .checks import check_bt_bound, check_nullspace, check_reduction
 from .outcomes import Outcome, attribute_silent, known_bug
 from .replay import check_agreement, check_g_invariance
@@ -52,8 +52,7 @@ def check_case(case: Case, fom=None) -> Outcome:
     fom = random_constrained(**case.model) if fom is None else fom
     r = min(case.r, fom.order)
     if case.family == "reduce":
-        opts = {"maxit": RUNNER_MAXIT} if case.method.startswith("irka") else {"maxiter": BT_MAXITER}
-        return check_reduction(fom, case.method, r, opts)
+        return check_reduction(fom, case.method, r, runner_options(case.method))
     if case.family == "agreement":
         return check_agreement(fom, r, case.maxit, given_shifts(fom, r, rng))
     if case.family == "nullspace":

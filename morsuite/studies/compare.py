@@ -31,7 +31,8 @@ from ..modelfiles import is_model_path
 from ..utils import atomic_write_text
 from .checks import suggest
 
-__all__ = ["METHODS", "DEFAULT_METHODS", "INPUTS", "compare_spec", "compare", "to_toml", "verdict_lines"]
+__all__ = ["METHODS", "DEFAULT_METHODS", "INPUTS", "compare_spec", "compare", "to_toml", "verdict_lines",
+           "rigid_line"]
 
 #: method name -> (reducer, options, first-order states per order, label)
 METHODS = {
@@ -290,6 +291,23 @@ def _table_note(result, name) -> str:
     except OSError:
         return ""
     return next((ln for ln in lines if "Smallest error" in ln), "")
+
+
+def rigid_line(model: str) -> str | None:
+    """The one line saying that ``model`` (a spec or file) has rigid-body modes and how the
+    comparison treats them (:mod:`morsuite.models.rigid`), or None if it has none (or cannot be
+    read: :func:`compare` then says why). Cost: building the model and its detection (one
+    sparse LU unless K is positive definite by diagonal dominance)."""
+    from .. import models
+    from ..models.rigid import rigid_body_modes
+
+    try:
+        fom = models.parse(str(model))
+    except (InputError, OSError, ValueError):
+        return None
+    rigid = rigid_body_modes(fom)
+    return (rigid.line(fom.name) + f"; each reduced model carries the {2 * rigid.k} rigid states beyond those asked, "
+            "errors and norms are the flexible part's") if rigid.k else None
 
 
 def compare(model, states, methods=None, band=None, input=None, out="results", name=None, quiet=False):

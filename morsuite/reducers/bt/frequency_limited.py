@@ -276,7 +276,8 @@ class BTFL(SquareRootBT):
 
     def _check_options(self):
         o = self.options
-        o["band"] = band_pair(self.fom.band if o["band"] is None else o["band"], allow_zero=True)
+        o["band"] = band_pair(self.fom.band if o["band"] is None else o["band"], allow_zero=True,
+                               name="The 'band' parameter of BTFL")
         if o["variable"] == "log" and o["band"][0] <= 0:
             raise InputError(f"variable='log' needs band w1 > 0; got band = {o['band']} (use 'linear' or 'auto')")
         if o["nodes"] is None and o["max_nodes"] < o["nodes_start"]:

@@ -50,7 +50,7 @@ from numbers import Integral
 import numpy as np
 import scipy.linalg as sla
 
-from ...errors import InputError, SingularShiftError
+from ...errors import InputError, RankWarning, SingularShiftError
 from ...linalg.eigen import constrained_modes
 from ...rom import SecondOrderROM
 from ..base import Option, Reducer, register
@@ -217,7 +217,7 @@ class Modal(Reducer):
         covered = bool(modes["info"]["covered"])
         if n_static < m_static:
             self.warn(f"modal: {m_static - n_static} static column(s) lie in the span of the modes (below "
-                      f"static_tol = {o['static_tol']:g}); the reduced order is {rom.order}, not {r}")
+                      f"static_tol = {o['static_tol']:g}); the reduced order is {rom.order}, not {r}", RankWarning)
         info = {
             "selection": o["selection"], "sigma": modes["sigma"], "modes": int(k), "static_columns": int(n_static),
             "omega": modes["omega"][chosen], "modes_computed": int(modes["omega"].size),
