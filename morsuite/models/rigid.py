@@ -358,8 +358,10 @@ def with_rigid(model, rom):
                              np.vstack([Fr, rom.F]), np.hstack([Lr, rom.L]), basis=basis)
     elif isinstance(rom, FirstOrderROM):
         E, A, B, C = SecondOrderROM(Mr, Dr, Kr, Fr, Lr).first_order()
+        phi = rigid_body_modes(model).shapes  # positions of the rigid states [q; q']: Phi q
+        basis = None if rom.basis is None else np.hstack([phi, np.zeros_like(phi), rom.basis])
         out = FirstOrderROM(sla.block_diag(E, rom.E), sla.block_diag(A, rom.A), np.vstack([B, rom.B]),
-                            np.hstack([C, rom.C]), rom.D)
+                            np.hstack([C, rom.C]), rom.D, basis=basis)
     else:
         raise InputError(f"rom must be a SecondOrderROM or FirstOrderROM; got {type(rom).__name__}")
     out.flexible = rom
