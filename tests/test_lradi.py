@@ -144,7 +144,8 @@ def test_pair_shares_lus_and_agrees_with_single_runs():
         s = res.shifts
         assert np.all(s.real < 0)
         assert_sets_close(s[s.imag > 0], np.conj(s[s.imag < 0]), rtol=1e-14, what="conjugate shifts")
-        assert res.iterations == s.size and res.rank == res.iterations * (fom.m if res is c else fom.p)
+        assert res.iterations == s.size and res.columns == res.iterations * (fom.m if res is c else fom.p)
+        assert res.rank <= res.columns
         assert len(res.residuals) == 1 + np.sum(s.imag >= 0)
 
 
@@ -325,3 +326,96 @@ def test_range_space_projection_equals_dense_projector(make_random_model):
         assert np.allclose(proj2.project(b), Pi @ b, rtol=0, atol=1e-12 * np.abs(Pi @ b).max())
     finally:
         ManifoldProjector.RANGE_FORM_MAX_N2 = 64
+
+
+# -- kept LUs (shift_reuse) and column compression (compress_tol) -------------------------
+def test_shift_reuse_saves_lus_and_keeps_the_dense_gramians(make_random_model):
+    """Reused LUs change the shift sequence, not the answer: both runs match the dense Lyapunov
+    solutions on ker G to the ADI tolerance, and reuse pays fewer LUs than steps."""
+    fom = ms.models.tcom(nc=30)
+    E, A, B, C, Th = projected_system(fom)
+    As, Bs = np.linalg.solve(E, A), np.linalg.solve(E, B)
+    P = sla.solve_continuous_lyapunov(As, -Bs @ Bs.T)
+    fresh = lradi(fom, "controllability", tol=1e-12, shift_reuse=0.0, lu_pool_mib=0.0)
+    kept = lradi(fom, "controllability", tol=1e-12, shift_reuse=0.5)
+    assert fresh.lu_reused == 0 and kept.lu_reused > 0
+    assert kept.lu_count < fresh.lu_count
+    # every step is served by a new LU or a kept one (plus the projector's LU)
+    steps = int(np.sum(kept.shifts.imag >= 0))
+    assert kept.lu_count - 1 + kept.lu_reused == steps
+    for res in (fresh, kept):
+        assert res.converged
+        Zq = to_coordinates(res, Th)
+        assert np.linalg.norm(Zq @ Zq.T - P, 2) / np.linalg.norm(P, 2) < 1e-9
+
+
+def test_given_shifts_are_factored_once_each():
+    fom = ms.models.dsms(g=60)
+    shifts = [-0.05 + 0.2j, -0.05 - 0.2j, -0.3, -1.0]
+    res = lradi(fom, "controllability", tol=1e-8, shifts=shifts, compress_tol=0.0)
+    assert res.converged and res.iterations > 2 * len(shifts)  # cycled several times
+    assert res.lu_count == 1 + 3  # the projector's LU and one per distinct shift (a pair counted once)
+    # kept LUs change nothing: the same run without them
+    again = lradi(fom, "controllability", tol=1e-8, shifts=shifts, compress_tol=0.0, lu_pool_mib=0.0)
+    assert again.lu_count > res.lu_count and again.iterations == res.iterations
+    assert np.allclose(again.Z, res.Z, rtol=0, atol=1e-13 * np.abs(res.Z).max())
+
+
+def test_factor_store_compression_matches_truncated_svd():
+    """Planted answer: columns spanning 12 directions with singular values down to 1e-9, plus
+    noise at 1e-14; compression at 1e-11 keeps exactly the 12, and the Gramian to the bound."""
+    from morsuite.linalg.adi_iteration import FactorStore
+    rng = np.random.default_rng(5)
+    n1 = 300
+    U = np.linalg.qr(rng.standard_normal((2 * n1, 12)))[0]
+    s = np.logspace(0, -9, 12)
+    cols = U @ (s[:, None] * rng.standard_normal((12, 200))) + 1e-14 * rng.standard_normal((2 * n1, 200))
+    plain, comp = FactorStore(n1, 0.0), FactorStore(n1, 1e-11, chunk=16)
+    for j in range(0, 200, 5):
+        for st in (plain, comp):
+            st.append(2.0, cols[:n1, j:j + 5], cols[n1:, j:j + 5])
+    for st in (plain, comp):
+        st.finish()
+    Zp, Zc = np.vstack(plain.blocks()), np.vstack(comp.blocks())
+    assert Zp.shape[1] == 200 and comp.columns == 200 and Zc.shape[1] == 12
+    P, Pc = Zp @ Zp.T, Zc @ Zc.T
+    # each truncation at most tol^2 ||P||, each of the 40 absorptions 20 sqrt(5) eps ||P||
+    bound = (comp.compressions * 1e-22 + 40 * 20 * np.sqrt(5) * 2.2e-16) * np.linalg.norm(P, 2)
+    assert np.linalg.norm(P - Pc, 2) <= bound
+    assert_sets_close(np.linalg.svd(Zc, compute_uv=False), np.linalg.svd(Zp, compute_uv=False)[:12],
+                      rtol=1e-6, what="kept singular values")
+
+
+def test_compressed_factors_keep_the_hankel_singular_values():
+    """The compressed factors' Gramians are within the compression bound of the uncompressed
+    ones, and both give the dense model's Hankel singular values."""
+    fom = ms.models.tcom(nc=30)
+    E, A, B, C, Th = projected_system(fom)
+    As, Bs = np.linalg.solve(E, A), np.linalg.solve(E, B)
+    P = sla.solve_continuous_lyapunov(As, -Bs @ Bs.T)
+    Qs = sla.solve_continuous_lyapunov(As.T, -C.T @ C)
+    hsv = np.sort(np.sqrt(np.abs(np.linalg.eigvals(P @ Qs))))[::-1]
+    full = lradi_pair(fom, tol=1e-12, compress_tol=0.0)
+    tau = 1e-7
+    comp = lradi_pair(fom, tol=1e-12, compress_tol=tau)
+    for a, b in zip(full, comp):
+        assert a.rank == a.columns and b.columns == a.columns and b.rank < a.rank
+        Pa, Pb = a.Z @ a.Z.T, b.Z @ b.Z.T
+        absorbed = -(-b.columns // 64)
+        bound = (b.compressions * tau ** 2 + absorbed * 20 * 8 * 2.2e-16) * np.linalg.norm(Pa, 2)
+        assert np.linalg.norm(Pa - Pb, 2) <= bound
+    for c, o in (full, comp):
+        s = np.linalg.svd(o.position.T @ c.position + o.velocity.T @ (fom.M @ c.velocity), compute_uv=False)
+        assert_sets_close(s[:8], hsv[:8], rtol=1e-6, what="HSVs")
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"shift_reuse": 1.0}, "shift_reuse"),
+    ({"shift_reuse": -0.1}, "shift_reuse"),
+    ({"compress_tol": 1.0}, "compress_tol"),
+    ({"lu_pool_mib": -1.0}, "lu_pool_mib"),
+    ({"lu_pool_mib": float("inf")}, "lu_pool_mib"),
+])
+def test_bad_reuse_and_compression_options(kwargs, match):
+    with pytest.raises(ms.InputError, match=match):
+        lradi(ms.models.dsms(g=20), **kwargs)

@@ -57,7 +57,141 @@ import numpy as np
 from ..errors import InputError
 from .refine import refine_columns
 
-__all__ = ["ADIIteration"]
+__all__ = ["ADIIteration", "FactorStore"]
+
+
+class FactorStore:
+    r"""The columns of a low-rank factor :math:`Z = [Z_1; Z_2]` (n1-blocks), kept plain or compressed.
+
+    ``tol = 0``: the columns are stored as appended (blocks grown by doubling: a run should
+    not reserve ``maxiter`` columns it may never use).
+
+    ``tol > 0``: column compression as the factor grows. The store holds
+    :math:`ZZ^T = QFF^TQ^T` with :math:`Q = [Q_1; Q_2]` orthonormal (stacked) and F
+    square. Appended columns wait in a buffer of ``chunk`` columns, then are absorbed:
+    with :math:`C = Q^TB` and :math:`B - QC = Q_bR_b` (classical Gram-Schmidt twice, then
+    a Householder QR and the SVD of :math:`R_b`, which drops only numerically null
+    directions, singular values below :math:`10\varepsilon\,\sigma_1(Z)`), Q gains those
+    of :math:`Q_b` and F becomes the triangular factor of :math:`[[F, C], [0, R_b]]`.
+    When Q has grown by half since the last
+    truncation (and at the end), the small SVD :math:`F = U\Sigma V^T` truncates: the
+    singular values below ``tol`` times :math:`\sigma_1(Z)` are dropped,
+    :math:`Q \leftarrow QU_t` (in place, by row blocks) and :math:`F = \Sigma_t`. A
+    truncation changes :math:`ZZ^T` by at most :math:`\mathrm{tol}^2\sigma_1(Z)^2`
+    (the rank-revealing SVD of Z itself); an absorption by at most
+    :math:`20\sqrt{b}\,\varepsilon\,\sigma_1(Z)^2`. Every kept column is a combination
+    of appended ones, so the store commutes with any projection applied to the rows
+    (the observability position block is kept unprojected, see :class:`ADIIteration`).
+
+    Cost with r kept columns: an absorption of b columns :math:`8n_1rb` flops (two
+    Gram-Schmidt passes) plus a QR of :math:`2n_1 \times b`; a truncation
+    :math:`4n_1 r t` (the rotation; t kept), at most about :math:`\log_{1.5}` of the
+    final rank times. Memory: at most 1.5 times the kept columns plus ``chunk``, instead
+    of every column produced.
+    """
+
+    def __init__(self, n1, tol=0.0, chunk=64):
+        self.n1, self.tol, self.chunk = int(n1), float(tol), int(chunk)
+        self.Z1 = np.empty((self.n1, 0), order="F")
+        self.Z2 = np.empty((self.n1, 0), order="F")
+        self.k = 0           # plain: columns stored; compressed: columns of Q
+        self.F = np.zeros((0, 0))
+        self.buf1, self.buf2 = [], []
+        self.columns = 0     # columns appended in all
+        self.compressions = 0  # truncations
+        self.k_truncated = 0   # rank after the last truncation
+        self.t_compress = 0.0
+        self.done = False
+
+    def _reserve(self, cols):
+        if cols > self.Z1.shape[1]:
+            for name in ("Z1", "Z2"):
+                Z = np.empty((self.n1, max(2 * cols, 32)), order="F")
+                Z[:, :self.k] = getattr(self, name)[:, :self.k]
+                setattr(self, name, Z)
+
+    def append(self, c, X1, X2):
+        """Append the columns c [X1; X2]."""
+        j = X1.shape[1]
+        self.columns += j
+        if self.tol == 0:
+            self._reserve(self.k + j)
+            np.multiply(X1, c, out=self.Z1[:, self.k:self.k + j])
+            np.multiply(X2, c, out=self.Z2[:, self.k:self.k + j])
+            self.k += j
+            return
+        self.buf1.append(c * X1)
+        self.buf2.append(c * X2)
+        if sum(b.shape[1] for b in self.buf1) >= self.chunk:
+            self._absorb()
+            if self.k >= max(2 * self.chunk, 1.5 * self.k_truncated):
+                self._truncate()
+
+    def _absorb(self):
+        if not self.buf1:
+            return
+        t0 = time.perf_counter()
+        B1, B2 = np.hstack(self.buf1), np.hstack(self.buf2)
+        self.buf1, self.buf2 = [], []
+        r, b, n1 = self.k, B1.shape[1], self.n1
+        C = np.zeros((r, b))
+        if r:
+            Q1, Q2 = self.Z1[:, :r], self.Z2[:, :r]
+            for _ in range(2):  # classical Gram-Schmidt twice (BLAS 3)
+                H = Q1.T @ B1 + Q2.T @ B2
+                B1 -= Q1 @ H
+                B2 -= Q2 @ H
+                C += H
+        Qb, Rb = np.linalg.qr(np.vstack([B1, B2]))  # Householder (BLAS 3)
+        Ub, sb, Vbt = np.linalg.svd(Rb)  # B - QC = (Qb Ub) diag(sb) Vbt: its numerical rank
+        big = np.block([[self.F, C], [np.zeros((sb.size, r)), sb[:, None] * Vbt]])
+        s1 = np.linalg.norm(big, 2)
+        t = int(np.sum(sb > 10 * np.finfo(float).eps * s1)) if s1 > 0 else 0
+        Qb = Qb @ Ub[:, :t]
+        self.F = np.linalg.qr(big[:r + t].T, mode="r").T  # big big^T = F F^T
+        self._reserve(r + t)
+        self.Z1[:, r:r + t] = Qb[:n1, :t]
+        self.Z2[:, r:r + t] = Qb[n1:, :t]
+        self.k = r + t
+        self.t_compress += time.perf_counter() - t0
+
+    def _rotate(self, X):
+        """:math:`Q \\leftarrow QX` in place (X is k x t, t <= k), by row blocks."""
+        r, t = X.shape
+        step = max(1, 2 ** 22 // max(r, 1))
+        for Z in (self.Z1, self.Z2):
+            for i in range(0, self.n1, step):
+                Z[i:i + step, :t] = Z[i:i + step, :r] @ X
+        self.k = t
+
+    def _truncate(self):
+        """Drop the singular values of F below tol times the largest (rotating Q)."""
+        t0 = time.perf_counter()
+        U, s, _ = np.linalg.svd(self.F)
+        t = int(np.sum(s > self.tol * s[0])) if s.size and s[0] > 0 else 0
+        self._rotate(U[:, :t])
+        self.F = np.diag(s[:t])
+        self.k_truncated = t
+        self.compressions += 1
+        self.t_compress += time.perf_counter() - t0
+
+    def finish(self):
+        """Absorb the buffer, truncate, and turn Q into the factor :math:`QF` (in place); once."""
+        if self.tol == 0 or self.done:
+            self.done = True
+            return
+        self._absorb()
+        self._truncate()
+        t0 = time.perf_counter()
+        self._rotate(self.F)  # F is diagonal: Q U_t Sigma_t
+        self.done = True
+        self.t_compress += time.perf_counter() - t0
+
+    def blocks(self):
+        """The factor's blocks (n1 x rank views); after :meth:`finish` when compressing."""
+        if not self.done:
+            raise RuntimeError("FactorStore.blocks before finish")
+        return self.Z1[:, :self.k], self.Z2[:, :self.k]
 
 
 class ADIIteration:
@@ -77,9 +211,11 @@ class ADIIteration:
         Long-double refinement steps of each shifted solve (0: none).
     saddle : SaddleOperator or None
         :math:`S(a)x` in long double on the solver's pattern (needed when ``refine`` > 0).
+    compress_tol : float
+        Column compression of the factor (:class:`FactorStore`; 0: none).
     """
 
-    def __init__(self, fom, equation, proj, operators, refine=0, saddle=None):
+    def __init__(self, fom, equation, proj, operators, refine=0, saddle=None, compress_tol=0.0):
         self.fom, self.equation, self.proj = fom, equation, proj
         self.refine, self.saddle = int(refine), saddle
         self.rho = 0.0  # the largest first correction of a refined solve, relative
@@ -97,11 +233,7 @@ class ADIIteration:
         if not self.norm0 > 0:
             raise InputError(f"the right-hand side of the {equation} equation is zero: matrix "
                              f"{'F' if equation == 'controllability' else 'L'} vanishes on the hidden manifold")
-        # position and velocity blocks of the factor, column-major, grown by doubling: a run
-        # should not reserve maxiter columns it may never use (docs/design/lradi.md)
-        self.Z1 = np.empty((n1, 32 * self.W1.shape[1]), order="F")
-        self.Z2 = np.empty_like(self.Z1, order="F")
-        self.k = 0
+        self.store = FactorStore(n1, compress_tol, chunk=max(64, 8 * self.W1.shape[1]))
         self.residuals = [1.0]
         self.shifts = []
         self.iterations = 0
@@ -173,16 +305,8 @@ class ADIIteration:
         return xr[:n1].astype(float) if xi is None else xr[:n1].astype(float) + 1j * xi[:n1].astype(float)
 
     def _append(self, c, X1, X2):
-        """Append the columns c [X1; X2] to the factor (written in place: no temporaries)."""
-        k, j = self.k, X1.shape[1]
-        if k + j > self.Z1.shape[1]:
-            for name in ("Z1", "Z2"):
-                Z = np.empty((self.fom.n1, 2 * (k + j)), order="F")
-                Z[:, :k] = getattr(self, name)[:, :k]
-                setattr(self, name, Z)
-        np.multiply(X1, c, out=self.Z1[:, k:k + j])
-        np.multiply(X2, c, out=self.Z2[:, k:k + j])
-        self.k = k + j
+        """Append the columns c [X1; X2] to the factor."""
+        self.store.append(c, X1, X2)
 
     def _update(self, c, R1, R2):
         r""":math:`W \leftarrow W + c\,ER` (controllability) or :math:`W + c\,E^TR` (observability)."""
@@ -203,8 +327,27 @@ class ADIIteration:
             [self.proj(self.W1)[1], self.proj(self.W2)[1]]
         return np.column_stack(cols)
 
+    def finish(self):
+        """Complete the factor (absorb the last compressed columns); call once, after the last step."""
+        self.store.finish()
+
+    @property
+    def columns(self) -> int:
+        """Columns produced by the steps."""
+        return self.store.columns
+
+    @property
+    def compressions(self) -> int:
+        """Blocks absorbed by column compression."""
+        return self.store.compressions
+
+    @property
+    def t_compress(self) -> float:
+        """Seconds spent compressing."""
+        return self.store.t_compress
+
     def factor(self):
         """The position and velocity blocks of the factor (n1 x k views; the observability
         position block unprojected, see LRADIResult.position)."""
-        return self.Z1[:, : self.k], self.Z2[:, : self.k]
+        return self.store.blocks()
 

@@ -19,6 +19,9 @@ small on the spectrum of the pencil :math:`(A, E)` of :mod:`morsuite.linalg.lrad
     Cost: one sparse LU (K bordered by G) besides the projector's.
 :func:`select_shifts`
     Penzl's greedy min-max choice among candidates.
+:class:`LUPool`
+    Kept LUs: a shift within ADI distance ``shift_reuse`` (:func:`adi_distance`) of a
+    kept LU's shift is served by that LU instead of a new one.
 
 All return representatives (Im >= 0) of the shifts, a complex pair counted once.
 """
@@ -26,13 +29,16 @@ All return representatives (Im >= 0) of the shifts, a complex pair counted once.
 from __future__ import annotations
 
 import warnings
+from collections import OrderedDict
 
 import numpy as np
 import scipy.linalg as sla
 
+from .backends import factor_nnz
 from .manifold import ManifoldProjector
 
-__all__ = ["projection_shifts", "penzl_shifts", "select_shifts", "STANDARD_RCOND"]
+__all__ = ["projection_shifts", "penzl_shifts", "select_shifts", "adi_distance", "lu_bytes", "LUPool",
+           "STANDARD_RCOND"]
 
 IMAG_TOL = 1e-12  # relative imaginary part below which a shift counts as real
 #: projection shifts: reciprocal condition of X^T M X above which the Ritz values come from the
@@ -300,3 +306,68 @@ def _arnoldi_ritz(op, v0, k) -> np.ndarray:
             break
         Q[:, j + 1] = w / H[j + 1, j]
     return np.linalg.eigvals(H[:k, :k])
+
+
+# -- kept factorizations: shifts served by an LU made for a nearby one ----------------
+def adi_distance(p, q) -> float:
+    r"""How far shift q is from p for ADI: :math:`|p - q| / |p + \bar q|`.
+
+    This is the factor :math:`|(\lambda - q)/(\lambda + \bar q)|` (:func:`select_shifts`) of shift q at
+    :math:`\lambda = p`, the point its own factor would have annihilated: q in place of p leaves at
+    most that factor where p was aimed. It is 0 for q = p and below 1 for two shifts in the open
+    left half-plane.
+    """
+    return float(abs(p - q) / abs(p + np.conj(q)))
+
+
+def lu_bytes(lu) -> int:
+    """Estimated memory of one saddle-point factorization: its stored entries (values and, at
+    half their size, indices) plus the kept matrix of the accuracy check."""
+    item = 16 if lu.complex_lu else 8
+    entries = factor_nnz(lu.lu) + (lu.matrix.nnz if lu.matrix is not None else 0)
+    return int(1.5 * item * entries)
+
+
+class LUPool:
+    r"""Factorizations kept for reuse, within a memory budget (least recently used dropped first).
+
+    :meth:`get` serves a shift p with the kept factorization of the shift q nearest to it
+    (:func:`adi_distance`) if that distance is at most ``radius``, otherwise factors at p and
+    keeps the new LU. A shift from a later projection batch often lies next to one already
+    applied (the same lightly damped modes keep most of the residual): the step with q costs a
+    solve instead of an LU and reduces the residual at p by the factor :math:`\le` ``radius``
+    instead of annihilating it. ``radius = 0`` reuses exact repeats only (cyclic shift sets).
+
+    Cost: one LU per served shift that no kept one is near; memory at most ``budget_mib``
+    (:func:`lu_bytes`; at least the LU in use is kept).
+    """
+
+    def __init__(self, solver, radius: float, budget_mib: float):
+        self.solver, self.radius, self.budget = solver, float(radius), float(budget_mib) * 2.0 ** 20
+        self._kept = OrderedDict()  # shift -> (lu, bytes)
+        self.reused = 0
+        self.peak_bytes = 0
+
+    def get(self, p):
+        """(shift actually used, its LU)."""
+        best = min(self._kept, key=lambda q: adi_distance(p, q), default=None)
+        if best is not None and adi_distance(p, best) <= self.radius:
+            self._kept.move_to_end(best)
+            self.reused += 1
+            return best, self._kept[best][0]
+        lu = self.solver.factor(-p if p.imag else -p.real)
+        if self.budget > 0:
+            self._kept[p] = (lu, lu_bytes(lu))
+            while len(self._kept) > 1 and self.bytes > self.budget:
+                self._kept.popitem(last=False)
+            self.peak_bytes = max(self.peak_bytes, self.bytes)
+        return p, lu
+
+    @property
+    def bytes(self) -> int:
+        """Estimated memory of the kept LUs."""
+        return sum(b for _, b in self._kept.values())
+
+    def clear(self):
+        """Drop every kept LU (the memory is freed once no step holds one)."""
+        self._kept.clear()

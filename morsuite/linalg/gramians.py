@@ -36,18 +36,19 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import ConvergenceWarning, InputError
-from .lradi import LRADIResult, lradi_pair
+from .lradi import COMPRESS_TOL, LU_POOL_MIB, SHIFT_REUSE, LRADIResult, lradi_pair
 
 __all__ = ["ADI_DEFAULTS", "GramianFactors", "gramian_factors", "cached_gramian_factors", "residual_weights", "residual_selection",
-           "h2_tail"]
+           "residual_factor", "h2_tail"]
 
 #: LR-ADI options of the shared factors, with balanced truncation's defaults (``bt`` declares the same);
 #: tol 1e-12 (not lradi's 1e-10): see morsuite.reducers.bt.balanced; refine 1 (not lradi's 0): one long-double
 #: refinement step of every controllability solve, without which ||T||_H2^2 from the factor is off by the
 #: solves' forward error (7.9e-12 relative on tcom(2000), docs/design/norms.md); it costs no LU, +25% (dsms(6000))
-#: and +47% (tcom(2000)) of the LR-ADI time
+#: and +47% (tcom(2000)) of the LR-ADI time; shift_reuse, lu_pool_mib and compress_tol as lradi's (kept LUs serve
+#: nearby shifts; no column compression, whose factors the exact H2 error's error-Gramian route cannot replay)
 ADI_DEFAULTS = {"tol": 1e-12, "maxiter": 3000, "shifts": "projection", "num_shifts": 16, "selection": "residual",
-                "refine": 1}
+                "refine": 1, "shift_reuse": SHIFT_REUSE, "lu_pool_mib": LU_POOL_MIB, "compress_tol": COMPRESS_TOL}
 
 
 @dataclass
@@ -163,8 +164,13 @@ def residual_weights(result: LRADIResult, width: int) -> np.ndarray:
     :math:`W_0` plus :math:`E` times the factor's columns weighted by
     :math:`\sqrt{-2p}`, :math:`g` and 0. This reads the column layout of
     :func:`lradi_pair`'s factors (blocks of ``width`` columns, one per step or
-    two per complex step), tested against the dense residual.
+    two per complex step), tested against the dense residual. A compressed factor
+    (``compress_tol`` > 0) has no such layout: its residual factor is
+    ``result.residual_w1, residual_w2`` (:func:`residual_factor`).
     """
+    if result.rank != result.columns:
+        raise InputError(f"the factor was compressed ({result.columns} columns to {result.rank}): its columns "
+                         "carry no residual weights; use residual_factor")
     gam = []
     shifts = np.asarray(result.shifts, dtype=complex)
     i = 0
@@ -193,6 +199,19 @@ def residual_selection(result: LRADIResult, width: int) -> np.ndarray:
     return S
 
 
+def residual_factor(result: LRADIResult, fom):
+    r"""The final residual factor :math:`W = [W_1; W_2]` of a controllability run, as iterated.
+
+    :math:`W_2` is :math:`\Pi F` plus E times factor columns; products with vectors of
+    :math:`\ker G` see it as :math:`W_0 = [0; F]` plus those (``residual_selection``).
+    Runs without the stored residual (older results) rebuild it from the column layout.
+    """
+    if result.residual_w1 is not None:
+        return result.residual_w1, result.residual_w2
+    S = residual_selection(result, fom.m)
+    return result.position @ S, np.asarray(fom.F, dtype=float) + fom.M @ (result.velocity @ S)
+
+
 def h2_tail(factors: GramianFactors, fom) -> float:
     r"""Estimate of :math:`\|T\|_{\mathcal H_2}^2 - \|LZ_p\|_F^2`, the part the ADI factor misses.
 
@@ -201,14 +220,12 @@ def h2_tail(factors: GramianFactors, fom) -> float:
     :math:`WW^T`, so the missing part is :math:`\mathrm{tr}(W^TQW)`
     (:math:`Q` the observability Gramian), estimated by
     :math:`\|Y^TW\|_F^2` with
-    :math:`Y^TW = Y_v^TF + (Y_p^TZ_p + Y_v^TMZ_v)S` (:func:`residual_weights`;
-    :math:`Y_v \in \ker G`, so :math:`Y_v^T\Pi F = Y_v^TF`). Its own error is of
+    :math:`Y^TW = Y_p^TW_1 + Y_v^TW_2` (:func:`residual_factor`; :math:`W_1 \in \ker G`,
+    so the unprojected :math:`Y_p` will do, and :math:`Y_v \in \ker G`). Its own error is of
     the order of the estimate times the observability residual. Cost: products
-    of the factors, no solve.
+    of the factors with m columns, no solve.
     """
     c, o = factors.controllability, factors.observability
-    S = residual_selection(c, fom.m)
-    # Z_p is in ker G, so the unprojected observability position block gives the same products
-    YEZS = o.position_unprojected.T @ (c.position @ S) + o.velocity.T @ (fom.M @ (c.velocity @ S))
-    YW = o.velocity.T @ fom.F + YEZS
+    W1, W2 = residual_factor(c, fom)
+    YW = o.position_unprojected.T @ W1 + o.velocity.T @ W2
     return float(np.sum(YW * YW))

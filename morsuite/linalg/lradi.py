@@ -46,9 +46,14 @@ Options (defaults): ``tol=1e-10``, ``maxiter=2000``, ``shifts="projection"``
 steps of each shifted solve, :mod:`morsuite.linalg.adi_iteration`; in
 :func:`lradi_pair` of the controllability solves only; the shared Gramian
 factors of :mod:`morsuite.linalg.gramians` use 1), ``solver=None`` (a fresh
-solver of the system, without a cache).
+solver of the system, without a cache), ``shift_reuse=0.5`` and
+``lu_pool_mib=2048`` (:class:`~morsuite.linalg.adi_shifts.LUPool`: a projection shift within
+ADI distance
+:math:`|p - q|/|p + \bar q| \le 0.5` of a kept LU's shift q is served by that
+LU), ``compress_tol=0`` (no column compression;
+:class:`~morsuite.linalg.adi_iteration.FactorStore`).
 
-Cost in sparse LUs: one per distinct shift (a complex pair: one complex LU),
+Cost in sparse LUs: one per distinct shift that no kept LU serves (a complex pair: one complex LU),
 plus one real LU of :math:`[[M, G^T], [G, 0]]` for the projector
 (:class:`~morsuite.linalg.manifold.ManifoldProjector`; none without
 constraints), plus one of K bordered for ``shifts="penzl"``. :func:`lradi_pair`
@@ -71,7 +76,7 @@ from ..errors import ModelError, ConvergenceWarning, InputError
 from ..utils import blas_threads
 from . import adi_shifts
 from .adi_iteration import ADIIteration
-from .adi_shifts import IMAG_TOL, as_pairs, penzl_shifts, projection_shifts
+from .adi_shifts import IMAG_TOL, LUPool, as_pairs, penzl_shifts, projection_shifts
 from .manifold import ManifoldProjector
 from .refine import SaddleOperator, refined_unit
 from .system import check_system, new_solver
@@ -79,6 +84,11 @@ from .system import check_system, new_solver
 __all__ = ["LRADIResult", "lradi", "lradi_pair"]
 
 EQUATIONS = ("controllability", "observability")
+#: defaults of the options that keep LUs and compress the factor (``lradi``, ``lradi_pair`` and
+#: ``gramians.ADI_DEFAULTS`` alike; measurements in docs/design/lradi.md)
+SHIFT_REUSE = 0.5
+LU_POOL_MIB = 2048.0
+COMPRESS_TOL = 0.0  # the exact H2 error reads the factors' column layout (norms/error_gramian.py)
 STRATEGIES = ("projection", "penzl")
 SELECTIONS = ("residual", "gain")
 
@@ -128,6 +138,22 @@ class LRADIResult:
         With ``refine`` > 0: the largest first correction of a solve, relative
         to the solution (max-norm per column), i.e. the largest forward error
         of the unrefined solves; NaN without refinement (not measured).
+    shift_reuse, lu_pool_mib : float
+        What was asked for (:class:`~morsuite.linalg.adi_shifts.LUPool`).
+    lu_reused : int
+        Steps served by a kept LU instead of a new one (shared by both results of :func:`lradi_pair`).
+    lu_pool_peak_mib : float
+        Largest estimated memory of the kept LUs.
+    compress_tol : float
+        Column compression tolerance (0: none; :class:`~morsuite.linalg.adi_iteration.FactorStore`).
+    columns : int
+        Columns the iteration produced; ``rank`` is the number kept.
+    compressions : int
+        Blocks of new columns compressed into the factor.
+    residual_w1, residual_w2 : ndarray, (n1, m) or (n1, p)
+        The final residual factor :math:`W = [W_1; W_2]` as iterated (the observability
+        :math:`W_1` modulo :math:`\operatorname{range}(G^T)`): the Lyapunov residual is
+        :math:`WW^T` (projected), whatever the factor's column layout.
     """
 
     position_unprojected: np.ndarray
@@ -147,6 +173,15 @@ class LRADIResult:
     shift_batches: list = field(default_factory=list)
     refine: int = 0
     solve_rho: float = float("nan")
+    shift_reuse: float = 0.0
+    lu_pool_mib: float = 0.0
+    lu_reused: int = 0
+    lu_pool_peak_mib: float = 0.0
+    compress_tol: float = 0.0
+    columns: int = 0
+    compressions: int = 0
+    residual_w1: np.ndarray = field(default=None, repr=False, compare=False)
+    residual_w2: np.ndarray = field(default=None, repr=False, compare=False)
     projector: object = field(default=None, repr=False, compare=False)
 
     @property
@@ -186,6 +221,9 @@ class LRADIResult:
                "num_shifts": self.num_shifts, "shifts": self.shifts.tolist(),
                "shift_batches": list(self.shift_batches), "times": dict(self.times),
                "refine": self.refine, "solve_rho": self.solve_rho, "solve_error": self.solve_error,
+               "shift_reuse": self.shift_reuse, "lu_pool_mib": self.lu_pool_mib, "lu_reused": self.lu_reused,
+               "lu_pool_peak_mib": self.lu_pool_peak_mib, "compress_tol": self.compress_tol,
+               "columns": self.columns, "compressions": self.compressions,
                "ritz_standard_rcond": adi_shifts.STANDARD_RCOND if self.strategy == "projection" else None}
         if history:
             out["residuals"] = self.residuals.tolist()
@@ -228,11 +266,10 @@ def _check_shifts(shifts):
     return reps
 
 
-def _run(fom, equations, tol, maxiter, shifts, num_shifts, selection, solver, refine=0, refined=EQUATIONS):
+def _run(fom, equations, tol, maxiter, shifts, num_shifts, selection, solver, refine=0, refined=EQUATIONS,
+         shift_reuse=SHIFT_REUSE, lu_pool_mib=LU_POOL_MIB, compress_tol=COMPRESS_TOL):
     check_system(fom, "fom")
-    if isinstance(tol, (bool, np.bool_)) or not isinstance(tol, (int, float, np.floating)) \
-            or not 0 < float(tol) < 1:
-        raise InputError(f"tol must be a float in (0, 1); got {tol!r}")
+    tol = _unit_float("tol", tol, 0.0, open_low=True)
     maxiter = _positive_int("maxiter", maxiter)
     num_shifts = _positive_int("num_shifts", num_shifts)
     if selection not in SELECTIONS:
@@ -240,12 +277,29 @@ def _run(fom, equations, tol, maxiter, shifts, num_shifts, selection, solver, re
     strategy = _check_shifts(shifts)
     if isinstance(refine, (bool, np.bool_)) or not isinstance(refine, (int, np.integer)) or refine < 0:
         raise InputError(f"refine must be a nonnegative integer; got {refine!r}")
+    shift_reuse = _unit_float("shift_reuse", shift_reuse, 0.0)
+    compress_tol = _unit_float("compress_tol", compress_tol, 0.0)
+    if isinstance(lu_pool_mib, (bool, np.bool_)) or not isinstance(lu_pool_mib, (int, float, np.integer, np.floating)) \
+            or not 0 <= float(lu_pool_mib) < np.inf:
+        raise InputError(f"lu_pool_mib must be a finite number >= 0; got {lu_pool_mib!r}")
     with blas_threads(1):
-        return _iterate(fom, equations, float(tol), maxiter, strategy, num_shifts, selection, solver, int(refine),
-                        refined)
+        return _iterate(fom, equations, tol, maxiter, strategy, num_shifts, selection, solver, int(refine),
+                        refined, shift_reuse, float(lu_pool_mib), compress_tol)
 
 
-def _iterate(fom, equations, tol, maxiter, strategy, num_shifts, selection, solver, refine=0, refined=EQUATIONS):
+def _unit_float(name, value, low, open_low=False):
+    """A float in [low, 1) (or (low, 1) with open_low), else InputError naming the argument."""
+    ok = not isinstance(value, (bool, np.bool_)) and isinstance(value, (int, float, np.integer, np.floating))
+    if ok:
+        v = float(value)
+        ok = (v > low if open_low else v >= low) and v < 1
+    if not ok:
+        raise InputError(f"{name} must be a float in {'(' if open_low else '['}{low:g}, 1); got {value!r}")
+    return float(value)
+
+
+def _iterate(fom, equations, tol, maxiter, strategy, num_shifts, selection, solver, refine, refined, shift_reuse,
+             lu_pool_mib, compress_tol):
     t_start = time.perf_counter()
     solver = new_solver(fom, cache_size=0) if solver is None else solver
     stats0 = solver.stats.copy()
@@ -255,9 +309,12 @@ def _iterate(fom, equations, tol, maxiter, strategy, num_shifts, selection, solv
     operators = {"controllability": (fom.M, sp.vstack([fom.M, fom.D], format="csr"), sym_m),
                  "observability": (Mt, sp.vstack([Mt, fom.D.T], format="csr"), sym_m)}
     saddle = SaddleOperator(solver.pattern) if refine else None
-    its = [ADIIteration(fom, eq, proj, operators, refine if eq in refined else 0, saddle) for eq in equations]
+    its = [ADIIteration(fom, eq, proj, operators, refine if eq in refined else 0, saddle, compress_tol)
+           for eq in equations]
     given = not isinstance(strategy, str)
     label = "given" if given else strategy
+    # a given or Penzl set is applied as it is: its LUs serve its cyclic repeats only
+    pool = LUPool(solver, shift_reuse if label == "projection" else 0.0, lu_pool_mib)
     queue: deque = deque()
     used, batches = [], []
     fixed = None  # a shift set used cyclically (given or Penzl)
@@ -295,14 +352,13 @@ def _iterate(fom, equations, tol, maxiter, strategy, num_shifts, selection, solv
             queue.extend(new)
             batches.append(len(new))
             t_shift += time.perf_counter() - t0
-        p = complex(queue.popleft())
+        p, lu = pool.get(complex(queue.popleft()))  # a kept LU near p, or a new one
         for it in active:  # a complex pair is two iterations: never step past maxiter
             if it.iterations + (2 if p.imag else 1) > maxiter:
                 it.done = True
         active = [it for it in active if not it.done]
         if not active:
             break
-        lu = solver.factor(-p if p.imag else -p.real)
         used.append(p)
         for i, it in enumerate(active):
             # the first solve with an LU is checked (backward error, refinement); that
@@ -312,6 +368,12 @@ def _iterate(fom, equations, tol, maxiter, strategy, num_shifts, selection, solv
                 it.done = it.converged = True
             elif it.iterations >= maxiter:
                 it.done = True
+    pool_peak, reused = pool.peak_bytes / 2.0 ** 20, pool.reused
+    pool.clear()
+    t0 = time.perf_counter()
+    for it in its:
+        it.finish()
+    t_compress = time.perf_counter() - t0
     total = time.perf_counter() - t_start
     st = solver.stats.since(stats0)
     out = []
@@ -321,7 +383,8 @@ def _iterate(fom, equations, tol, maxiter, strategy, num_shifts, selection, solv
                           f"with relative residual {it.residuals[-1]:.2e} > tol = {tol:.1e}",
                           ConvergenceWarning, stacklevel=4)
         times = {"factor": st["factor_time_s"] + st["assemble_time_s"], "solve": it.t_solve,
-                 "shifts": t_shift, "residual": it.t_res, "total": total}
+                 "shifts": t_shift, "residual": it.t_res, "compress": it.t_compress + t_compress / len(its),
+                 "total": total}
         Zp, Zv = it.factor()
         out.append(LRADIResult(position_unprojected=Zp, velocity=Zv, equation=it.equation,
                                residuals=np.array(it.residuals), shifts=np.array(it.shifts, dtype=complex),
@@ -330,12 +393,16 @@ def _iterate(fom, equations, tol, maxiter, strategy, num_shifts, selection, solv
                                selection=selection, tol=tol, maxiter=maxiter,
                                num_shifts=num_shifts, shift_batches=list(batches), refine=it.refine,
                                solve_rho=it.rho if it.refine else float("nan"),
+                               shift_reuse=shift_reuse, lu_pool_mib=lu_pool_mib, lu_reused=reused,
+                               lu_pool_peak_mib=pool_peak, compress_tol=compress_tol, columns=it.columns,
+                               compressions=it.compressions, residual_w1=it.W1, residual_w2=it.W2,
                                projector=proj if it.equation == "observability" and proj.lu is not None else None))
     return out
 
 
 def lradi(fom, equation="controllability", *, tol=1e-10, maxiter=2000, shifts="projection", num_shifts=16,
-          selection="residual", solver=None, refine=0) -> LRADIResult:
+          selection="residual", solver=None, refine=0, shift_reuse=SHIFT_REUSE, lu_pool_mib=LU_POOL_MIB,
+          compress_tol=COMPRESS_TOL) -> LRADIResult:
     r"""Low-rank ADI for one projected Lyapunov equation (see the module docstring).
 
     Parameters
@@ -368,6 +435,21 @@ def lradi(fom, equation="controllability", *, tol=1e-10, maxiter=2000, shifts="p
         the LU's solutions are not (shifts next to slow or lightly damped
         poles); it costs a long-double product with the saddle-point matrix and
         a pair of triangular solves per column, no LU.
+    shift_reuse : float in [0, 1)
+        A shift is served by the kept LU of a shift q with
+        :func:`~morsuite.linalg.adi_shifts.adi_distance` (p, q) at most this
+        (:class:`~morsuite.linalg.adi_shifts.LUPool`); 0 reuses exact
+        repeats only, and so do given and Penzl shifts (a fixed set used
+        cyclically: each of its shifts is factored once while its LU fits
+        ``lu_pool_mib``). Default 0.5.
+    lu_pool_mib : float >= 0
+        Memory budget of the kept LUs in MiB (0: none kept). Default 2048.
+    compress_tol : float in [0, 1)
+        Column compression of the factor as it grows: new directions below
+        ``compress_tol`` times its largest singular value are dropped
+        (:class:`~morsuite.linalg.adi_iteration.FactorStore`); 0 (default) keeps
+        every column in the order made, the layout that the exact H2 error's
+        error-Gramian route replays (:mod:`morsuite.norms.error_gramian`).
 
     Returns
     -------
@@ -386,11 +468,12 @@ def lradi(fom, equation="controllability", *, tol=1e-10, maxiter=2000, shifts="p
     """
     if equation not in EQUATIONS:
         raise InputError(f"equation must be 'controllability' or 'observability'; got {equation!r}")
-    return _run(fom, (equation,), tol, maxiter, shifts, num_shifts, selection, solver, refine)[0]
+    return _run(fom, (equation,), tol, maxiter, shifts, num_shifts, selection, solver, refine, EQUATIONS,
+                shift_reuse, lu_pool_mib, compress_tol)[0]
 
 
 def lradi_pair(fom, *, tol=1e-10, maxiter=2000, shifts="projection", num_shifts=16, selection="residual",
-               solver=None, refine=0):
+               solver=None, refine=0, shift_reuse=SHIFT_REUSE, lu_pool_mib=LU_POOL_MIB, compress_tol=COMPRESS_TOL):
     r"""Both projected Lyapunov equations in lock step: one shift sequence, one LU per shift.
 
     Each LU of :math:`[[S(-p), G^T], [G, 0]]` serves the controllability solve
@@ -412,5 +495,6 @@ def lradi_pair(fom, *, tol=1e-10, maxiter=2000, shifts="projection", num_shifts=
         Controllability and observability; ``lu_count``, ``times["factor"]``,
         ``times["shifts"]`` and ``times["total"]`` are those of the shared run.
     """
-    c, o = _run(fom, EQUATIONS, tol, maxiter, shifts, num_shifts, selection, solver, refine, ("controllability",))
+    c, o = _run(fom, EQUATIONS, tol, maxiter, shifts, num_shifts, selection, solver, refine, ("controllability",),
+                shift_reuse, lu_pool_mib, compress_tol)
     return c, o

@@ -44,7 +44,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
-from ..linalg.gramians import residual_selection
+from ..errors import InputError
+from ..linalg.gramians import residual_factor as _iterated_residual
 
 __all__ = ["RomADI", "rom_adi", "output_columns", "residual_factor", "ErrorGramian", "error_gramian"]
 
@@ -193,14 +194,13 @@ def residual_factor(fom, factors):
     r"""The model's final controllability residual factor :math:`W = W_0 + EZS` as its blocks (W1, W2).
 
     :math:`W_0 = [0; F]` (``F`` and :math:`\Pi F` differ by a vector of
-    :math:`\mathrm{range}(G^T)`, which the saddle-point solves absorb);
-    :func:`~morsuite.linalg.gramians.residual_selection` gives :math:`S`. Cost: two products with
-    the factor's blocks, once per model and options (kept beside the factors).
+    :math:`\mathrm{range}(G^T)`, which the saddle-point solves absorb), as iterated
+    (:func:`~morsuite.linalg.gramians.residual_factor`; a compressed factor has no column
+    layout to rebuild it from). Cost: none (older results: two products with the factor's
+    blocks), once per model and options (kept beside the factors).
     """
     def make():
-        c = factors.controllability
-        S = residual_selection(c, fom.m)
-        return c.position @ S, np.asarray(fom.F, dtype=float) + fom.M @ (c.velocity @ S)
+        return _iterated_residual(factors.controllability, fom)
 
     return _per_model(fom, factors, "h2_residual_factor", make)
 
@@ -257,6 +257,10 @@ def error_gramian(fom, arrays, factors, norm_record, unit: float) -> ErrorGramia
     """
     E, A, B, C, _ = arrays
     c, o = factors.controllability, factors.observability
+    if c.rank != c.columns:
+        raise InputError(f"the error-Gramian route replays the factor's columns, but it was compressed "
+                         f"(compress_tol = {c.compress_tol:g}: {c.columns} columns to {c.rank}); use "
+                         "compress_tol=0 for the exact H2 error")
     LZ = output_columns(fom, factors)
     run = rom_adi(c.shifts, E, A, B, C)
     d = LZ - run.CZ

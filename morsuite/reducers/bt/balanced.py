@@ -79,7 +79,8 @@ same model object and ADI options, and :func:`morsuite.analysis.h2_norm` /
 ``h2_error``, share one LR-ADI run.
 
 ``info`` holds ``adi`` (per equation: iterations, converged, residual history,
-shifts, rank), ``adi_iterations``, ``residual_history``, ``factor_ranks``,
+shifts, rank, columns, LUs reused, ``shift_reuse``, ``lu_pool_mib``, ``compress_tol``),
+``adi_iterations``, ``residual_history``, ``factor_ranks``,
 ``lu_count`` (the LR-ADI's LUs when this call ran it, else 0), ``lu_count_shared`` (the
 LR-ADI's LUs, whoever paid them), ``time_breakdown`` (adi, of which lu, solves, shifts; svd;
 projection), ``hsv`` (first-order Hankel singular values), ``error_bound``
@@ -96,9 +97,10 @@ import time
 from numbers import Integral
 
 import numpy as np
+import scipy.linalg as sla
 
 from ...errors import ConvergenceWarning, InputError, OptionError, RankWarning, StabilityWarning
-from ...linalg.gramians import gramian_factors
+from ...linalg.gramians import ADI_DEFAULTS, gramian_factors
 from ...rom import FirstOrderROM, SecondOrderROM
 from ..base import Option, Reducer, register
 
@@ -107,7 +109,8 @@ __all__ = ["BT", "FORMS", "SquareRootBT", "level_products"]
 FORMS = ("first-order", "pp", "pv", "vp", "vv", "fv")
 
 #: options that change the Gramian factors (reducers agreeing on them can share factors)
-ADI_OPTIONS = ("tol", "maxiter", "shifts", "num_shifts", "selection", "refine")
+ADI_OPTIONS = ("tol", "maxiter", "shifts", "num_shifts", "selection", "refine", "shift_reuse", "lu_pool_mib",
+               "compress_tol")
 
 #: which products Y_a^T (M) Z_b give the right (V) and left (W) bases of each level
 _LEVELS = {  # form: (svd for V, factor block of V, svd for W)
@@ -197,7 +200,7 @@ class SquareRootBT(Reducer):
                 g["prods"][key] = (ob.velocity.T @ (fom.M @ c.position) if key == "pv"
                                    else ob.position_unprojected.T @ c.velocity)
             X = g["prods"]["pp"] + g["prods"]["vv"] if key == "fo" else g["prods"][key]
-            g["svd"][key] = np.linalg.svd(X, full_matrices=False) if X.size else \
+            g["svd"][key] = _svd(X) if X.size else \
                 (np.zeros((X.shape[0], 0)), np.zeros(0), np.zeros((0, X.shape[1])))
             g["svd_times"][key] = time.perf_counter() - t0
         return g["svd"][key]
@@ -308,6 +311,14 @@ class BT(SquareRootBT):
                          "without it the factors carry the solves' forward error, 8e-12 of ||T||_H2^2 on "
                          "tcom(2000), which the exact H2 errors sharing them cannot certify; costs no LU, "
                          "docs/design/norms.md)", low=0),
+        "shift_reuse": Option(ADI_DEFAULTS["shift_reuse"], "float", "a projection shift within this ADI distance "
+                              "|p - q| / |p + conj(q)| of a kept LU's shift q is served by that LU (no new LU; "
+                              "0: exact repeats only; docs/design/lradi.md)", low=0, high=1, open_high=True),
+        "lu_pool_mib": Option(ADI_DEFAULTS["lu_pool_mib"], "float", "memory budget (MiB) of the LR-ADI's kept "
+                              "LUs, least recently used dropped first (0: none kept)", low=0),
+        "compress_tol": Option(ADI_DEFAULTS["compress_tol"], "float", "column compression of the LR-ADI factors "
+                               "as they grow: new directions below compress_tol times the factor's largest "
+                               "singular value are dropped (0: none)", low=0, high=1, open_high=True),
         "gramian_cache": Option("model", "choice", "where the LR-ADI factors are kept: in the model's cache, "
                                 "shared with every bt reducer and analysis.h2_norm / h2_error on the same model "
                                 "object and ADI options (LR-ADI runs once per model), or on this reducer only (a "
@@ -376,11 +387,13 @@ class BT(SquareRootBT):
             "factor_ranks": {"controllability": c.rank, "observability": ob.rank},
             "lu_count": c.lu_count if adi_fresh else 0,
             "lu_count_shared": c.lu_count,  # the Gramian factors' LR-ADI, whoever paid it
+            "lu_reused": c.lu_reused,  # LR-ADI steps served by a kept LU (shift_reuse)
             **extra,
             "time_breakdown": {"adi": times["adi"] if adi_fresh else 0.0,
                                "lu": st_c["factor"] if adi_fresh else 0.0,
                                "solves": (c.times["solve"] + ob.times["solve"]) if adi_fresh else 0.0,
                                "shifts": st_c["shifts"] if adi_fresh else 0.0,
+                               "compress": (c.times["compress"] + ob.times["compress"]) if adi_fresh else 0.0,
                                "products": times["products"] if fresh else 0.0,
                                "svd": tt["svd"], "projection": tt["projection"]},
             # r-independent work paid once per reducer (studies add it back for 'standalone' times)
@@ -399,6 +412,15 @@ def level_products(c, ob, fom) -> dict:
     Cost: two dense products of n1 x k blocks and one sparse product.
     """
     return {"pp": ob.position_unprojected.T @ c.position, "vv": ob.velocity.T @ (fom.M @ c.velocity)}
+
+
+def _svd(X):
+    """Thin SVD; LAPACK's gesdd can fail to converge on a numerically rank-deficient product
+    (factors with many more columns than the model's order), then the slower gesvd does it."""
+    try:
+        return np.linalg.svd(X, full_matrices=False)
+    except np.linalg.LinAlgError:
+        return sla.svd(X, full_matrices=False, lapack_driver="gesvd", check_finite=False)
 
 
 def _orthonormal(X):
