@@ -158,18 +158,22 @@ def test_screened_searches_pay_fewer_lus_and_keep_every_peak():
     ones find (to rtol) and that a dense sweep of the hidden-manifold realization finds (20,000
     frequencies and every pole's), and pay fewer LUs in all; the LUs of the screened sequence are the
     band grid once plus each search's samples beyond it at most."""
-    def model():
-        fom = ms.models.fem_block(n1=200)
-        ms.analysis.h2_norm(fom)
-        return fom
-    fom = model()
+    fom = ms.models.fem_block(n1=200)
+    ms.analysis.h2_norm(fom)  # the Gramian factors (the model's resonances), kept for both sequences
     band_grid = (fom.band[0], fom.band[1], 100)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         roms = [_bt(fom, 4), _bt(fom, 8), ms.reducers.make("modal", fom).reduce(3).rom]
     opts = {"certify_dim": 0, "skip_factor": 0.5}
+
+    def forget():  # the memo of T(jw) and the cached norm: each sequence starts from none
+        for key in [k for k in fom.cache if isinstance(k, tuple) and str(k[0]).startswith(("fom_response",
+                                                                                          "hinf_norm"))]:
+            del fom.cache[key]
+    forget()
     screened, lus_s = _sequence(fom, roms, band_grid, opts={**opts, "screen": True})
-    plain, lus_p = _sequence(model(), roms, band_grid, opts=opts)
+    forget()
+    plain, lus_p = _sequence(fom, roms, band_grid, opts=opts)
     assert lus_s < lus_p
     assert lus_s <= band_grid[2] + sum(d["samples"] - band_grid[2] for _, d in screened)
     grid = np.geomspace(fom.band[0] / 100, fom.band[1] * 100, 20000)
@@ -178,8 +182,8 @@ def test_screened_searches_pay_fewer_lus_and_keep_every_peak():
         assert v >= _dense_peak(fom, rom, grid) * (1 - 1e-8)
         sc = d["screened"]
         assert sc["sampled"] + len(sc["skipped"]) == sc["candidates"]
-        # a skipped resonance was predicted below the bar: skip_factor times the peak, with the margin
-        assert all(1.25 * s["predicted"] < 0.5 * v for s in sc["skipped"])
+        # a skipped resonance was predicted below the bar: the best sample (at most the peak), with the margin
+        assert all(1.25 * s["predicted"] < v for s in sc["skipped"])
     assert sum(len(d["screened"]["skipped"]) for _, d in screened) > 0
 
 

@@ -4,10 +4,10 @@ The start grid of a search holds the resonance frequencies of the reduced model 
 full model besides the band grid and the log grid. Each costs one sparse LU where the memo
 does not hold it; most of them lie far below the peak. With ``screen``, the base points (0,
 the band grid, the log grid) are sampled first, and a resonance frequency :math:`\omega_c` is
-sampled only when a surrogate of the error between its two sampled neighbours
-:math:`a < \omega_c < b` may still reach ``skip_factor`` times the best value sampled (the
-isolated-resonance rule of the refinement, with the same margin
-:data:`~morsuite.analysis._hinf_certify.BAR_MARGIN`).
+sampled only when the largest value of a surrogate of the error between its two sampled
+neighbours :math:`a < \omega_c < b`, raised by the refinement's margin
+:data:`~morsuite.analysis._hinf_certify.BAR_MARGIN` (25%), reaches the best value sampled: the
+bar under which the refinement gives up on a maximum (``refine_peak(bar=...)``).
 
 The surrogate of the full model on :math:`[a, b]` interpolates :math:`T` and :math:`T'`
 (which every sample has: one transposed solve with its LU) at both ends by
@@ -109,8 +109,8 @@ def predicted_peak(w_c, ws, data, poles, rr) -> float:
     return float(np.max(np.linalg.svd(E, compute_uv=False)[:, 0]))
 
 
-def screen(sig, candidates, poles, rr, skip_factor, margin, budget):
-    """Sample the ``candidates`` whose predicted peak may reach ``skip_factor`` times the best sample.
+def screen(sig, candidates, poles, rr, margin, budget):
+    """Sample the ``candidates`` whose predicted peak, raised by ``margin``, reaches the best sample.
 
     The predictions are made on the samples taken before (the base points), most promising first;
     the best value is updated after each sample. ``budget``: samples allowed. Returns the record
@@ -122,9 +122,10 @@ def screen(sig, candidates, poles, rr, skip_factor, margin, budget):
     pred.sort(key=lambda t: (-t[0], t[1]))
     sampled, skipped = [], []
     for p, w in pred:
-        if (1.0 + margin) * p < skip_factor * best or len(sampled) >= budget:
+        if (1.0 + margin) * p < best or len(sampled) >= budget:
             skipped.append({"frequency": w, "predicted": p})
             continue
-        best = max(best, sig(w)[0])
-        sampled.append(w)
-    return {"candidates": len(pred), "sampled": len(sampled), "skipped": skipped}
+        v = sig(w)[0]
+        best = max(best, v)
+        sampled.append({"frequency": w, "predicted": p, "value": v})
+    return {"candidates": len(pred), "sampled": len(sampled), "skipped": skipped, "sampled_at": sampled}

@@ -15,8 +15,8 @@ Search
        ``grid_lus`` LUs, the model's resonances thinned first. With
        ``screen`` (and ``band_grid``, ``skip_factor``), the resonances are
        sampled after the other points, and only where a surrogate of the
-       error between their sampled neighbours may reach the bar of the
-       refinement (:mod:`morsuite.analysis._hinf_screen`).
+       error between their sampled neighbours, raised by 25%, reaches the
+       best sample (:mod:`morsuite.analysis._hinf_screen`).
     2. Each sample costs one sparse LU and gives :math:`\sigma_{\max}` and its
        derivative from the singular vectors,
 
@@ -197,7 +197,7 @@ def _search(fom, rr, rom_poles, feed, *, max_lus, grid_lus, rtol, per_decade, re
     sig.calls -= how.get("band_grid", 0)
     if optional.any():  # the resonances whose surrogate may reach the bar (module _hinf_screen)
         poles = model_poles(ritz)
-        screened = screen_resonances(sig, pts[optional], poles, rr, skip_factor, BAR_MARGIN,
+        screened = screen_resonances(sig, pts[optional], poles, rr, BAR_MARGIN,
                                      max(min(grid_lus, max_lus - 1) - sig.calls, 0))
     ws = np.array(sorted(sig.samples))
     fs = np.array([sig.samples[w][0] for w in ws])
@@ -323,11 +323,11 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
         are most of a search's LUs). The skipped ones are in ``details["skipped"]``.
     screen : bool
         With ``band_grid`` and ``skip_factor`` > 0: the resonance frequencies of the start grid (the
-        reduced model's and the model's) are sampled only where a surrogate of the error between
-        their sampled neighbours, Hermite interpolation of :math:`T` and :math:`T'` with the model's
-        poles in that interval (:mod:`morsuite.analysis._hinf_screen`), may reach ``skip_factor``
-        times the best sample (with the refinement's 25% margin); the base points (0, the band grid,
-        the log grid) are sampled first. Default False (every resonance sampled; ``morsuite compare``
+        reduced model's and the model's) are sampled only where the largest value of a surrogate of
+        the error between their sampled neighbours, Hermite interpolation of :math:`T` and :math:`T'`
+        with the model's poles in that interval (:mod:`morsuite.analysis._hinf_screen`), raised by
+        the refinement's 25% margin, reaches the best sample: the bar under which a maximum is not
+        refined; the base points (0, the band grid, the log grid) are sampled first. Default False (every resonance sampled; ``morsuite compare``
         uses True: most resonances lie far below the peak and cost one LU each). The record is
         ``details["screened"]`` (candidates, sampled, the skipped ones with their predictions).
     details : bool
