@@ -4,6 +4,7 @@ worse-than-the-zero-model flag of reported errors (:func:`worse_than_zero`)."""
 from __future__ import annotations
 
 import contextlib
+from concurrent.futures import ThreadPoolExecutor
 import math
 import os
 import tempfile
@@ -12,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["atomic_path", "atomic_write_text", "to_plain", "strict_json", "band_pair", "worse_than_zero"]
+__all__ = ["atomic_path", "atomic_write_text", "to_plain", "strict_json", "band_pair", "worse_than_zero",
+           "default_threads", "map_threads"]
 
 
 @contextlib.contextmanager
@@ -125,6 +127,37 @@ def blas_threads(limit: int = 1):
         from threadpoolctl import ThreadpoolController
         _CONTROLLER = ThreadpoolController()
     return _CONTROLLER.limit(limits=limit, user_api="blas")
+
+
+def default_threads(backend: str) -> int:
+    """The automatic ``solver_threads``: 2 on two or more cores, else 1; always 1 for ``"klu"``.
+
+    IRKA's shift solves, frequency-limited BT's nodes and the full model's samples of a band
+    response (:func:`morsuite.analysis.band_response`) use it. Measured on a quiet moment of
+    this 2-core machine (docs/design/backends.md): six LUs of
+    dsms(2e5) or tcom(2e5) on 2 threads took 0.46-0.55 of the serial time with SuperLU and
+    0.48-0.64 with the banded LU (0.70-0.79 with their solves). BLAS runs single-threaded
+    inside a reduction (``reducers.base.BLAS_THREADS``), so the threads do not compete
+    with BLAS threads. More than 2 was not measured. KLU through nbklu holds the GIL for
+    its numeric factorization (measured 2026-11-27: a Python loop in another thread ran about 1/70
+    of its iterations during the call; kvxopt, the former KLU, held it too), so threads cannot
+    overlap its LUs. rslab's factorizations and PARDISO's calls (ctypes) release the GIL.
+    """
+    if backend == "klu":
+        return 1
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cores = os.cpu_count() or 1
+    return 2 if cores >= 2 else 1
+
+
+def map_threads(fn, jobs, threads: int) -> list:
+    """``[fn(j) for j in jobs]`` on a pool of ``threads`` threads (serial for one thread or one job)."""
+    if threads <= 1 or len(jobs) <= 1:
+        return [fn(j) for j in jobs]
+    with ThreadPoolExecutor(max_workers=min(threads, len(jobs))) as pool:
+        return list(pool.map(fn, jobs))
 
 
 def _judged(pair):

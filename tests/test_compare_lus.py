@@ -36,8 +36,9 @@ N_BAND = 60
 OPTS = {"certify_dim": 0, "skip_factor": 0.5}
 
 
-def _sequence(fom, roms, band_grid, band_first=True):
+def _sequence(fom, roms, band_grid, band_first=True, opts=None):
     """A comparison's sequence: band response, model norm, one error search per reduced model."""
+    OPTS = globals()["OPTS"] if opts is None else opts
     lus = 0
     if band_first:
         H, n = ms.analysis.band_response(fom, ms.analysis.freq_grid(band_grid[:2], band_grid[2]))
@@ -132,3 +133,110 @@ def test_irka_safeguard_stops_on_a_cycle():
         warnings.simplefilter("ignore")
         old = ms.reducers.make("irka", fom, safeguard_stop=False, **opts).reduce(8).info
     assert old["status"] == "cap" and old["iterations"] == opts["maxit"]
+
+
+# -- option screen: the resonances sampled only where a surrogate may reach the bar --------------
+
+def _dense_peak(fom, rom, grid):
+    r"""max over ``grid`` and the poles' frequencies of sigma_max(T - T_r), from the eigendecomposition of the
+    dense realization on the hidden manifold (independent of the sparse solves and of the search)."""
+    from morsuite.analysis._hinf_dense import hidden_realization
+
+    A, B, C, _ = hidden_realization(fom)
+    lam, V = np.linalg.eig(A)
+    CV, WB = C @ V, np.linalg.solve(V, B)
+    w = np.unique(np.concatenate([grid, np.abs(lam.imag)]))
+    T = np.einsum("pk,wk,km->wpm", CV, 1.0 / (1j * w[:, None] - lam[None, :]), WB)
+    if rom is not None:
+        T = T - rom.freqresp(w)
+    return float(np.max(np.linalg.svd(T, compute_uv=False)[:, 0]))
+
+
+def test_screened_searches_pay_fewer_lus_and_keep_every_peak():
+    """fem_block(200) with its Gramian factors (the model's resonances): the screened searches of a
+    comparison (band response, model norm, three error searches) find every peak that the unscreened
+    ones find (to rtol) and that a dense sweep of the hidden-manifold realization finds (20,000
+    frequencies and every pole's), and pay fewer LUs in all; the LUs of the screened sequence are the
+    band grid once plus each search's samples beyond it at most."""
+    fom = ms.models.fem_block(n1=200)
+    ms.analysis.h2_norm(fom)  # the Gramian factors (the model's resonances), kept for both sequences
+    band_grid = (fom.band[0], fom.band[1], 100)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        roms = [_bt(fom, 4), _bt(fom, 8), ms.reducers.make("modal", fom).reduce(3).rom]
+    opts = {"certify_dim": 0, "skip_factor": 0.5}
+
+    def forget():  # the memo of T(jw) and the cached norm: each sequence starts from none
+        for key in [k for k in fom.cache if isinstance(k, tuple) and str(k[0]).startswith(("fom_response",
+                                                                                          "hinf_norm"))]:
+            del fom.cache[key]
+    forget()
+    screened, lus_s = _sequence(fom, roms, band_grid, opts={**opts, "screen": True})
+    forget()
+    plain, lus_p = _sequence(fom, roms, band_grid, opts=opts)
+    assert lus_s < lus_p
+    assert lus_s <= band_grid[2] + sum(d["samples"] - band_grid[2] for _, d in screened)
+    grid = np.geomspace(fom.band[0] / 100, fom.band[1] * 100, 20000)
+    for rom, (v, d), (v0, _) in zip([None] + roms, screened, plain):
+        assert v >= v0 * (1 - 1e-9), (v, v0)
+        assert v >= _dense_peak(fom, rom, grid) * (1 - 1e-8)
+        sc = d["screened"]
+        assert sc["sampled"] + len(sc["skipped"]) == sc["candidates"]
+        # a skipped resonance was predicted below the bar: the best sample (at most the peak), with the margin
+        assert all(1.25 * s["predicted"] < v for s in sc["skipped"])
+    assert sum(len(d["screened"]["skipped"]) for _, d in screened) > 0
+
+
+def test_screen_option_is_checked():
+    fom = ms.models.dsms(g=20)
+    with pytest.raises(OptionError, match="screen"):
+        ms.analysis.hinf_norm(fom, screen="yes")
+
+
+def test_engaged_guard_counts_only_progress_of_safeguard_progress():
+    """Engaged, a new smallest measure counts as progress only when it is below 1 - progress times the
+    smallest one at the last progress (fem_block(4000), r = 6 crept from 0.156 to 0.155 in 15
+    iterations and ran on to the cap); idle, any new smallest measure counts (the plain iteration's path
+    is kept)."""
+    from morsuite.reducers.irka.safeguards import CycleGuard
+
+    def guard(progress):
+        return CycleGuard(True, hysteresis=1.0, radius=0.05, settle=1e-6, window=3, min_step=0.125,
+                          tabu_radius=0.01, progress=progress)
+    creeping = [0.5 * 0.98 ** k for k in range(6)]  # 2% smaller each iteration, 9.6% in all
+    idle = guard(0.1)
+    for m in creeping:
+        idle.observe(m)
+    assert not idle.stalled()  # idle: every new smallest measure is progress
+    engaged, plain = guard(0.1), guard(0.0)
+    for g in (engaged, plain):
+        g.engage(1, "stall")
+        for m in creeping:
+            g.observe(m)
+    assert engaged.stalled() and not plain.stalled()
+    engaged.observe(0.8 * creeping[0])  # 20% below the smallest at the last progress: progress
+    assert not engaged.stalled()
+
+
+def test_safeguard_progress_is_a_recorded_option():
+    fom = ms.models.dsms(g=20)
+    red = ms.reducers.make("irka", fom)
+    assert red.options["safeguard_progress"] == 0.1 and red.options["safeguard_stall"] == 15
+    with pytest.raises(OptionError, match="safeguard_progress"):
+        ms.reducers.make("irka", fom, safeguard_progress=1.5)
+
+
+def test_band_response_on_threads_is_the_same_to_the_bit():
+    """The full model's samples are independent: on 2 threads each with its own solver, the response is
+    fom.freqresp's (one LU per frequency, the reference) and the same bits as on one thread."""
+    omega = ms.analysis.freq_grid((0.01, 1.0), 24)
+    one = ms.models.dsms(g=60)
+    H1, lus1 = ms.analysis.band_response(one, omega, threads=1)
+    two = ms.models.dsms(g=60)
+    H2, lus2 = ms.analysis.band_response(two, omega, threads=2)
+    assert lus1 == lus2 == omega.size
+    assert np.array_equal(H1, H2)
+    ref = one.freqresp(omega)
+    assert np.max(np.abs(H2 - ref)) <= 1e-12 * np.max(np.abs(ref))
+    with pytest.raises(ms.errors.InputError, match="threads"):
+        ms.analysis.band_response(two, omega, threads=-1)

@@ -12,7 +12,11 @@ Search
        when nothing is cached: computing them would cost more LUs than the
        whole search); and a log grid (``per_decade`` points a decade) over the
        model's band widened to cover all those frequencies. At most
-       ``grid_lus`` LUs, the model's resonances thinned first.
+       ``grid_lus`` LUs, the model's resonances thinned first. With
+       ``screen`` (and ``band_grid``, ``skip_factor``), the resonances are
+       sampled after the other points, and only where a surrogate of the
+       error between their sampled neighbours, raised by 25%, reaches the
+       best sample (:mod:`morsuite.analysis._hinf_screen`).
     2. Each sample costs one sparse LU and gives :math:`\sigma_{\max}` and its
        derivative from the singular vectors,
 
@@ -84,11 +88,11 @@ from ..linalg.gramians import cached_gramian_factors
 from ..utils import blas_threads
 from ..norms._common import adi_options, check_fom, flexible_route, infinite, refuse_rigid, validate_rom
 from ..norms._fom import FomResponse
-from ._hinf_certify import certificate as _certificate, refine_peak as _refine
+from ._hinf_certify import BAR_MARGIN, certificate as _certificate, refine_peak as _refine
+from ._hinf_grid import start_grid as _grid
+from ._hinf_screen import model_poles, predicted_peak, screen as screen_resonances
 from ._hinf_dense import error_realization, hidden_realization
 from ..norms._rom import RomResponse
-from ..norms.h2 import breakpoints, resonances
-from .response import freq_grid
 
 __all__ = ["hinf_norm", "hinf_error", "hinf_rel_error"]
 
@@ -113,7 +117,9 @@ def _band_grid(band_grid):
     return (float(lo), float(hi), int(n))
 
 
-def _check(max_lus, rtol, per_decade, certify_dim=0, certify_tol=0.5, certify_lus=4, skip_factor=0.0):
+def _check(max_lus, rtol, per_decade, certify_dim=0, certify_tol=0.5, certify_lus=4, skip_factor=0.0, screen=False):
+    if not isinstance(screen, (bool, np.bool_)):
+        raise OptionError(f"screen must be True or False; got {screen!r}")
     if not (isinstance(skip_factor, (float, int)) and not isinstance(skip_factor, bool) and 0 <= skip_factor < 1):
         raise OptionError(f"skip_factor must be a number in [0, 1); got {skip_factor!r}")
     if isinstance(certify_dim, bool) or not isinstance(certify_dim, (int, np.integer)) or certify_dim < 0:
@@ -139,6 +145,8 @@ class _Sigma:
         self.rr = rr
         self.rtol = rtol
         self.samples = {}
+        #: the full model's (T, T') per sampled frequency (the screening's surrogate, option ``screen``)
+        self.full = {}
         #: frequencies evaluated (one LU each without the model's memo): the budgets count these, so
         #: that a search does not depend on what the memo holds
         self.calls = 0
@@ -153,6 +161,7 @@ class _Sigma:
         self.calls += 1
         # always refined and kept: the entry then serves every search and the band response alike
         T0, Tx, dT = self.ev.sample(s)
+        self.full[w] = (T0, dT)
         if self.rr is None:
             T = T0
         else:
@@ -173,73 +182,23 @@ class _Sigma:
         return self.samples[w]
 
 
-def _anchored(lo, hi, b_lo, b_hi, per_decade):
-    """Log-lattice points ``b_lo 10^(-k/per_decade)`` down to ``lo`` and ``b_hi 10^(k/per_decade)`` up to ``hi``
-    (k >= 1): anchored at the band's ends, so that searches whose ranges differ share their points."""
-    below = int(np.ceil(per_decade * np.log10(b_lo / lo))) if lo < b_lo else 0
-    above = int(np.ceil(per_decade * np.log10(hi / b_hi))) if hi > b_hi else 0
-    return np.concatenate([b_lo * 10.0 ** (-np.arange(below, 0, -1) / per_decade),
-                           b_hi * 10.0 ** (np.arange(1, above + 1) / per_decade)])
-
-
-def _grid(fom, rom_poles, ritz, per_decade, budget, band_grid=None):
-    """Start frequencies: 0, resonances of the reduced model and of the model, a log grid; with
-    ``band_grid`` that grid's points (not counted in ``budget``) and the log grid outside it only."""
-    own = np.abs(np.asarray(rom_poles, dtype=complex).imag)
-    own = np.unique(own[own > 0])
-    if ritz is None or not ritz.size:
-        model = np.zeros(0)
-    elif band_grid is None:
-        model = breakpoints(ritz)
-    else:  # the band grid resolves the flanks: the resonances' centres only
-        model = np.array([w for w, _ in resonances(ritz)], dtype=float)
-    lo, hi = fom.band if band_grid is None else (float(band_grid[0]), float(band_grid[1]))
-    freqs = np.concatenate([own, model])
-    if freqs.size:
-        lo, hi = min(lo, freqs.min() / 10.0), max(hi, freqs.max() * 10.0)
-    if band_grid is not None:
-        return _banded(own, model, _anchored(lo, hi, float(band_grid[0]), float(band_grid[1]), per_decade),
-                       freq_grid(band_grid[:2], band_grid[2]), budget)
-    n_log = int(np.ceil(np.log10(hi / lo) * per_decade)) + 1
-    logs = np.logspace(np.log10(lo), np.log10(hi), n_log)
-    room = budget - 1 - own.size - logs.size
-    if model.size > max(room, 0):
-        model = model[np.linspace(0, model.size - 1, max(room, 0)).astype(int)] if room > 0 else model[:0]
-    pts = np.unique(np.concatenate([[0.0], own, model, logs]))
-    if pts.size > budget:  # too many of the reduced model's own resonances: thin the log grid first
-        keep = np.unique(np.concatenate([[0.0], own, model]))
-        rest = np.setdiff1d(pts, keep)
-        n = max(budget - keep.size, 0)
-        pts = np.unique(np.concatenate([keep, rest[np.linspace(0, rest.size - 1, n).astype(int)] if n else []]))
-        pts = pts[:budget] if pts.size > budget else pts
-    # a conjugate pair's |Im| can differ in the last bit: one sample per frequency
-    pts = pts[np.concatenate([[True], np.diff(pts) > 1e-10 * pts[1:]])]
-    return pts, {"rom_resonances": int(own.size), "model_resonances": int(model.size), "log_grid": int(logs.size)}
-
-
-def _banded(own, model, logs, band, budget):
-    """:func:`_grid` with a band grid: ``band`` kept whole (free), the model's resonances thinned to the
-    ``budget`` left by 0, the reduced model's resonances and the log points outside the band."""
-    room = budget - 1 - own.size - logs.size
-    if model.size > max(room, 0):
-        model = model[np.linspace(0, model.size - 1, max(room, 0)).astype(int)] if room > 0 else model[:0]
-    pts = np.unique(np.concatenate([[0.0], own, model, logs, band]))
-    # a conjugate pair's |Im| can differ in the last bit: one sample per frequency (the band's points kept)
-    near = np.concatenate([[False], np.diff(pts) <= 1e-10 * pts[1:]]) & ~np.isin(pts, band)
-    return pts[~near], {"rom_resonances": int(own.size), "model_resonances": int(model.size),
-                        "log_grid": int(logs.size), "band_grid": int(band.size)}
-
-
 def _search(fom, rr, rom_poles, feed, *, max_lus, grid_lus, rtol, per_decade, refine, n_peaks, adi,
-            band_grid=None, skip_factor=0.0):
+            band_grid=None, skip_factor=0.0, screen=False):
     gf = cached_gramian_factors(fom, **adi)
     ritz = np.asarray(gf.controllability.shifts) if gf is not None else None
     sig = _Sigma(fom, rr, refine, rtol)
-    pts, how = _grid(fom, rom_poles, ritz, per_decade, min(grid_lus, max_lus - 1), band_grid)
-    for w in pts:
+    pts, how, optional = _grid(fom, rom_poles, ritz, per_decade, min(grid_lus, max_lus - 1), band_grid)
+    screened = None
+    if not (screen and skip_factor > 0 and optional.any()):
+        optional[:] = False
+    for w in pts[~optional]:
         sig(w)
     # the band grid's samples are the band response's (one memo): the budgets count the others
     sig.calls -= how.get("band_grid", 0)
+    if optional.any():  # the resonances whose surrogate may reach the bar (module _hinf_screen)
+        poles = model_poles(ritz)
+        screened = screen_resonances(sig, pts[optional], poles, rr, BAR_MARGIN,
+                                     max(min(grid_lus, max_lus - 1) - sig.calls, 0))
     ws = np.array(sorted(sig.samples))
     fs = np.array([sig.samples[w][0] for w in ws])
     # local maxima of the samples (the ends count), best first
@@ -249,6 +208,11 @@ def _search(fom, rr, rom_poles, feed, *, max_lus, grid_lus, rtol, per_decade, re
     cands = np.flatnonzero(is_max)
     cands = cands[np.argsort(-fs[cands])][:n_peaks]
     est = np.array([_resonance_peak(ws, fs, i) for i in cands])
+    if screened is not None:  # no finite isolated-resonance estimate: the surrogate's, where it has one
+        est = np.array([e if np.isfinite(e) or not 0 < i < ws.size - 1 else
+                        max(predicted_peak(0.5 * (ws[i - 1] + ws[i]), ws, sig.full, poles, rr),
+                            predicted_peak(0.5 * (ws[i] + ws[i + 1]), ws, sig.full, poles, rr))
+                        for i, e in zip(cands, est)])
     if skip_factor > 0:  # the most promising first: the others then meet a higher bar
         cands, est = cands[np.argsort(-est, kind="stable")], est[np.argsort(-est, kind="stable")]
     best = (float(fs.max()), float(ws[np.argmax(fs)]))
@@ -277,7 +241,7 @@ def _search(fom, rr, rom_poles, feed, *, max_lus, grid_lus, rtol, per_decade, re
     rec = {"peak_frequency": w_peak, "lu_count": sig.ev.lu_count, "lu_shifts": list(sig.ev.shifts),
            "samples": len(sig.samples),
            "grid": how, "grid_size": int(pts.size), "model_resonances_from": "cached LR-ADI shifts" if gf else None,
-           "refinements": refinements, "skipped": skipped}
+           "refinements": refinements, "skipped": skipped, "screened": screened}
     return float(value), rec, sig
 
 
@@ -307,7 +271,8 @@ ho / (j\omega - \lambda)|`); ``inf`` at an end of the grid or
 
 def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-10, per_decade: int = 8,
               refine: int = 1, n_peaks: int = 8, adi=None, certify_dim: int = CERTIFY_DIM, certify_tol: float = 1e-6,
-              certify_lus: int = 100, band_grid=None, skip_factor: float = 0.0, details: bool = False):
+              certify_lus: int = 100, band_grid=None, skip_factor: float = 0.0, screen: bool = False,
+               details: bool = False):
     r""":math:`\|T\|_{\mathcal H_\infty} = \sup_\omega \sigma_{\max}(T(j\omega))`: the peak found (a lower
     bound), with a certified upper bound where :math:`n_1 - n_2 \le` ``certify_dim``.
 
@@ -356,6 +321,15 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
         unbounded at the grid's ends). Default 0: each of the ``n_peaks`` best maxima is
         refined (``morsuite compare`` uses 0.5: refinements of maxima far below the peak
         are most of a search's LUs). The skipped ones are in ``details["skipped"]``.
+    screen : bool
+        With ``band_grid`` and ``skip_factor`` > 0: the resonance frequencies of the start grid (the
+        reduced model's and the model's) are sampled only where the largest value of a surrogate of
+        the error between their sampled neighbours, Hermite interpolation of :math:`T` and :math:`T'`
+        with the model's poles in that interval (:mod:`morsuite.analysis._hinf_screen`), raised by
+        the refinement's 25% margin, reaches the best sample: the bar under which a maximum is not
+        refined; the base points (0, the band grid, the log grid) are sampled first. Default False (every resonance sampled; ``morsuite compare``
+        uses True: most resonances lie far below the peak and cost one LU each). The record is
+        ``details["screened"]`` (candidates, sampled, the skipped ones with their predictions).
     details : bool
         Also return a dict (``lower_bound``, ``upper_bound``, ``certified``, ``certificate``,
         ``peak_frequency``, ``lu_count``, ``samples``, ``refinements``, ...).
@@ -367,13 +341,13 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
     """
     check_fom(fom)
     refuse_rigid(fom, "hinf_norm")
-    _check(max_lus, rtol, per_decade, certify_dim, certify_tol, certify_lus, skip_factor)
+    _check(max_lus, rtol, per_decade, certify_dim, certify_tol, certify_lus, skip_factor, screen)
     band_grid = _band_grid(band_grid)
     adi = adi_options(adi)
     # the start grid depends on whether the model's resonances (cached Gramian factors) are there
     resonances = cached_gramian_factors(fom, **adi) is not None
     key = ("hinf_norm", max_lus, grid_lus, rtol, per_decade, refine, n_peaks, tuple(sorted(adi.items())),
-           certify_dim, certify_tol, certify_lus, resonances, band_grid, skip_factor)
+           certify_dim, certify_tol, certify_lus, resonances, band_grid, skip_factor, bool(screen))
     cache = getattr(fom, "cache", None)
     if cache is not None and key in cache:
         value, rec = cache[key]
@@ -383,7 +357,7 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
         with blas_threads(1):
             value, rec, sig = _search(fom, None, np.zeros(0), None, max_lus=max_lus, grid_lus=grid_lus, rtol=rtol,
                                       per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi,
-                                      band_grid=band_grid, skip_factor=skip_factor)
+                                      band_grid=band_grid, skip_factor=skip_factor, screen=screen)
             value = _certificate(fom, sig, lambda: hidden_realization(fom), value, rec, certify_dim=certify_dim,
                                  certify_tol=certify_tol, certify_lus=certify_lus, rtol=rtol)
         rec["time_s"] = time.perf_counter() - t0
@@ -395,7 +369,8 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
 
 def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-10, per_decade: int = 8,
                refine: int = 1, n_peaks: int = 8, adi=None, certify_dim: int = CERTIFY_DIM, certify_tol: float = 1e-6,
-               certify_lus: int = 100, band_grid=None, skip_factor: float = 0.0, details: bool = False):
+               certify_lus: int = 100, band_grid=None, skip_factor: float = 0.0, screen: bool = False,
+               details: bool = False):
     r""":math:`\|T - T_r\|_{\mathcal H_\infty}`: the peak found (a lower bound, exact to ``rtol`` at that
     peak), with a certified upper bound where :math:`n_1 - n_2 \le` ``certify_dim``.
 
@@ -415,7 +390,7 @@ def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float
     fom : Index3Model
     rom : SecondOrderROM or FirstOrderROM
     max_lus, grid_lus, rtol, per_decade, refine, n_peaks, adi, certify_dim, certify_tol, certify_lus, band_grid,
-    skip_factor, details
+    skip_factor, screen, details
         As in :func:`hinf_norm`.
 
     Returns
@@ -434,13 +409,13 @@ def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float
     InputError
         ``rom`` has non-finite matrices or a singular E.
     """
-    _check(max_lus, rtol, per_decade, certify_dim, certify_tol, certify_lus, skip_factor)
+    _check(max_lus, rtol, per_decade, certify_dim, certify_tol, certify_lus, skip_factor, screen)
     band_grid = _band_grid(band_grid)
     adi = adi_options(adi)
     routed = flexible_route(fom, rom, hinf_error, details, max_lus=max_lus, grid_lus=grid_lus, rtol=rtol,
                             per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi, certify_dim=certify_dim,
                             certify_tol=certify_tol, certify_lus=certify_lus, band_grid=band_grid,
-                            skip_factor=skip_factor)
+                            skip_factor=skip_factor, screen=screen)
     if routed is not None:  # rigid-body modes: T - T_r is the flexible parts' difference
         return routed
     arrays, why = validate_rom(fom, rom, "rom")
@@ -455,7 +430,7 @@ def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float
     with blas_threads(1):
         value, rec, sig = _search(fom, rr, rom.poles(), feed, max_lus=max_lus, grid_lus=grid_lus, rtol=rtol,
                                   per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi,
-                                  band_grid=band_grid, skip_factor=skip_factor)
+                                  band_grid=band_grid, skip_factor=skip_factor, screen=screen)
         value = _certificate(fom, sig, lambda: error_realization(fom, arrays), value, rec, certify_dim=certify_dim,
                              certify_tol=certify_tol, certify_lus=certify_lus, rtol=rtol)
     rec["time_s"] = time.perf_counter() - t0

@@ -8,7 +8,8 @@ their floors, H-infinity peaks found), so that a change of the LU count can be c
 against unchanged answers. Full: ``fem_block:n1=4000`` (about 6 min with SuperLU on two
 cores); quick: ``fem_block:n1=1000``. Ratio: the total LU count over the target of
 issue 33 (450 at n1 = 4000), lower is better; the LU count is deterministic for a given
-backend, the times are not (the machine's load is recorded).
+backend, the times are not (the machine's load is recorded). Then the band response alone on one
+and on two solver threads, interleaved (:func:`band_threads`): a ratio of times, not of LUs.
 """
 
 from __future__ import annotations
@@ -69,6 +70,32 @@ def compare_lus(model: str, states: int, echo=print) -> dict:
             "wall_s": wall}
 
 
+def band_threads(model: str, n: int = 24, reps: int = 2) -> dict:
+    """The full model's band response on 1 and on 2 solver threads, interleaved, each on a fresh model
+    (pattern analysed before timing): the times, the ratio of the medians (2 threads over 1) and
+    whether the responses are the same bits (:func:`morsuite.analysis.band_response`)."""
+    import numpy as np
+
+    from ..analysis.response import band_response, freq_grid
+    from ..models import parse
+
+    times, same = {1: [], 2: []}, True
+    for _ in range(reps):
+        ref = None
+        for threads in (1, 2):
+            fom = parse(model)
+            fom.solver.factor(1j * fom.band[0])  # the pattern's analysis, not timed
+            w = freq_grid(fom.band, n)
+            t0 = time.perf_counter()
+            H, _ = band_response(fom, w, threads=threads)
+            times[threads].append(time.perf_counter() - t0)
+            same = same and (ref is None or np.array_equal(H, ref))
+            ref = H if ref is None else ref
+    ratio = float(np.median(times[2]) / np.median(times[1]))
+    return {"model": model, "frequencies": n, "times_1": times[1], "times_2": times[2], "ratio_2_over_1": ratio,
+            "same_bits": bool(same)}
+
+
 @benchmark("compare-lus")
 def bench_compare_lus(quick: bool) -> dict:
     """LUs and time per item of `morsuite compare fem_block:n1=4000 --states 12` (quick: n1=1000); target 450 LUs."""
@@ -79,8 +106,14 @@ def bench_compare_lus(quick: bool) -> dict:
     except (AttributeError, OSError):
         load = None
     print(f"compare-lus: {model} --states {states}: {res['lu_total']} LUs, {res['wall_s']:.0f} s; load {load}")
+    # the band response's samples on the solver threads: time, not LUs (the same bits)
+    thr = band_threads(model)
+    print(f"compare-lus: band response of {thr['frequencies']} frequencies on 2 threads / 1 thread: "
+          f"{thr['ratio_2_over_1']:.2f} (same bits: {thr['same_bits']})")
     ratios = {}
     if target is not None:
         ratios["compare_lus"] = {"value": res["lu_total"] / target, "target": 1.0,
                                  "what": f"{res['lu_total']} LUs of the comparison over the target {target}"}
-    return {**res, "load_average": load, "ratios": ratios}
+    ratios["band_threads"] = {"value": thr["ratio_2_over_1"], "target": None,
+                              "what": "band response time on 2 solver threads over 1 (interleaved, fresh models)"}
+    return {**res, "band_threads": thr, "load_average": load, "ratios": ratios}

@@ -150,8 +150,10 @@ def compare_spec(model: str, states, methods=None, band=None, input=None, name=N
             "norms": ["h2", "hinf"], "models": {"model": source},
             "grids": {"band": {"band": band, "n": 200}},
             # the H-infinity searches sample the band response's grid too: one memo of T(jw), no second LU
-            # and refine only the maxima that may beat the best peak found
-            "norm_options": {"hinf": {"band_grid": [band[0], band[1], 200], "skip_factor": SKIP_FACTOR}},
+            # and refine only the maxima that may beat the best peak found, sample only the resonances
+            # whose surrogate may (screen)
+            "norm_options": {"hinf": {"band_grid": [band[0], band[1], 200], "skip_factor": SKIP_FACTOR,
+                                      "screen": True}},
             "methods": {_alias(m): {"reducer": METHODS[m][0], **({"options": _options(m, band)} if _options(m, band)
                                                               else {}),
                                     "label": METHODS[m][3]} for m in methods},

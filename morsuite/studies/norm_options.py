@@ -49,6 +49,13 @@ def _skip_factor(ctx, where, value):
     return float(value)
 
 
+def _flag(ctx, where, value):
+    """True or False."""
+    if not isinstance(value, bool):
+        ctx.fail(where, f"expected true or false; got {value!r}")
+    return value
+
+
 #: kind -> option -> (default, validator); the keyword options of h2_error / hinf_error
 NORM_OPTIONS = {
     "h2": {"method": ("auto", choice_of(("auto", "error-gramian", "pole-residue", "quadrature"))), "rtol": (1e-8, float_in_01),
@@ -57,7 +64,7 @@ NORM_OPTIONS = {
              "per_decade": (8, positive_int), "refine": (1, nonnegative_int), "n_peaks": (8, positive_int),
              "adi": (None, _adi), "certify_dim": (300, nonnegative_int), "certify_tol": (1e-6, float_in_01),
              "certify_lus": (100, int_at_least(4)), "band_grid": (None, _band_grid),
-             "skip_factor": (0.0, _skip_factor)},
+             "skip_factor": (0.0, _skip_factor), "screen": (False, _flag)},
 }
 
 

@@ -45,15 +45,18 @@ def fom_response(source: str, lo: float, hi: float, n: int, key: str, cache_root
     needs no linear algebra)."""
     from ..analysis import sigma_max
     from ..analysis.response import band_response
+    from ..utils import default_threads
 
     fom = _model(source)
     omega = np.logspace(np.log10(lo), np.log10(hi), n)
     t0 = time.perf_counter()
-    # through the model's memo of T(jw): the H-infinity searches with this band grid draw on it
-    H, lus = band_response(fom, omega, progress=progress)
+    # through the model's memo of T(jw): the H-infinity searches with this band grid draw on it; the
+    # frequencies on the solver threads IRKA's shift solves use (the values do not depend on them)
+    threads = default_threads(fom.solver.backend)
+    H, lus = band_response(fom, omega, progress=progress, threads=threads)
     elapsed = time.perf_counter() - t0
     out = {"kind": "fom", "key": key, "model": fom.name, "omega": omega, "H": H, "sigma_full": sigma_max(H),
-           "time_s": elapsed, "lu_count": lus, "cached": False, "scheduler": run_by,
+           "time_s": elapsed, "lu_count": lus, "solver_threads": threads, "cached": False, "scheduler": run_by,
            **_stamp()}
     if cache_root is not None:
         from .cache import Cache

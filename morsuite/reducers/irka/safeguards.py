@@ -148,9 +148,12 @@ GUARD_OPTIONS = {
                              "again after a reaction (stronger hysteresis, smaller step, recent sets forgotten) "
                              "to an earlier one (status cycle) or after safeguard_stall iterations without a new smallest "
                              "measure (status stalled), returning the best iterate, instead of running to maxit"),
-    "safeguard_stall": Option(30, "int", "iterations of the engaged safeguard without a new smallest measure after "
-                              "which safeguard_stop stops (30: tcom(2000) at r = 26 converges 14 iterations after its "
-                              "last new smallest measure, 2026-11-27; fem_block(4000) at r = 6 never does)", low=2),
+    "safeguard_stall": Option(15, "int", "iterations of the engaged safeguard without progress (a measure below "
+                              "1 - safeguard_progress times the smallest one at the last progress) after which "
+                              "safeguard_stop stops (docs/design/irka.md, issue 33)", low=2),
+    "safeguard_progress": Option(0.1, "float", "relative decrease of the smallest measure that counts as progress "
+                                 "of the engaged safeguard (0: any new smallest measure); idle, any new smallest "
+                                 "measure counts", low=0, high=1, open_high=True),
     "shortlist": Option(5, "int", "stable iterates kept (with their models) for the final choice "
                         "without convergence (safeguard on)", low=1),
     "shortlist_score": Option("h2", "choice", "how the shortlisted iterates are ranked without convergence: "
@@ -254,10 +257,12 @@ class CycleGuard:
         active = o["safeguard"] == "on" or (o["safeguard"] == "auto" and o["update"] == "auto")
         return cls(active, hysteresis=o["safeguard_hysteresis"], radius=o["hysteresis_radius"],
                    settle=o["safeguard_settle"], window=o["safeguard_window"], min_step=o["safeguard_min_step"],
-                   tabu_radius=o["safeguard_tabu_radius"])
+                   tabu_radius=o["safeguard_tabu_radius"], progress=o.get("safeguard_progress", 0.0))
 
-    def __init__(self, active, *, hysteresis, radius, settle, window, min_step, tabu_radius):
+    def __init__(self, active, *, hysteresis, radius, settle, window, min_step, tabu_radius, progress=0.0):
         self.active = bool(active)
+        #: engaged, a new smallest measure counts as progress only below (1 - progress) times the last one that did
+        self.progress = float(progress)
         self.h0, self.radius, self.settle = hysteresis, radius, settle
         self.window, self.min_step, self.tabu_radius = window, min_step, tabu_radius
         self.h = hysteresis
@@ -283,8 +288,9 @@ class CycleGuard:
         self.new_stage()  # its progress is counted from here
 
     def observe(self, measure):
-        """Record this iteration's measure (progress: a new smallest one in the stage)."""
-        if measure < self._best:
+        """Record this iteration's measure (progress: a new smallest one in the stage; engaged, smaller than
+        ``1 - progress`` times the smallest at the last progress)."""
+        if measure < (1.0 - (self.progress if self.engaged else 0.0)) * self._best:
             self._best, self._since_best = measure, 0
         else:
             self._since_best += 1

@@ -25,13 +25,11 @@ the executor and thread count.
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 
 from ...errors import InputError, SingularShiftError
 from ...linalg.refine import SaddleOperator, refined_solve
+from ...utils import default_threads, map_threads  # noqa: F401 (re-exported: IRKA's executors)
 from .shift_update import COMPLEX_TOL
 
 __all__ = ["raw_bases", "default_threads", "map_threads", "map_dask", "remote_shift_solves"]
@@ -85,35 +83,6 @@ def shift_solves(red):
         w = None if rhs_w is None else red._solve(red._second(lu), rhs_w, True, a)
         return x, w  # the LU is freed here (a dense LU of the projected baseline is n1 x n1)
     return run
-
-
-def default_threads(backend: str) -> int:
-    """The automatic ``solver_threads``: 2 on two or more cores, else 1; always 1 for ``"klu"``.
-
-    Measured on a quiet moment of this 2-core machine (docs/design/backends.md): six LUs of
-    dsms(2e5) or tcom(2e5) on 2 threads took 0.46-0.55 of the serial time with SuperLU and
-    0.48-0.64 with the banded LU (0.70-0.79 with their solves). BLAS runs single-threaded
-    inside a reduction (``reducers.base.BLAS_THREADS``), so the threads do not compete
-    with BLAS threads. More than 2 was not measured. KLU through nbklu holds the GIL for
-    its numeric factorization (measured 2026-11-27: a Python loop in another thread ran about 1/70
-    of its iterations during the call; kvxopt, the former KLU, held it too), so threads cannot
-    overlap its LUs. rslab's factorizations and PARDISO's calls (ctypes) release the GIL.
-    """
-    if backend == "klu":
-        return 1
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        cores = os.cpu_count() or 1
-    return 2 if cores >= 2 else 1
-
-
-def map_threads(fn, jobs, threads: int) -> list:
-    """``[fn(j) for j in jobs]`` on a pool of ``threads`` threads (serial for one thread or one job)."""
-    if threads <= 1 or len(jobs) <= 1:
-        return [fn(j) for j in jobs]
-    with ThreadPoolExecutor(max_workers=min(threads, len(jobs))) as pool:
-        return list(pool.map(fn, jobs))
 
 
 def remote_shift_solves(solver, job, steps: int, ext: bool, check_all: bool):
