@@ -141,7 +141,8 @@ def test_so_h2_converges_on_the_dsms_against_the_dense_reference(dsms60):
     assert info["descent"] == "varpro" and info["status"] == "converged" and info["converged"]
     np.testing.assert_array_equal(res.rom.M, np.eye(3))
     rho_ref, J_ref = dense_rho(dsms60, res.rom)
-    assert info["h2_error"] == pytest.approx(np.sqrt(J_ref), rel=1e-7)
+    # the reducer's value (the H2 decision's route) within its own floor of the dense reference
+    assert abs(info["h2_error"] - np.sqrt(J_ref)) <= info["h2_error_floor"] + 1e-12 * np.sqrt(J_ref)
     assert rho_ref <= GTOL
     assert rho_ref == pytest.approx(info["relative_gradient"], rel=0.05, abs=1e-6)
     for form in ("pp", "vv", "fv"):

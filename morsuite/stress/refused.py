@@ -280,7 +280,7 @@ _ROWS = [
      r"The 'band' parameter of BTFL must satisfy 0 <= w1 < w2 .*the band is empty"),
     ("btfl-limited", "option", "bt-fl(limited='observability')",
      lambda t, d: ms.reducers.make("bt-fl", _small(), limited="observability"), OptionError,
-     r"The 'limited' parameter of BTFL must be one of 'both', 'controllability'"),
+     r"The 'limited' parameter of BTFL must be one of 'controllability', 'both'"),
     ("btfl-nodes", "option", "bt-fl(nodes=0)", lambda t, d: ms.reducers.make("bt-fl", _small(), nodes=0),
      OptionError, r"The 'nodes' parameter of BTFL must be an int in \[1, inf\)"),
     ("btfl-log-zero", "option", "bt-fl(band=[0, 1], variable='log')",

@@ -8,6 +8,8 @@ This module imports only :mod:`morsuite.studies.checks`: the spec and the scene 
 
 from __future__ import annotations
 
+from numbers import Real
+
 from .checks import choice_of, float_in_01, int_at_least, nonnegative_int, positive_int, subset_of
 
 __all__ = ["NORM_KINDS", "NORM_OPTIONS", "NORM_MEASURES", "ADI_KEYS", "full_options", "norms_of"]
@@ -16,14 +18,30 @@ NORM_KINDS = ("h2", "hinf")
 #: measure of a scene -> (norm kind, relative?)
 NORM_MEASURES = {"h2": ("h2", False), "h2_rel": ("h2", True), "hinf": ("hinf", False), "hinf_rel": ("hinf", True)}
 #: the LR-ADI options of the Gramian factors (morsuite.linalg.gramians.ADI_DEFAULTS)
-ADI_KEYS = ("tol", "maxiter", "shifts", "num_shifts", "selection", "refine")
+ADI_KEYS = ("tol", "maxiter", "shifts", "num_shifts", "selection", "refine", "shift_reuse", "lu_pool_mib",
+            "compress_tol")
+
+
+def _nonnegative_below_1(ctx, where, value):
+    """``float(value)`` if it lies in [0, 1)."""
+    if isinstance(value, bool) or not isinstance(value, Real) or not (0 <= value < 1):
+        ctx.fail(where, f"expected a number in [0, 1); got {value!r}")
+    return float(value)
+
+
+def _nonnegative(ctx, where, value):
+    """``float(value)`` if it is a finite number >= 0."""
+    if isinstance(value, bool) or not isinstance(value, Real) or not (0 <= value < float("inf")):
+        ctx.fail(where, f"expected a finite number >= 0; got {value!r}")
+    return float(value)
 
 
 def _adi(ctx, where, value):
     if value is None:
         return None
     ctx.keys(where, value, ADI_KEYS)
-    checks = {"tol": float_in_01, "maxiter": positive_int, "num_shifts": positive_int, "refine": nonnegative_int}
+    checks = {"tol": float_in_01, "maxiter": positive_int, "num_shifts": positive_int, "refine": nonnegative_int,
+              "shift_reuse": _nonnegative_below_1, "lu_pool_mib": _nonnegative, "compress_tol": _nonnegative_below_1}
     out = {}
     for k, v in value.items():
         out[k] = checks[k](ctx, f"{where}.{k}", v) if k in checks else v
