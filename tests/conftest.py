@@ -117,3 +117,34 @@ def count_factorizations(monkeypatch):
 
     monkeypatch.setattr(SaddlePointSolver, "_assemble_scaled", counted)
     return calls
+
+
+# -- random order ---------------------------------------------------------------------------------
+def pytest_addoption(parser):
+    parser.addoption("--shuffle", type=int, default=None, metavar="SEED",
+                     help="run the test modules, and the tests within each, in an order shuffled with SEED "
+                          "(the suite must pass in any order; the same SEED gives every xdist worker the same order)")
+
+
+def pytest_collection_modifyitems(config, items):
+    """With ``--shuffle SEED``: modules in a random order, tests within a module too (a module's tests kept
+    together so that its module-scoped fixtures are built once), reproducible from SEED."""
+    seed = config.getoption("--shuffle")
+    if seed is None:
+        return
+    import random
+
+    rng = random.Random(seed)
+    modules: dict = {}
+    for item in items:
+        modules.setdefault(item.nodeid.split("::", 1)[0], []).append(item)
+    groups = list(modules.values())
+    rng.shuffle(groups)
+    for group in groups:
+        rng.shuffle(group)
+    items[:] = [item for group in groups for item in group]
+
+
+def pytest_report_header(config):
+    seed = config.getoption("--shuffle")
+    return None if seed is None else f"test order shuffled with --shuffle {seed}"

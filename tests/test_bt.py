@@ -239,7 +239,9 @@ def test_unconverged_adi_warns_and_says_so():
 def test_cli_reduce_json(capsys):
     from morsuite.cli import main
 
-    assert main(["reduce", "--model", "dsms:g=600", "--method", "bt", "--r", "10", "--json"]) == 0
+    # the reduction's record only: the norms of `reduce --json` are tested on dsms:g=40
+    # (test_studies_norms_time.py); here they would add the Hinf certificate of 599 hidden positions
+    assert main(["reduce", "--model", "dsms:g=600", "--method", "bt", "--r", "10", "--json", "--no-norms"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["method"] == "bt" and out["r"] == 10 and out["converged"] and out["stable"]
     assert out["max_abs_error"] < 2e-6 and out["lu_count"] > 0

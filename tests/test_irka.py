@@ -90,8 +90,9 @@ def test_dsms_r30_rank_loss_is_reported_and_accurate(dsms6000_freq):
     assert info["converged"] and info["stable"]
     assert any("RankWarning" in w for w in info["warnings"])
     df = ms.analysis.errors(fom, res.rom, omega, H_full=H)
-    # measured 2e-16 to 1.5e-14 (orders 24 to 26); 4e-11 before (order 18)
-    assert df.abs_error.max() <= 1e-12
+    # measured 2e-16 to 1.5e-14 (orders 24 to 26; max |H| = 0.151); 4e-11 before (order 18): relative to
+    # the response's size, not an absolute number
+    assert df.abs_error.max() <= 1e-11 * np.abs(H).max()
 
 
 def test_refined_solves_and_gram_schmidt_reach_the_long_double_accuracy():

@@ -62,3 +62,9 @@ def test_the_expression_language_refuses_anything_else(tmp_path):
     for expr in ('__import__("os").getcwd()', 'csv.__class__', 'open("r.csv")'):
         with pytest.raises(InputError):
             evaluate(expr, _csv(tmp_path))
+
+
+@pytest.mark.parametrize("page,least", [("docs/design/backends.md", 40), ("docs/benchmarks.md", 15)])
+def test_the_measurement_pages_quote_their_headline_figures_with_sources(page, least):
+    """The pages of measured figures mark what they take from results/ (checked above), not only the README."""
+    assert len(find_quotes((ROOT / page).read_text(encoding="utf-8"))) >= least

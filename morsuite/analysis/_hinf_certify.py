@@ -17,7 +17,7 @@ import numpy as np
 
 from ..linalg.levelset import level_set
 
-__all__ = ["refine_peak", "climb", "certify", "certificate", "RESOLUTION", "LOCAL"]
+__all__ = ["refine_peak", "climb", "certify", "certificate", "RESOLUTION", "LOCAL", "TRUNCATION"]
 
 EPS = np.finfo(float).eps
 #: an eigenvalue near the axis is checked locally only if |Re| <= LOCAL * max(frequency, lowest band frequency)
@@ -79,6 +79,9 @@ def refine_peak(sig, lo, c, hi, rtol, budget, bar=None):
 BAR_MARGIN = 0.25
 
 
+#: the modal truncation of the model may add at most TRUNCATION * tol * peak to the error (``certify``)
+TRUNCATION = 0.1
+
 #: the dense level-set test's resolution: the certified gap is at least RESOLUTION * eps * ||T|| / peak
 RESOLUTION = 1e3
 
@@ -115,28 +118,34 @@ def climb(sig, w, h, rtol, budget):
 def certify(sig, realization, value, w_peak, *, tol, rounds, lus, rtol, w_lo):
     r"""Upper bound by the level-set test at :math:`\gamma = (1 + tol)\,\text{peak}`; missed peaks refined.
 
-    An eigenvalue near the axis is dismissed by a climb only when its real part is at most
+    ``realization(budget)`` gives the dense error system ``(A, B, C, D, delta, info)``, possibly with
+    the model modally truncated (:mod:`morsuite.analysis._hinf_dense`) at an error :math:`\delta \le`
+    :data:`TRUNCATION` :math:`\cdot\,tol\cdot` peak; the test then runs on the truncated system at
+    :math:`\hat\gamma = \gamma - \delta`, so that :math:`\gamma` still bounds the model's error. An
+    eigenvalue near the axis is dismissed by a climb only when its real part is at most
     :data:`LOCAL` times its frequency (or ``w_lo``, the model's lowest band frequency): farther
     off, the true eigenvalue it may stand for could sit on another hump, and the value stays
-    uncertified.
+    uncertified; and only when the hump peaks below :math:`\hat\gamma - \delta`.
 
     Returns ``(value, w_peak, upper_bound or None, certified, record)``.
     """
     t0, lu0, made0 = time.perf_counter(), sig.calls, sig.ev.lu_count  # lu0: samples (one LU each without the memo)
-    A, B, C, D = realization()
-    t_real = time.perf_counter() - t0
     scale = max(sig.scale, value)
     tol = max(tol, RESOLUTION * EPS * scale / value) if value > 0 else tol
+    A, B, C, D, delta, trunc = realization(TRUNCATION * tol * value if value > 0 else 0.0)
+    t_real = time.perf_counter() - t0
     rec = {"method": "level set (Hamiltonian of the dense error system on the hidden manifold)",
-           "order": 2 * A.shape[0], "tol": tol, "realization_s": t_real, "rounds": [], "reason": None}
+           "order": 2 * A.shape[0], "tol": tol, "realization_s": t_real, "truncation": trunc, "rounds": [],
+           "reason": None}
     upper, certified = None, False
     for rnd in range(rounds + 1):
         gamma = (1.0 + tol) * value
         if not gamma > 0:
             rec["reason"] = "the error is zero to rounding: no level to test"
             break
-        ls = level_set(A, B, C, D, gamma)
-        entry = {"gamma": gamma, "candidates": ls.frequencies.tolist(), "closest": ls.closest, "climbs": []}
+        ls = level_set(A, B, C, D, gamma - delta)  # ||T - That|| <= delta: gamma bounds the model's error
+        entry = {"gamma": gamma, "tested": gamma - delta, "candidates": ls.frequencies.tolist(),
+                 "closest": ls.closest, "climbs": []}
         rec["rounds"].append(entry)
         if not ls.crossed:
             upper, certified = gamma, True
@@ -158,7 +167,7 @@ def certify(sig, realization, value, w_peak, *, tol, rounds, lus, rtol, w_lo):
             break
         vals = np.array([sig(w)[0] for w in probe])
         i = int(np.argmax(vals))
-        if vals[i] >= gamma:
+        if vals[i] >= gamma - 2.0 * delta:
             h = 0.25 * float(np.min(np.abs(np.delete(probe, i) - probe[i]))) if probe.size > 1 else 1e-4 * probe[i]
             fv, wv, used, _ = climb(sig, float(probe[i]), max(h, 1e-12 * probe[i]), rtol,
                                     max(lus - (sig.calls - lu0), 4))
@@ -177,8 +186,8 @@ def certify(sig, realization, value, w_peak, *, tol, rounds, lus, rtol, w_lo):
                                     "complete": complete})
             if fv > value:
                 value, w_peak = fv, wv
-            if fv >= gamma:
-                improved = True  # a peak the search missed: test again above it
+            if fv >= gamma - 2.0 * delta:
+                improved = True  # a peak the search missed (or within delta of the level): test again above it
             elif complete:
                 dismissed += 1  # its hump peaks below gamma: an eigenvalue near the axis, not on it
         if improved:

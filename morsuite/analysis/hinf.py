@@ -40,11 +40,12 @@ missed.
 
 Certificate
     Where the hidden manifold is small, :math:`n_1 - n_2 \le` ``certify_dim``
-    (default 300):
+    (default 1000):
 
     4. A dense standard realization of the error system on the hidden manifold
        (:mod:`morsuite.analysis._hinf_dense`: an orthonormal basis of
-       :math:`\ker G`, the reduced model stacked) and the level-set test
+       :math:`\ker G`, the reduced model stacked; from 150 positions the model's
+       modes with a negligible bounded contribution dropped) and the level-set test
        (:func:`morsuite.linalg.levelset.level_set`) at
        :math:`\gamma = (1 + \tau)\,\text{peak}`,
        :math:`\tau = \max(c,\ 10^3\varepsilon\|T\|/\text{peak})`, :math:`c` = ``certify_tol``
@@ -98,7 +99,7 @@ __all__ = ["hinf_norm", "hinf_error", "hinf_rel_error"]
 
 EPS = np.finfo(float).eps
 #: largest hidden-manifold dimension n1 - n2 given the dense level-set test by default (docs/design/norms.md)
-CERTIFY_DIM = 300
+CERTIFY_DIM = 1000
 
 
 def _band_grid(band_grid):
@@ -299,7 +300,7 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
     adi : dict, optional
         ADI options under which cached Gramian factors supply the model's resonances.
     certify_dim : int
-        Largest :math:`n_1 - n_2` given the dense level-set test (default 300; 0: never).
+        Largest :math:`n_1 - n_2` given the dense level-set test (default 1000; 0: never).
     certify_tol : float
         Relative gap :math:`\tau` of the upper bound above the peak (default 1e-6; raised
         to the realization's resolution, module docstring).
@@ -327,8 +328,9 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
         the error between their sampled neighbours, Hermite interpolation of :math:`T` and :math:`T'`
         with the model's poles in that interval (:mod:`morsuite.analysis._hinf_screen`), raised by
         the refinement's 25% margin, reaches the best sample: the bar under which a maximum is not
-        refined; the base points (0, the band grid, the log grid) are sampled first. Default False (every resonance sampled; ``morsuite compare``
-        uses True: most resonances lie far below the peak and cost one LU each). The record is
+        refined; the base points (0, the band grid, the log grid) are sampled first. Default False
+        (every resonance sampled; ``morsuite compare`` uses True: most resonances lie far below the
+        peak and cost one LU each). The record is
         ``details["screened"]`` (candidates, sampled, the skipped ones with their predictions).
     details : bool
         Also return a dict (``lower_bound``, ``upper_bound``, ``certified``, ``certificate``,
@@ -358,7 +360,7 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
             value, rec, sig = _search(fom, None, np.zeros(0), None, max_lus=max_lus, grid_lus=grid_lus, rtol=rtol,
                                       per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi,
                                       band_grid=band_grid, skip_factor=skip_factor, screen=screen)
-            value = _certificate(fom, sig, lambda: hidden_realization(fom), value, rec, certify_dim=certify_dim,
+            value = _certificate(fom, sig, lambda b: hidden_realization(fom, b), value, rec, certify_dim=certify_dim,
                                  certify_tol=certify_tol, certify_lus=certify_lus, rtol=rtol)
         rec["time_s"] = time.perf_counter() - t0
         rec["cached"] = False
@@ -431,7 +433,7 @@ def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float
         value, rec, sig = _search(fom, rr, rom.poles(), feed, max_lus=max_lus, grid_lus=grid_lus, rtol=rtol,
                                   per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi,
                                   band_grid=band_grid, skip_factor=skip_factor, screen=screen)
-        value = _certificate(fom, sig, lambda: error_realization(fom, arrays), value, rec, certify_dim=certify_dim,
+        value = _certificate(fom, sig, lambda b: error_realization(fom, arrays, b), value, rec, certify_dim=certify_dim,
                              certify_tol=certify_tol, certify_lus=certify_lus, rtol=rtol)
     rec["time_s"] = time.perf_counter() - t0
     rec["value"] = value

@@ -80,7 +80,7 @@ NORM_OPTIONS = {
            "max_nodes": (1500, int_at_least(15)), "refine": (1, nonnegative_int), "adi": (None, _adi)},
     "hinf": {"max_lus": (190, int_at_least(4)), "grid_lus": (120, positive_int), "rtol": (1e-10, float_in_01),
              "per_decade": (8, positive_int), "refine": (1, nonnegative_int), "n_peaks": (8, positive_int),
-             "adi": (None, _adi), "certify_dim": (300, nonnegative_int), "certify_tol": (1e-6, float_in_01),
+             "adi": (None, _adi), "certify_dim": (1000, nonnegative_int), "certify_tol": (1e-6, float_in_01),
              "certify_lus": (100, int_at_least(4)), "band_grid": (None, _band_grid),
              "skip_factor": (0.0, _skip_factor), "screen": (False, _flag)},
 }
