@@ -425,8 +425,7 @@ class IRKABase(Reducer):
                 reason = "stall"
             elif guard.engaged and o["safeguard_stop"] and guard.stalled(o["safeguard_stall"]):
                 stalled = True  # engaged and no new smallest measure for a window: stop
-                guard.events.append((it, f"no progress (a new smallest measure {o['safeguard_progress']:g} below the "
-                                         f"last) in {o['safeguard_stall']} iterations: stopped"))
+                guard.events.append((it, f"no progress in {o['safeguard_stall']} iterations: stopped"))
                 break
             how, relax = schedule.rule
             if reason is not None:
@@ -482,9 +481,8 @@ class IRKABase(Reducer):
                       f"the model supports to rank_tol = {o['rank_tol']:g}, hsv_tol = {o['hsv_tol']:g}",
                       RankWarning, stacklevel=4)
         if not converged:
-            why = ("a cycle of shift sets was detected" if cycled else
-                   f"the safeguard made no progress in {o['safeguard_stall']} iterations (safeguard_progress "
-                   f"{o['safeguard_progress']:g})"
+            why = ("a cycle of shift sets was detected" if cycled else f"the safeguard made no progress "
+                   f"(safeguard_progress {o['safeguard_progress']:g}) in {o['safeguard_stall']} iterations"
                    if getattr(self, "_stalled", False) else f"maxit = {o['maxit']} was reached")
             what = (f"iteration {best_it} (shift change {history[best_it - 1]['measure']:.2e}, tol {o['tol']:g})"
                     if best_it else "its start")
