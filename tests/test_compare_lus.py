@@ -142,7 +142,7 @@ def _dense_peak(fom, rom, grid):
     dense realization on the hidden manifold (independent of the sparse solves and of the search)."""
     from morsuite.analysis._hinf_dense import hidden_realization
 
-    A, B, C, _ = hidden_realization(fom)
+    A, B, C = hidden_realization(fom)[:3]  # budget 0: the full realization
     lam, V = np.linalg.eig(A)
     CV, WB = C @ V, np.linalg.solve(V, B)
     w = np.unique(np.concatenate([grid, np.abs(lam.imag)]))
