@@ -149,11 +149,11 @@ class SimoModalValues:
 
     def precise(self, co, x):
         r"""(J, floor) without the pole-residue formula's cancellation (the residual form of
-        :func:`~morsuite.reducers.h2.gradient.h2_value`). Its floor, :math:`4arepsilon\kappa\|T\|\|E\|`, is a
+        :func:`~morsuite.reducers.h2.gradient.h2_value`). Its floor, :math:`4\varepsilon\kappa\|T\|\|E\|`, is a
         worst case that exceeded the spread of J over orthogonally transformed realizations of the same model
         by about 1e3 at the DSMS's errors of 1e-10 (docs/design/so_h2.md, 2026-11-28): the floor returned is
         the smaller of that bound and an estimate, ``SPREAD_SAFETY`` times the difference between J of the
-        realization and of one fixed orthogonal transformation of it, plus :math:`4arepsilon J`."""
+        realization and of one fixed orthogonal transformation of it, plus :math:`4\varepsilon J`."""
         from .gradient import h2_value
         A, B, C = co.realization(x)
         ev = h2_value(self.target, A, B, C)

@@ -153,7 +153,7 @@ def taylor_radius(X, M, D, K, s0) -> float:
     poles and :math:`\gamma = \min|s_0 - \lambda_\pm|` the radius of convergence of
     the Taylor series. The recurrence then runs on :math:`\gamma^jX_j` (the same
     spans): the linearisation :math:`[\gamma\mathcal A\ \gamma^2\mathcal B; I\ 0]`
-    has both blocks of order one instead of :math:`\|\mathcal B\| pprox
+    has both blocks of order one instead of :math:`\|\mathcal B\| \approx
     1/\omega_1^2`, so its Arnoldi pairs keep both halves in proportion. Returns 1
     where the quotient gives no finite positive scale. Cost: three sparse products.
     """
