@@ -22,6 +22,7 @@ side leaf of ``studies``.
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -234,3 +235,16 @@ def test_the_study_modules_flow_one_way():
     rank = {f"morsuite.studies.{m}": i for i, m in enumerate(order)}
     back = [(i, t) for i, t, _ in edges() if i in rank and t in rank and rank[t] > rank[i]]
     assert not back, f"study modules importing downstream: {back}"
+
+
+def test_no_control_characters_in_sources_and_docs():
+    """A backslash escape in a non-raw string or a paste can leave a control character (a vertical tab for
+    \\v, a bell for \\a) in a docstring: Sphinx then fails on garbled math. Tabs, newlines and carriage
+    returns aside, none may appear in the package, the tests or the docs."""
+    root = Path(morsuite.__file__).resolve().parents[1]
+    bad = re.compile(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f]")
+    files = [p for d in ("morsuite", "tests", "docs") for p in (root / d).rglob("*")
+             if p.suffix in (".py", ".md", ".rst", ".toml") and "_build" not in p.parts]
+    hits = [f"{p.relative_to(root)}:{n}" for p in files
+            for n, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) if bad.search(line)]
+    assert not hits, f"control characters: {hits}"
