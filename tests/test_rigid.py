@@ -15,7 +15,7 @@ import scipy.linalg as sla
 
 import morsuite as ms
 from morsuite.errors import InputError, ModelError
-from morsuite.models.rigid import flexible_part, rigid_body_modes, split
+from morsuite.models.rigid import flexible_part, rigid_block, rigid_body_modes, split
 
 METHODS = {"modal": {}, "krylov": {}, "irka": {}, "irka-projected": {}, "irka-fo": {}, "bt": {},
            "bt-fl": {"nodes": 24}, "so-h2": {"maxit": 100}}
@@ -41,8 +41,16 @@ def _radius(model, k):
     n = M.shape[0]
     A = np.block([[np.zeros((n, n)), np.eye(n)], [-K, -D]])
     E = sla.block_diag(np.eye(n), M)
-    lam = np.sort(np.abs(sla.eigvals(A, E)))
-    return 0.5 * lam[2 * k]
+    lam = sla.eigvals(A, E)
+    lam = lam[np.isfinite(lam)]
+    # the 2k rigid poles: 0 and -eig(D_rigid) (lambda^2 + lambda D_r = 0); the others matched away from them
+    # by distance (a cut, not a sorted position)
+    Dr = rigid_block(model)[1]
+    rigid = np.concatenate([np.zeros(k), -np.linalg.eigvals(Dr)])
+    scale = np.abs(lam).max()
+    far = np.array([np.min(np.abs(rigid - x)) > 1e-8 * scale for x in lam])
+    assert lam.size - far.sum() == 2 * k
+    return 0.5 * np.abs(lam[far]).min()
 
 
 def _rigid_moments(transfer, rho, N=64):
