@@ -218,10 +218,46 @@ def test_engaged_guard_counts_only_progress_of_safeguard_progress():
     assert not engaged.stalled()
 
 
+def test_out_of_reach_extrapolates_the_windows_rate_to_maxit():
+    """The reach rule: the smallest measure's decrease over the last window, continued geometrically for
+    the iterations left, must reach tol. fem_block(4000), r = 6: engaged at 28 with its smallest measure
+    0.559, 0.222 fifteen iterations later; at that rate 57 iterations more end near 7e-3, far above
+    1e-6, and the run paid 25 iterations more before the stall rule stopped it. A linear rate that
+    does reach tol is never stopped, and the rule needs a whole window of the stage."""
+    from morsuite.reducers.irka.safeguards import CycleGuard
+
+    def engaged():
+        g = CycleGuard(True, hysteresis=1.0, radius=0.05, settle=1e-6, window=3, min_step=0.125,
+                       tabu_radius=0.01, progress=0.1)
+        g.engage(1, "stall")
+        return g
+    slow, fast = engaged(), engaged()
+    for k in range(16):
+        slow.observe(0.559 * (0.222 / 0.559) ** (k / 15))  # the fem_block run's rate
+        fast.observe(0.5 * 0.5 ** k)  # halves every iteration: 1e-6 within 20 more
+        if k < 15:
+            assert not slow.out_of_reach(15, 1e-6, 57)  # less than a window seen
+    assert slow.out_of_reach(15, 1e-6, 57)
+    assert not slow.out_of_reach(15, 1e-6, 57 * 40)  # with a budget of 2,280 iterations it would get there
+    assert not fast.out_of_reach(15, 1e-6, 20)
+    flat = engaged()
+    for m in [0.3] * 16:
+        flat.observe(m)
+    assert flat.out_of_reach(15, 1e-6, 1000)  # no decrease at all
+    # the extrapolation is the geometric one: m1 (m1/m0)^(left/window) against tol, at the boundary
+    m0, m1 = 0.559, 0.222
+    left = 15 * np.log(1e-6 / m1) / np.log(m1 / m0)
+    assert slow.out_of_reach(15, 1e-6, int(np.floor(left)) - 1)
+    assert not slow.out_of_reach(15, 1e-6, int(np.ceil(left)) + 1)
+    slow.new_stage()  # a new stage counts afresh
+    assert not slow.out_of_reach(15, 1e-6, 57)
+
+
 def test_safeguard_progress_is_a_recorded_option():
     fom = ms.models.dsms(g=20)
     red = ms.reducers.make("irka", fom)
     assert red.options["safeguard_progress"] == 0.1 and red.options["safeguard_stall"] == 15
+    assert red.options["safeguard_reach"] is True
     with pytest.raises(OptionError, match="safeguard_progress"):
         ms.reducers.make("irka", fom, safeguard_progress=1.5)
 

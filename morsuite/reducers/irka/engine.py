@@ -341,6 +341,7 @@ class IRKABase(Reducer):
         chosen = None
         converged = cycled = False
         stalled = forget = False
+        stall_why = None
         t_proj = t_upd = 0.0
         cap = r
         schedule = UpdateSchedule(o["update"], o["relaxation"], o["maxit"])
@@ -427,6 +428,14 @@ class IRKABase(Reducer):
                 stalled = True  # engaged and no new smallest measure for a window: stop
                 guard.events.append((it, f"no progress in {o['safeguard_stall']} iterations: stopped"))
                 break
+            elif (guard.engaged and o["safeguard_stop"] and o["safeguard_reach"]
+                  and guard.out_of_reach(o["safeguard_stall"], o["tol"], o["maxit"] - it)):
+                stalled = True  # engaged, and at its rate of the last window it would not converge by maxit
+                stall_why = (f"at the rate of its last {o['safeguard_stall']} iterations the safeguard would not "
+                             f"reach tol = {o['tol']:g} by maxit = {o['maxit']}")
+                guard.events.append((it, f"tol {o['tol']:g} out of reach by maxit {o['maxit']} at the rate of the "
+                                         f"last {o['safeguard_stall']} iterations: stopped"))
+                break
             how, relax = schedule.rule
             if reason is not None:
                 if reason == "unstable fixed point":
@@ -451,7 +460,7 @@ class IRKABase(Reducer):
             chosen = shortlist.choose(None if score is None else (lambda m: score(self.fom, m)))
         times = {"setup": t_setup, **setup_times, **self._phase_times(), "projection": t_proj,
                  "shift_update": t_upd}
-        self._stalled = stalled  # read by _outcome (its signature is shared with the variants)
+        self._stalled = stalled and (stall_why or True)  # read by _outcome (its signature is shared with the variants)
         rom, info = self._outcome(r, chosen, history, it, converged, cycled, times=times, perturbed=perturbed,
                                   switched=schedule.switched_at)
         info["safeguard"] = {**guard.info(), "active": guard.active,
@@ -481,9 +490,10 @@ class IRKABase(Reducer):
                       f"the model supports to rank_tol = {o['rank_tol']:g}, hsv_tol = {o['hsv_tol']:g}",
                       RankWarning, stacklevel=4)
         if not converged:
-            why = ("a cycle of shift sets was detected" if cycled else f"the safeguard made no progress "
-                   f"(safeguard_progress {o['safeguard_progress']:g}) in {o['safeguard_stall']} iterations"
-                   if getattr(self, "_stalled", False) else f"maxit = {o['maxit']} was reached")
+            stall = getattr(self, "_stalled", False)
+            why = ("a cycle of shift sets was detected" if cycled else stall if isinstance(stall, str) else
+                   f"the safeguard made no progress (safeguard_progress {o['safeguard_progress']:g}) in "
+                   f"{o['safeguard_stall']} iterations" if stall else f"maxit = {o['maxit']} was reached")
             what = (f"iteration {best_it} (shift change {history[best_it - 1]['measure']:.2e}, tol {o['tol']:g})"
                     if best_it else "its start")
             self.warn(f"{self.name} did not converge at r = {r}: {why}; returning {what}",

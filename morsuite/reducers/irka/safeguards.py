@@ -154,6 +154,11 @@ GUARD_OPTIONS = {
     "safeguard_progress": Option(0.1, "float", "relative decrease of the smallest measure that counts as progress "
                                  "of the engaged safeguard (0: any new smallest measure); idle, any new smallest "
                                  "measure counts", low=0, high=1, open_high=True),
+    "safeguard_reach": Option(True, "bool", "engaged, safeguard_stop also stops (status stalled) when the "
+                              "smallest measure's decrease over the last safeguard_stall iterations, continued "
+                              "geometrically, would not reach tol by maxit (CycleGuard.out_of_reach): a run that "
+                              "cannot converge within its budget stops instead of paying it (docs/design/irka.md, "
+                              "issue 33)"),
     "shortlist": Option(5, "int", "stable iterates kept (with their models) for the final choice "
                         "without convergence (safeguard on)", low=1),
     "shortlist_score": Option("h2", "choice", "how the shortlisted iterates are ranked without convergence: "
@@ -275,6 +280,8 @@ class CycleGuard:
         self.step = 1.0
         self._best = np.inf
         self._since_best = 0
+        #: the running minimum of the measure at each iteration of the stage (out_of_reach)
+        self._mins = []
 
     @property
     def engaged(self) -> bool:
@@ -294,10 +301,28 @@ class CycleGuard:
             self._best, self._since_best = measure, 0
         else:
             self._since_best += 1
+        self._mins.append(min(measure, self._mins[-1]) if self._mins else measure)
 
     def new_stage(self):
         """The update schedule moved on: progress is counted afresh."""
         self._best, self._since_best = np.inf, 0
+        self._mins = []
+
+    def out_of_reach(self, window: int, tol: float, left: int) -> bool:
+        r"""Whether the stage's smallest measure, decreasing from now on as it did over the last ``window``
+        iterations, would stay above ``tol`` after the ``left`` iterations the budget allows.
+
+        With :math:`m_0` the smallest measure ``window`` iterations ago and :math:`m_1` the smallest now,
+        the extrapolation is :math:`m_1 (m_1/m_0)^{\text{left}/\text{window}}`; it needs ``window``
+        iterations of the stage (before that: False). No decrease at all is out of reach."""
+        if len(self._mins) <= window:
+            return False
+        m0, m1 = self._mins[-1 - window], self._mins[-1]
+        if not (m1 > tol):
+            return False
+        if m1 >= m0:
+            return True
+        return bool(np.log(m1) + (left / window) * np.log(m1 / m0) > np.log(tol))
 
     def stalled(self, window: int | None = None) -> bool:
         """Whether ``window`` (default the guard's) iterations have passed without a new smallest measure."""
