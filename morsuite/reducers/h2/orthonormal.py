@@ -108,7 +108,12 @@ def projection_value(poles, mu, b, c, qfactor):
     to reduced ones, so nothing of the size of :math:`\|T\|^2` is formed. Requires target poles and
     ``poles`` closed under conjugation (a real T and real models). Returns ``(J, floor)``, the floor a
     bound on the rounding of the sums. Cost: :math:`O(nN + Nk)`, k the rank of F (no Schur form, no
-    Lyapunov solve)."""
+    Lyapunov solve).
+
+    Several outputs and one input (``c`` of shape (p, N), ``qfactor`` that of the Gramian of all outputs):
+    :math:`R_B` does not depend on the output and the outputs' Gramians sum, so the first term is the
+    same with :math:`Q = \sum_iQ_i`, the second the sum of the outputs' (each output's residues sum to
+    zero; :mod:`morsuite.reducers.h2.simo`)."""
     a = np.asarray(poles, dtype=complex)[:, None]
     mu = np.asarray(mu, dtype=complex)
     eps = np.finfo(float).eps
@@ -116,16 +121,17 @@ def projection_value(poles, mu, b, c, qfactor):
     rb = np.asarray(b) * np.conj(np.prod((sr + np.conj(a)) / (sr - a), axis=0))
     s = -mu[None, :]
     one_minus = 1.0 - np.prod((s + np.conj(a)) / (s - a), axis=0)
-    psi = np.asarray(c) * np.asarray(b)
+    psi = np.atleast_2d(c) * np.asarray(b)[None, :]         # (p, N): several outputs, one input
     nb = np.sqrt(np.sum(-2.0 * a.real))
     fr = qfactor.conj().T @ rb
     j1 = float(np.sum(np.abs(fr) ** 2))
-    rc = np.sum(psi * one_minus) / nb
-    j2 = float(abs(rc) ** 2)
+    rc = np.sum(psi * one_minus[None, :], axis=1) / nb
+    j2s = np.abs(rc) ** 2                                      # per output
+    j2 = float(np.sum(j2s))
     n, N = a.shape[0], mu.size
     e1 = 4.0 * eps * (n + np.sqrt(N)) * float(np.linalg.norm(np.abs(qfactor).T @ np.abs(rb)))
-    e2 = 4.0 * eps * (n + np.sqrt(N)) * float(np.sum(np.abs(psi) * (1.0 + np.abs(one_minus)))) / nb
-    floor = 2.0 * np.sqrt(j1) * e1 + e1 * e1 + 2.0 * np.sqrt(j2) * e2 + e2 * e2
+    e2 = 4.0 * eps * (n + np.sqrt(N)) * np.sum(np.abs(psi) * (1.0 + np.abs(one_minus))[None, :], axis=1) / nb
+    floor = 2.0 * np.sqrt(j1) * e1 + e1 * e1 + float(np.sum(2.0 * np.sqrt(j2s) * e2 + e2 * e2))
     return j1 + j2, float(floor)
 
 

@@ -71,7 +71,8 @@ def _tr_step(S, D, g, radius):
     return p, -(g @ p + 0.5 * p @ (S @ p))
 
 
-def varpro_descent(co: Coordinates, x, target, *, maxit: int = 300, gtol: float = 1e-8, optimal=optimal_residues):
+def varpro_descent(co: Coordinates, x, target, *, maxit: int = 300, gtol: float = 1e-8, optimal=optimal_residues,
+                   reduced_gradient: bool = False):
     r"""Trust-region Newton over the poles alone, the residues eliminated (variable projection):
     :math:`J(\lambda) = \min_\varphi J(\lambda, \varphi)`, gradient :math:`g_\lambda` at the optimal
     residues, Hessian the Schur complement :math:`S = H_{\lambda\lambda} - H_{\lambda\varphi}
@@ -84,7 +85,13 @@ def varpro_descent(co: Coordinates, x, target, *, maxit: int = 300, gtol: float 
     is at most ``gtol`` (``"converged"``), when the radius has shrunk below 1e-12 of the start's
     (``"stalled"``), or at ``maxit`` (``"cap"``). ``optimal``: the variable projection (coordinates, x,
     target) -> evaluation (:func:`~morsuite.reducers.h2.poles.optimal_residues`; the SIMO one of
-    :mod:`~morsuite.reducers.h2.simo`). Returns ``(evaluation, iterations, reason, history)``."""
+    :mod:`~morsuite.reducers.h2.simo`). ``reduced_gradient``: the poles' gradient of
+    :math:`J(\lambda)` with the residues' remaining gradient :math:`g_\varphi` eliminated,
+    :math:`g_\lambda - H_{\lambda\varphi}H_{\varphi\varphi}^{-1}g_\varphi` (consistent with S; where the
+    residue block is ill-conditioned, the residues of one solve leave a :math:`g_\varphi` whose
+    correction is of the size of :math:`g_\lambda`: the SIMO descent at the DSMS's errors of 1e-9 of its
+    norm, docs/design/so_h2.md 2026-11-28); False (the SISO path): :math:`g_\lambda`.
+    Returns ``(evaluation, iterations, reason, history)``."""
     ev = optimal(co, x, target)
     if ev is None:
         raise InputError("the start is outside the domain (unstable, or a pair on the real axis)")
@@ -105,6 +112,12 @@ def varpro_descent(co: Coordinates, x, target, *, maxit: int = 300, gtol: float 
             break
         D = _scaling(S, SG)
         gl = ev.g[lm]
+        if reduced_gradient:
+            try:
+                gl = gl - ev.H[np.ix_(lm, ~lm)] @ np.linalg.solve(ev.H[np.ix_(~lm, ~lm)], ev.g[~lm])
+            except np.linalg.LinAlgError:
+                reason, it = "stalled", it - 1
+                break
         accepted = None
         while radius > 1e-12 * r0:
             p, pred = _tr_step(S, D, gl, radius)

@@ -20,6 +20,15 @@ with the Schur complement (:func:`~morsuite.reducers.h2.poles_descent.varpro_des
 unchanged; the Schur complement is the sum of the outputs' Schur complements. A model with one output
 and several inputs is the transpose of one of these (not used: so-h2 takes this path for m = 1).
 
+At the DSMS's errors (1e-8 to 1e-10 of :math:`\|T\|` from r = 10) three things decide whether the descent
+moves: the error's values at the mirrored poles are formed in long double against the surrogate
+(:class:`SimoModalValues`; in double they were rounding to 1e-7 of themselves, 1e-4 of the gradient); the
+trust region's decisions read J as the value of the projection (:meth:`SimoModalValues.projected`, smooth in
+the poles to 1e-5 of J where the residual form's rounding is 1e-3 of it); the poles' gradient is that of
+:math:`J(\lambda)` with the residues' remaining gradient eliminated (``reduced_gradient`` of
+:func:`~morsuite.reducers.h2.poles_descent.varpro_descent`). Measurements: ``docs/design/so_h2.md``
+(2026-11-28, second session).
+
 Against the full model the values :math:`T(\sigma)` (p entries) and :math:`T'(\sigma)` need one LU per
 real point or conjugate pair, one right solve with F and p transposed solves with the rows of L
 (:class:`FullValues`, refined in long double). Cost: p times the SISO dense work per iteration.
@@ -28,11 +37,14 @@ Measurements: ``docs/design/so_h2.md`` (2026-11-28).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import scipy.linalg as sla
 
 from ...errors import InputError
-from .poles import Coordinates, PoleEvaluation, _real_modal, chord_step, evaluate, relative_gradient
+from .poles import (EPS_EXTENDED, Coordinates, PoleEvaluation, _real_modal, chord_step, evaluate,
+                    relative_gradient)
 from .poles_descent import varpro_descent
 from .starts import standard_realization
 
@@ -45,7 +57,8 @@ class _Out:
     """What :func:`~morsuite.reducers.h2.poles.evaluate` reads of a target when its values are given."""
 
     def __init__(self, norm2, norm2_floor):
-        self.norm2, self.norm2_floor = float(norm2), float(norm2_floor)
+        # long double kept where given (SimoModalValues: poles.evaluate's extended branch reads it)
+        self.norm2, self.norm2_floor = norm2, float(norm2_floor)
 
 
 class SimoCoordinates:
@@ -129,18 +142,21 @@ class SimoModalValues:
     (:func:`~morsuite.reducers.h2.gradient.h2_value`)."""
 
     def __init__(self, target):
+        L = np.clongdouble
         self.target = target
-        self.mu = np.asarray(target.poles)
-        self.psi = np.asarray(target.C) * np.asarray(target.B)[:, 0][None, :]     # (p, N)
-        Ph = np.outer(target.B[:, 0], np.conj(target.B[:, 0])) / (-(self.mu[:, None] + np.conj(self.mu)[None, :]))
-        n2 = np.real(np.einsum("ij,jk,ik->i", target.C, Ph, np.conj(target.C)))
-        self.outputs = [_Out(v, 2.0 * np.finfo(float).eps * np.sqrt(self.mu.size) * v) for v in n2]
+        self.mu = np.asarray(target.poles).astype(L)
+        # the target as given (double) is the target; its values, norms and errors are formed in long double
+        # (poles.evaluate's extended branch): the error's values at 1e-11 of the terms keep their digits
+        self.psi = np.asarray(target.C).astype(L) * np.asarray(target.B)[:, 0].astype(L)[None, :]     # (p, N)
+        S = -(self.mu[:, None] + np.conj(self.mu)[None, :])
+        n2 = np.real(np.einsum("ij,jk,ik->i", self.psi, 1.0 / S, np.conj(self.psi)))
+        self.outputs = [_Out(v, 2.0 * EPS_EXTENDED * self.mu.size * abs(v)) for v in n2]
         self.norm2, self.norm2_floor = float(target.norm2), float(target.norm2_floor)
         self.lu_count = 0
 
     def values(self, s, second: bool = True):
-        """(T(s), T'(s), T''(s) or None), each (p, len(s))."""
-        R = 1.0 / (s[:, None] - self.mu[None, :])
+        """(T(s), T'(s), T''(s) or None), each (p, len(s)), in long double (``clongdouble``)."""
+        R = 1.0 / (np.asarray(s).astype(np.clongdouble)[:, None] - self.mu[None, :])
         R2 = R * R
         t0 = (R @ self.psi.T).T
         t1 = -(R2 @ self.psi.T).T
@@ -163,6 +179,17 @@ class SimoModalValues:
         ev2 = h2_value(self.target, Q.T @ A @ Q, Q.T @ B, C @ Q)
         spread = SPREAD_SAFETY * abs(ev.value - ev2.value) + 4.0 * np.finfo(float).eps * abs(ev.value)
         return ev.value, float(min(ev.floor, spread))
+
+
+    def projected(self, co, x):
+        r"""(J, floor) of the best model with the poles of x (each output's residues the optimal ones, as
+        the variable projection makes them), without cancellation:
+        :func:`~morsuite.reducers.h2.orthonormal.projection_value` with the outputs' values summed (its
+        floor a bound on the rounding of its sums). The descent's decisions below the pole-residue
+        formula's rounding use it (:func:`~morsuite.reducers.h2.poles_descent.varpro_descent`)."""
+        from .orthonormal import projection_value
+        t = self.target
+        return projection_value(co.split(x)[0], t.poles, t.B[:, 0], t.C, t.gramian_factor)
 
 
 #: the rounding of the cancellation-free value is estimated as this times its spread over two realizations
@@ -264,18 +291,34 @@ def simo_optimal_residues(co: SimoCoordinates, x, target, *, hessian: bool = Tru
     if not co.valid(x):
         return None
     vals = target.values(-co.split(x)[0], second=hessian)
-    ev = simo_evaluate(co, x, target, hessian=False, values=vals, precise=False)
     y = ~co.lam_mask
-    try:
-        dy = -np.linalg.solve(ev.G[np.ix_(y, y)], ev.g[y])
-    except np.linalg.LinAlgError:
-        return None
-    return simo_evaluate(co, ev.x + co.Z[:, y] @ dy, target, hessian=hessian, values=vals)
+    for _ in range(1 + VP_REFINE):
+        ev = simo_evaluate(co, x, target, hessian=False, values=vals, precise=False)
+        try:
+            dy = -np.linalg.solve(ev.G[np.ix_(y, y)], ev.g[y])
+        except np.linalg.LinAlgError:
+            return None
+        x = ev.x + co.Z[:, y] @ dy
+    ev = simo_evaluate(co, x, target, hessian=hessian, values=vals, precise=False)
+    if not ev.value > 10.0 * ev.floor and hasattr(target, "projected"):
+        # J below the pole-residue formula's resolution: the value of the projection (the residues are the
+        # optimal ones), cancellation-free and smooth in the poles (floor about 1e-5 of J on the DSMS at
+        # r = 10, where the residual form's rounding was 1e-3 of J)
+        J, floor = target.projected(co, x)
+        ev = replace(ev, value=float(J), floor=float(floor), _rho=None)
+    return ev
+
+
+#: refinement steps of the variable projection's solve (the residue gradient recomputed at the new residues,
+#: in long double against the surrogate, and solved again): the Gauss-Newton block of clustered poles is
+#: ill-conditioned, and one solve leaves residues whose error moves the poles' gradient
+VP_REFINE = 1
 
 
 def simo_descent(co, x, target, *, maxit, gtol):
     """:func:`~morsuite.reducers.h2.poles_descent.varpro_descent` over the poles of a SIMO model."""
-    return varpro_descent(co, x, target, maxit=maxit, gtol=gtol, optimal=simo_optimal_residues)
+    return varpro_descent(co, x, target, maxit=maxit, gtol=gtol, optimal=simo_optimal_residues,
+                          reduced_gradient=True)
 
 
 #: singular values of the reduced C below this fraction of the largest are rounding (equal outputs)
@@ -364,7 +407,7 @@ def simo_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
 
     def score(label):
         co, ev = results[label][:2]
-        return tv.precise(co, ev.x)
+        return tv.projected(co, ev.x)
 
     def pick():
         best, bv = None, None
@@ -405,7 +448,7 @@ def simo_phase(roms, order, sur, full, *, gtol, maxit, chord_maxit, starts, prob
         # value (within the surrogate's distance), the gradient and metric from the full model's values
         if e.value > 10.0 * e.floor:
             return e.rho
-        return relative_gradient(e.g, e.G, tv.precise(co, e.x)[0])
+        return relative_gradient(e.g, e.G, tv.projected(co, e.x)[0])
 
     rho_f = rho_of(evf)
     rec["history_full"] = [float(np.sqrt(max(evf.value, 0.0)))]

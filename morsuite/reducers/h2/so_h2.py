@@ -116,6 +116,9 @@ class SOH2(Reducer):
                        "model is at most this", low=0, high=1, open_low=True, open_high=True),
         "starts": Option(5, "int", "varpro: candidates (best by surrogate error first) descended from", low=1),
         "newton_maxit": Option(300, "int", "varpro: Newton iterations per start against the surrogate", low=1),
+        "simo_maxit": Option(1500, "int", "varpro with several outputs (reducers/h2/simo.py): Newton iterations "
+                             "against the surrogate (the DSMS at r = 10 and 14 needs 700 to 1,100 to reach the "
+                             "floor of its relative gradient; docs/design/so_h2.md)", low=1),
         "chord_maxit": Option(5, "int", "varpro: chord steps against the full model (r LUs each)", low=0),
         "cluster_rounds": Option(3, "int", "varpro: when no start converges on the surrogate, rounds of "
                                  "Gauss-Newton in cluster-polynomial coordinates alternated with it, from the best "
@@ -387,7 +390,7 @@ class SOH2(Reducer):
             rec.update(stop_reason="skipped", stop_reason_full="skipped")
         elif descent == "varpro" and fom.p > 1:
             with blas_threads(1):
-                kdfl, prec = simo_phase(roms, order, sur, self._full, gtol=o["gtol"], maxit=o["newton_maxit"],
+                kdfl, prec = simo_phase(roms, order, sur, self._full, gtol=o["gtol"], maxit=o["simo_maxit"],
                                         chord_maxit=o["chord_maxit"], starts=o["starts"])
             rec.update(prec)
             if kdfl is not None:

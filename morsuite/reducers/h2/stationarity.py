@@ -181,11 +181,14 @@ def full_stationarity(full, A, B, C, *, refine: int = 2, orthonormal: bool = Tru
                 a_c = _scale(Cm[:, jj], np.conj(Cm[:, k]))
                 Tb[:, jj], cT[jj], dT[jj] = a_b * tb, a_c * np.conj(cT[k]), a_b * a_c * np.conj(dT[k])
                 done[jj] = True
-    Rs = np.stack([np.linalg.inv(sk * np.eye(A.shape[0]) - A) for sk in -lam])       # (n, N, N)
-    RB = Rs @ B                                                                       # (n, N, m)
-    TrB = np.einsum("pn,knm,km->pk", C, RB, Bm)
-    cTr = np.einsum("pk,pn,knm->km", Cm, C, RB)
-    dTr = -np.array([Cm[:, k] @ C @ Rs[k] @ RB[k] @ Bm[k] for k in range(n)])
+    if p == 1 and m == 1:
+        Rs = np.stack([np.linalg.inv(sk * np.eye(A.shape[0]) - A) for sk in -lam])       # (n, N, N)
+        RB = Rs @ B                                                                       # (n, N, m)
+        TrB = np.einsum("pn,knm,km->pk", C, RB, Bm)
+        cTr = np.einsum("pk,pn,knm->km", Cm, C, RB)
+        dTr = -np.array([Cm[:, k] @ C @ Rs[k] @ RB[k] @ Bm[k] for k in range(n)])
+    else:
+        TrB, cTr, dTr = _modal_values_extended(lam, Cm, Bm)
     terms = np.array([Cm[:, k] @ Tb[:, k] for k in range(n)])
     e2, floor, _ = pole_residue_squared(full.norm2, full.norm2_floor, complex(np.sum(terms)),
                                         float(np.sum(np.abs(terms))), md)
@@ -199,6 +202,25 @@ def full_stationarity(full, A, B, C, *, refine: int = 2, orthonormal: bool = Tru
     return {"value": float(e2), "floor": float(floor), "value_form": form, "rho": rho, "rho_pole_residue": rho_pr,
             "rho_form": "orthonormal" if siso else "pole-residue", "gram_condition": cond,
             "lu_count": full.lu_count - lu0, "kappa": float(md.kappa)}
+
+
+def _modal_values_extended(lam, Cm, Bm):
+    r"""The reduced model's :math:`T_r(-\lambda_k)b_k`, :math:`c_k^TT_r(-\lambda_k)` and
+    :math:`c_k^TT_r'(-\lambda_k)b_k` from its modal form :math:`T_r = \sum_lc_lb_l^T/(s - \lambda_l)`, summed in
+    long double (several inputs or outputs). The resolvents of the real realization that the SISO
+    certificate uses carry the rounding :math:`\varepsilon\kappa(\sigma I - A)\|T_r\|`: on the DSMS at r = 6
+    (error 4.5e-7 of the norm) it made the certificate's :math:`\rho` 2.7e-5 and 1.0e-4 for two reduced models
+    whose dense :math:`\rho` (derivative systems) is 1.7e-6 and 2.2e-6 (docs/design/so_h2.md, 2026-11-28,
+    second session)."""
+    L = np.clongdouble
+    lamL, CmL, BmL = lam.astype(L), Cm.astype(L), Bm.astype(L)
+    R = 1.0 / (-lamL[:, None] - lamL[None, :])          # R[k, l] = 1 / (sigma_k - lambda_l), sigma_k = -lambda_k
+    W = BmL @ BmL.T                                      # W[l, k] = b_l^T b_k
+    X = CmL.T @ CmL                                      # X[k, l] = c_k^T c_l
+    TrB = CmL @ (R * W.T).T                              # sum_l c_l (b_l^T b_k) R[k, l]
+    cTr = (R * X) @ BmL                                  # sum_l (c_k^T c_l) R[k, l] b_l^T
+    dTr = -np.sum(X * (R * R) * W.T, axis=1)              # -sum_l (c_k^T c_l)(b_l^T b_k) R[k, l]^2
+    return TrB.astype(complex), cTr.astype(complex), dTr.astype(complex)
 
 
 def _partial_fraction_condition(lam, phi) -> float:
