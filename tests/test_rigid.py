@@ -165,6 +165,15 @@ def test_norms_refuse_or_route(chain, tmp_path):
     fm, fr, k = split(chain, back)
     assert k == 1 and fm is flexible_part(chain)
     assert ms.analysis.h2_error(chain, back) == pytest.approx(ms.analysis.h2_error(chain, rom), rel=1e-12)
+    # the Hinf search's start grid takes the flexible part's Gramian factors: compare prepares those, never
+    # the free model's own (a pole at 0: its LR-ADI cannot converge and ran to maxiter, 18 s here)
+    from morsuite.analysis.compare import error_norm
+    from morsuite.linalg.gramians import cached_gramian_factors
+
+    fresh = _free_chain()
+    rec = error_norm(fresh, rom, "hinf")
+    assert rec["value"] == pytest.approx(ms.analysis.hinf_error(chain, rom), rel=1e-6)
+    assert cached_gramian_factors(flexible_part(fresh)) is not None and cached_gramian_factors(fresh) is None
 
 
 def test_coupled_damping_is_refused():
