@@ -136,7 +136,9 @@ class Browser:
     # -- what the tests use ---------------------------------------------------------
     def open(self, url: str, width: int, height: int, mobile: bool = False):
         """Open ``url`` in a new page of ``width`` x ``height`` CSS pixels and wait for its load event."""
-        target = self.call("Target.createTarget", {"url": "about:blank"}, session=False)["targetId"]
+        if getattr(self, "_target", None):  # one page at a time: the previous one's events cannot mix in
+            self.call("Target.closeTarget", {"targetId": self._target}, session=False)
+        target = self._target = self.call("Target.createTarget", {"url": "about:blank"}, session=False)["targetId"]
         self.session = self.call("Target.attachToTarget", {"targetId": target, "flatten": True},
                                  session=False)["sessionId"]
         for domain in ("Page", "Runtime", "Log"):

@@ -32,6 +32,24 @@ def rounding_unit(n) -> float:
     return 10.0 * np.sqrt(n) * EPS
 
 
+def orthonormality_error(V, M=None) -> tuple[float, float]:
+    r"""(:math:`\max|V^T M V - I|`, its rounding level) for a basis orthonormalized in the M inner product
+    (M = None: the identity): the products' rounding, :func:`rounding_unit` (n) times
+    :math:`\|M\|\,\|V\|_2^2` (:math:`\|V\|_2^2 \le 1/\lambda_{\min}(M)`: it carries M's conditioning;
+    :math:`\|M\|` from the 1-norm, an upper bound of the 2-norm of a symmetric M), times 10 for the
+    orthogonalization's own passes. A fixed 1e-12 is too tight on a large or ill-scaled M and too loose
+    on a small one."""
+    V = np.asarray(V)
+    n, k = V.shape
+    if M is None:
+        gram, norm_m = V.conj().T @ V, 1.0
+    else:
+        gram = V.conj().T @ (M @ V)
+        norm_m = float(abs(M).sum(axis=0).max())
+    err = float(np.abs(gram - np.eye(k)).max())
+    return err, 10.0 * rounding_unit(n) * norm_m * np.linalg.norm(V, 2) ** 2
+
+
 def assert_sets_close(actual, desired, rtol=0.0, atol=0.0, what="values"):
     r"""Assert that two sets agree after an optimal one-to-one matching.
 

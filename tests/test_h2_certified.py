@@ -23,13 +23,13 @@ from test_norms import error_ss, extended_h2_error, hidden_ss, lyap_h2
 REF_REL = 1e-11
 
 
-def dense_reference(fom, rom):
+def dense_reference(fom, rom, norm=None):
     """(||T - Tr||_H2 from the dense Lyapunov equation of the error system on the hidden manifold, its
     relative accuracy): it cancels at about eps ||T||^2 / ||E||^2, and Bartels-Stewart's rounding grows
     with ||A|| / sep(A), sep about the smallest damping |Re lambda| (on a random model with a pole of
     damping ratio 6e-4 the dense value was 1.7e-10 off two independent routes of morsuite that agree
     to 1e-15)."""
-    norm = lyap_h2(*hidden_ss(fom))
+    norm = lyap_h2(*hidden_ss(fom)) if norm is None else norm
     A, B, C = error_ss(fom, rom)
     dense = lyap_h2(A, B, C)
     lam = np.linalg.eigvals(A)
@@ -144,16 +144,27 @@ def test_every_floor_bounds_its_error_on_random_models(case):
             assert abs(rec["squared"] - ref * ref) <= rec["floor_squared"] + 2 * acc * ref * ref
 
 
-@pytest.mark.parametrize("make,method,opts,r", [
-    (lambda: ms.models.tcom(nc=60), "bt", {}, 60),          # 60 states, 60 poles, ||E|| / ||T|| ~ 1e-8
-    (lambda: ms.models.tcom(nc=60), "irka-fo", {}, 30),
-    (lambda: ms.models.tcom(nc=60), "bt", {"form": "vv"}, 20),  # 40 states
-    (lambda: ms.models.dsms(g=60), "irka", {}, 8),
+@pytest.fixture(scope="module")
+def large_order_models():
+    """{spec: (model, its dense H2 norm)}, each built once for the module: the three tcom(60) cases share the
+    model's LR-ADI factors (as reductions of one model do) and its dense Lyapunov norm (the reference's
+    ||T||, 350 hidden states)."""
+    return {}
+
+
+@pytest.mark.parametrize("spec,method,opts,r", [
+    ("tcom:nc=60", "bt", {}, 60),          # 60 states, 60 poles, ||E|| / ||T|| ~ 1e-8
+    ("tcom:nc=60", "irka-fo", {}, 30),
+    ("tcom:nc=60", "bt", {"form": "vv"}, 20),  # 40 states
+    ("dsms:g=60", "irka", {}, 8),
 ], ids=["tcom60-bt60", "tcom60-irkafo30", "tcom60-vv20", "dsms60-irka8"])
-def test_trusted_values_within_their_floor_at_large_orders(make, method, opts, r):
+def test_trusted_values_within_their_floor_at_large_orders(spec, method, opts, r, large_order_models):
     """Against the cancellation-free quadrature converged at rtol 1e-11 (another route: no Gramian, no
     modal form), and the dense Lyapunov reference where it is reliable."""
-    fom = make()
+    if spec not in large_order_models:
+        fom = ms.models.parse(spec)
+        large_order_models[spec] = fom, lyap_h2(*hidden_ss(fom))
+    fom, norm = large_order_models[spec]
     rom = _reduce(fom, method, r, **opts)
     value, d = _h2(fom, rom)
     q, dq = _h2(fom, rom, method="quadrature", rtol=1e-11, max_nodes=20000)
@@ -162,5 +173,5 @@ def test_trusted_values_within_their_floor_at_large_orders(make, method, opts, r
     assert d["trusted"] == (d["rel_floor"] <= 1e-4 and d["consistent"] and not d["negative"])
     assert d["trusted"] and d["rtol_met"]
     # and against the dense Lyapunov reference of the error system (up to 410 states here), to its accuracy
-    ref, acc = dense_reference(fom, rom)
+    ref, acc = dense_reference(fom, rom, norm)
     assert abs(value - ref) <= d["floor"] + acc * ref

@@ -166,10 +166,23 @@ def test_dense_h2_reference_scorer_agrees_with_quadrature():
     ||T - Tr||_F^2 on the imaginary axis (a smooth, well damped case)."""
     fom = ms.models.dsms(60)
     rom = _reduce(fom, 3).rom
-    w = np.concatenate([[0.0], np.logspace(-6, 3, 40001)])
-    E = fom.freqresp(w) - rom.freqresp(w)
-    quad = np.sqrt(np.trapezoid(np.sum(np.abs(E) ** 2, axis=(1, 2)), w) / np.pi)
-    assert dense_h2_error(fom, rom) == pytest.approx(quad, rel=1e-4)
+
+    def quad(per_decade):
+        # composite 8-point Gauss-Legendre in log w on [1e-6, 1e3] (per_decade panels a decade), the
+        # trapezoid on [0, 1e-6]; the error response is smooth (poles damped at zeta >= 0.2)
+        x, wt = np.polynomial.legendre.leggauss(8)
+        edges = np.linspace(np.log(1e-6), np.log(1e3), 9 * per_decade + 1)
+        a, b = edges[:-1, None], edges[1:, None]
+        w = np.exp(((a + b) / 2 + (b - a) / 2 * x).ravel())
+        weight = ((b - a) / 2 * wt).ravel() * w          # dw = w d(log w)
+        f = [np.sum(np.abs(fom.freqresp(v) - rom.freqresp(v)) ** 2, axis=(1, 2)) for v in (w, [0.0, 1e-6])]
+        return np.sqrt((weight @ f[0] + np.trapezoid(f[1], [0.0, 1e-6])) / np.pi)
+
+    # (720 nodes; the trapezoid on 40001 log-spaced points took 20x longer for 1e-4.) The rule's own
+    # accuracy: at half the panels it agrees to 7e-9 (measured), at these to 3e-12 of the dense value
+    fine, coarse = quad(10), quad(5)
+    assert abs(fine - coarse) <= 1e-7 * fine
+    assert dense_h2_error(fom, rom) == pytest.approx(fine, rel=1e-7)
 
 
 def test_shortlist_prefers_stable_then_score_then_earlier():

@@ -15,6 +15,7 @@ import morsuite as ms
 from morsuite.reducers.base import as_complex
 from morsuite.stress.refused_inputs import _pole_model
 from morsuite.utils import blas_threads
+from support import orthonormality_error
 
 TOL = 1e-8  # relative error of each matched moment
 
@@ -172,7 +173,8 @@ def test_basis_lies_in_ker_g(models):
     fom, _ = models["tcom"]
     red, res = _reduce(fom, 10, points="band")
     V = red._state["sides"]["right"].basis.V[:, :10]
-    assert np.allclose(V.T @ V, np.eye(10), rtol=0, atol=1e-13)
+    err, tol = orthonormality_error(V)
+    assert err <= tol, (err, tol)
     assert np.linalg.norm(fom.G @ V) <= 1e-13 * np.linalg.norm(fom.G.toarray())
     assert np.allclose(res.rom.L, fom.L @ V, rtol=1e-13, atol=0)
 

@@ -372,38 +372,45 @@ def test_templates_are_package_data():
 CHROMIUM = find_chromium()
 
 
+@pytest.fixture(scope="module")
+def browser():
+    """One headless Chromium for the three screen sizes (each page opened in a fresh tab)."""
+    with Browser(CHROMIUM) as b:
+        yield b
+
+
 @pytest.mark.skipif(CHROMIUM is None, reason="no Chromium found (Debian: apt-get install chromium; or set "
                                              "MORSUITE_CHROMIUM): the page is not checked in a browser")
 @pytest.mark.parametrize("width,height,mobile", [(1280, 900, False), (400, 800, True), (390, 844, True)])
-def test_page_renders_in_headless_chromium(results, moded, width, height, mobile):
+def test_page_renders_in_headless_chromium(results, moded, browser, width, height, mobile):
     from PIL import Image
 
     tmp, res = results
-    with Browser(CHROMIUM) as b:
-        for page in (res.outdir / "index.html", tmp / "results" / "index.html", moded[1].outdir / "index.html"):
-            b.open(page.as_uri(), width, height, mobile)
-            images = b.evaluate("[...document.images].map(i => [i.getAttribute('src'), i.complete, i.naturalWidth])")
-            assert all(done and w > 0 for _, done, w in images), images
-            assert b.errors() == []
-            # nothing wider than the screen: wide tables scroll inside their box
-            assert b.evaluate("document.documentElement.scrollWidth") <= width
-            # nothing but what a scroll box holds reaches past the viewport (the box itself does not)
-            wide = b.evaluate("[...document.querySelectorAll('body *')].filter(e => "
-                              "e.getBoundingClientRect().right > window.innerWidth + 0.5 && "
-                              "!(e.parentElement && e.parentElement.closest('.scroll')))"
-                              ".map(e => e.tagName + '.' + e.className)")
-            assert wide == [], wide
-            modes = b.evaluate("[document.querySelectorAll('section.modes table.modes tbody tr').length, "
-                               "document.querySelectorAll('section.modes svg.poles').length]")
-            assert modes == ([len(MODES["rows"]), 1] if moded[0] in page.parents else [0, 0])
-            if page.parent.name == "demo":
-                n = b.evaluate("[...document.querySelectorAll('table.scoreboard')].map(t => t.tBodies[0].rows.length)")
-                assert n == [3]
-                if width >= 1280:  # the scoreboard shows whole, without a sideways scroll of its own
-                    assert b.evaluate("[...document.querySelectorAll('table.scoreboard')].every(t => "
-                                      "t.parentElement.scrollWidth <= t.parentElement.clientWidth)")
-            shot = Image.open(io.BytesIO(b.screenshot())).convert("L")
-            px = np.asarray(shot, dtype=float)
-            assert px.shape[1] == width and px.shape[0] >= height // 2
-            assert (px < 200).mean() > 0.01 and px.std() > 10, "the screenshot is blank"
-            shot.save(page.parent / f"shot_{width}.png")   # to look at by hand
+    b = browser
+    for page in (res.outdir / "index.html", tmp / "results" / "index.html", moded[1].outdir / "index.html"):
+        b.open(page.as_uri(), width, height, mobile)
+        images = b.evaluate("[...document.images].map(i => [i.getAttribute('src'), i.complete, i.naturalWidth])")
+        assert all(done and w > 0 for _, done, w in images), images
+        assert b.errors() == []
+        # nothing wider than the screen: wide tables scroll inside their box
+        assert b.evaluate("document.documentElement.scrollWidth") <= width
+        # nothing but what a scroll box holds reaches past the viewport (the box itself does not)
+        wide = b.evaluate("[...document.querySelectorAll('body *')].filter(e => "
+                          "e.getBoundingClientRect().right > window.innerWidth + 0.5 && "
+                          "!(e.parentElement && e.parentElement.closest('.scroll')))"
+                          ".map(e => e.tagName + '.' + e.className)")
+        assert wide == [], wide
+        modes = b.evaluate("[document.querySelectorAll('section.modes table.modes tbody tr').length, "
+                           "document.querySelectorAll('section.modes svg.poles').length]")
+        assert modes == ([len(MODES["rows"]), 1] if moded[0] in page.parents else [0, 0])
+        if page.parent.name == "demo":
+            n = b.evaluate("[...document.querySelectorAll('table.scoreboard')].map(t => t.tBodies[0].rows.length)")
+            assert n == [3]
+            if width >= 1280:  # the scoreboard shows whole, without a sideways scroll of its own
+                assert b.evaluate("[...document.querySelectorAll('table.scoreboard')].every(t => "
+                                  "t.parentElement.scrollWidth <= t.parentElement.clientWidth)")
+        shot = Image.open(io.BytesIO(b.screenshot())).convert("L")
+        px = np.asarray(shot, dtype=float)
+        assert px.shape[1] == width and px.shape[0] >= height // 2
+        assert (px < 200).mean() > 0.01 and px.std() > 10, "the screenshot is blank"
+        shot.save(page.parent / f"shot_{width}.png")   # to look at by hand

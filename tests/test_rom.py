@@ -9,7 +9,7 @@ import pytest
 import morsuite as ms
 from morsuite.linalg.dense import dense_bt, orth, shift_distance, UnstableError
 from morsuite.rom import FirstOrderROM, SecondOrderROM, load_rom
-from support import assert_sets_close
+from support import assert_sets_close, orthonormality_error
 
 
 def _random_so(r=5, m=2, p=3, seed=0):
@@ -111,7 +111,8 @@ def test_orth_and_shift_distance():
     X = rng.standard_normal((50, 4))
     X = np.hstack([X, X[:, :1] * 3 + 1e-15])  # a dependent column
     Q, s = orth(X, 1e-12)
-    assert Q.shape[1] == 4 and np.allclose(Q.T @ Q, np.eye(4), atol=1e-13)
+    err, tol = orthonormality_error(Q)
+    assert Q.shape[1] == 4 and err <= tol, (err, tol)
     a = np.array([1 + 1j, 1 - 1j, 2.0])
     assert shift_distance(a, a[::-1]) == 0.0
     assert shift_distance(a, a[:2]) >= 1.0
