@@ -134,12 +134,22 @@ class IRKABase(Reducer):
                             "cycle_window sets, while 100 times farther from the current one, is a cycle",
                             low=0, high=1, open_low=True, open_high=True),
         "cycle_window": Option(6, "int", "number of earlier shift sets checked for a cycle", low=0),
+        "stage_stall": Option(None, "int", "update='auto': iterations of a stage that is not the last without a "
+                              "new smallest measure after which it moves to the next stage (the BT update can "
+                              "wander without cycling on long lightly damped chains: tcom at n1 = 1e5 spent its "
+                              "first 50 iterations there; docs/design/irka.md); 0: only a cycle or half of maxit "
+                              "ends a stage; None (default): STAGE_STALL iterations from STAGE_STALL_MIN_N1 "
+                              "positions on, 0 below (where the rule would move converged answers and an "
+                              "iteration is cheap); info['stage_stall']", low=0, nullable=True),
         **GUARD_OPTIONS,
         "pivot_tol": Option(0.0, "float", "smallest relative LU pivot before a shift counts as a pole "
                             "(0: only exact singularity and non-finite solves count)", low=0, high=1),
         "shift_perturbation": Option(1e-6, "float", "relative perturbation applied to a shift whose "
                                      "saddle matrix is singular", low=0, high=1, open_low=True),
     }
+
+    #: ``stage_stall=None``: the stall window of a stage of update="auto", from this many positions on
+    STAGE_STALL, STAGE_STALL_MIN_N1 = 10, 50_000
 
     #: Score of the shortlisted stable iterates when the iteration does not converge (safeguard
     #: on): a callable ``(fom, rom) -> float``, smaller is better, or None: option
@@ -317,6 +327,13 @@ class IRKABase(Reducer):
         return initial_shifts(r, fom.band, fom.m, fom.p, init=o["init"], seed=o["seed"], shifts=o["init_shifts"],
                               b=o["init_b"], c=o["init_c"])
 
+    def _stage_stall(self) -> int:
+        """The stall window of the stages of update="auto" (option ``stage_stall``, resolved when None)."""
+        ss = self.options["stage_stall"]
+        if ss is None:
+            ss = self.STAGE_STALL if self.fom.n1 >= self.STAGE_STALL_MIN_N1 else 0
+        return int(ss)
+
     def _criterion(self, lost_rank, d_resp) -> str:
         """The convergence measure in force: option ``criterion``, resolved when "auto"."""
         crit = self.options["criterion"]
@@ -344,6 +361,7 @@ class IRKABase(Reducer):
         t_proj = t_upd = 0.0
         cap = r
         schedule = UpdateSchedule(o["update"], o["relaxation"], o["maxit"])
+        stage_stall = self._stage_stall()
         how, relax = schedule.rule
         lost_rank = False
         check_grid = np.logspace(np.log10(self.fom.band[0]), np.log10(self.fom.band[1]), o["n_check"])
@@ -419,7 +437,10 @@ class IRKABase(Reducer):
                     cycled = True
                     break
             elif schedule.stage_expired(it):
-                schedule.switch(it)  # no convergence within this stage's share of maxit
+                schedule.switch(it, "maxit")  # no convergence within this stage's share of maxit
+                guard.new_stage()
+            elif schedule.can_switch() and stage_stall and guard.stalled(stage_stall):
+                schedule.switch(it, "stall")  # no new smallest measure for stage_stall iterations
                 guard.new_stage()
             elif guard.active and not guard.engaged and not schedule.can_switch() and guard.stalled():
                 reason = "stall"
@@ -454,6 +475,8 @@ class IRKABase(Reducer):
         self._stalled = stalled  # read by _outcome (its signature is shared with the variants)
         rom, info = self._outcome(r, chosen, history, it, converged, cycled, times=times, perturbed=perturbed,
                                   switched=schedule.switched_at)
+        info["update_switch_reasons"] = list(schedule.switch_reasons)
+        info["stage_stall"] = stage_stall
         info["safeguard"] = {**guard.info(), "active": guard.active,
                              "scored_by": "iterate_score" if chosen[2] else "measure",
                              "scores": {str(i): v for i, v in chosen[2].items()}, **score_cost(score)}

@@ -81,9 +81,10 @@ def initial_shifts(r, band, m, p, *, init="logspace", seed=0, shifts=None, b=Non
 class UpdateSchedule:
     """The update rule and relaxation in force: option ``update``, or the stages of ``"auto"``.
 
-    ``"auto"`` runs the stages in turn: the next one after a cycle (:meth:`switch`) or
-    once its share of ``maxit`` is used up (:meth:`stage_expired`); ``switched_at`` lists
-    the iterations at which it moved on.
+    ``"auto"`` runs the stages in turn: the next one after a cycle (:meth:`switch`),
+    after ``stage_stall`` iterations without a new smallest measure (the engine's option),
+    or once its share of ``maxit`` is used up (:meth:`stage_expired`); ``switched_at`` lists
+    the iterations at which it moved on, ``switch_reasons`` why ("cycle", "stall", "maxit").
     """
 
     #: the stages of update="auto": (update, relaxation)
@@ -93,6 +94,7 @@ class UpdateSchedule:
         self.update, self.relaxation, self.maxit = update, relaxation, maxit
         self.stage = 0
         self.switched_at = []
+        self.switch_reasons = []
 
     @property
     def rule(self):
@@ -103,10 +105,11 @@ class UpdateSchedule:
         """Whether a cycle may move ``update="auto"`` on to a next stage (there is one left)."""
         return self.update == "auto" and self.stage < len(self.STAGES) - 1
 
-    def switch(self, it):
-        """Move to the next stage at iteration ``it`` (recorded in ``switched_at``)."""
+    def switch(self, it, reason="cycle"):
+        """Move to the next stage at iteration ``it`` (recorded in ``switched_at`` and ``switch_reasons``)."""
         self.stage += 1
         self.switched_at.append(it)
+        self.switch_reasons.append(reason)
 
     def stage_expired(self, it) -> bool:
         """Whether iteration ``it`` ends the current stage's share of maxit (and a next stage exists)."""
