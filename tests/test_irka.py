@@ -422,7 +422,7 @@ def test_stage_stall_moves_a_wandering_bt_stage_on():
     fom = ms.models.tcom(nc=40)
     plain, stall, default = (_reduce(fom, 20, stage_stall=s) for s in (0, 10, None))
     assert plain.info["update_switch_reasons"] == ["maxit"] and plain.info["stage_stall"] == 0
-    assert default.info["stage_stall"] == 0 and fom.n1 < ms.reducers.irka.engine.IRKABase.STAGE_STALL_MIN_N1
+    assert default.info["stage_stall"] == 0 and fom.n1 < ms.reducers.irka.shift_update.STAGE_STALL_MIN_N1
     assert np.array_equal(default.info["shifts"], plain.info["shifts"])
     assert stall.info["update_switch_reasons"] == ["stall"] and stall.info["stage_stall"] == 10
     (k,) = stall.info["update_switched_at"]

@@ -84,7 +84,7 @@ class FactorStore:
     (the observability position block is kept unprojected, see :class:`ADIIteration`).
 
     Memory: plain, the blocks grow by doubling and are trimmed to the columns in use at
-    :meth:`finish`; compressed, by a quarter (at least ``chunk`` columns).
+    :meth:`finish`; compressed, by an eighth (at least ``chunk`` columns).
 
     Cost with r kept columns: an absorption of b columns :math:`8n_1rb` flops (two
     Gram-Schmidt passes) plus a QR of :math:`2n_1 \times b`; a truncation
@@ -109,10 +109,10 @@ class FactorStore:
 
     def _reserve(self, cols):
         """Room for ``cols`` columns: plain, doubled (amortised appends); compressed, ``cols`` plus
-        a quarter or one ``chunk``, whichever is more (its column count is bounded by the truncation
+        an eighth or one ``chunk``, whichever is more (its column count is bounded by the truncation
         rule, and a doubled Q at n1 = 1e6 would hold gigabytes of unused columns)."""
         if cols > self.Z1.shape[1]:
-            room = max(2 * cols, 32) if self.tol == 0 else cols + max(self.chunk, cols // 4)
+            room = max(2 * cols, 32) if self.tol == 0 else cols + max(self.chunk, cols // 8)
             for name in ("Z1", "Z2"):
                 Z = np.empty((self.n1, room), order="F")
                 Z[:, :self.k] = getattr(self, name)[:, :self.k]

@@ -24,33 +24,28 @@ response once they have lost it or once it changes by less than
 ``response_tol`` (shifts beyond the numerical order are set by rounding and
 never settle). Only a stable iterate counts as converged.
 
-Numerical order: once the bases at the iteration's own shifts (from the second
-iteration on) have rank below the shift count, the shift count is capped for
-good at that rank, so the iteration cannot cycle between orders; the returned
-order ``info["r"]`` is then below ``info["r_requested"]`` with a
-:class:`~morsuite.errors.RankWarning`.
+Numerical order: once the bases at the iteration's own shifts (from the second iteration on) have rank below the
+shift count, the shift count is capped for good at that rank, so the iteration cannot cycle between orders; the
+returned order ``info["r"]`` is then below ``info["r_requested"]`` with a :class:`~morsuite.errors.RankWarning`.
 
-Cycles: a new shift set within ``cycle_tol`` of one of the last
-``cycle_window`` sets while more than 100 ``cycle_tol`` from the current one
-(criterion ``"shifts"``) is a cycle: ``update="auto"`` moves to its next stage,
-otherwise the safeguard engages or (safeguard off) the iteration stops. Without
-convergence the best iterate (stable first) is returned with ``converged=False``, ``status`` "cap"
-or "cycle" (:mod:`.outcome`) and a :class:`~morsuite.errors.ConvergenceWarning`.
+Cycles: a new shift set within ``cycle_tol`` of one of the last ``cycle_window`` sets while more than 100
+``cycle_tol`` from the current one (criterion ``"shifts"``) is a cycle: ``update="auto"`` moves to its next
+stage, otherwise the safeguard engages or (safeguard off) the iteration stops. Without convergence the best
+iterate (stable first) is returned with ``converged=False``, ``status`` "cap" or "cycle" (:mod:`.outcome`) and a
+:class:`~morsuite.errors.ConvergenceWarning`.
 
-Safeguard (option ``safeguard``, :class:`~morsuite.reducers.irka.safeguards.CycleGuard`): idle
-while the plain iteration may still converge, so that its fixed points and
-paths are kept bit for bit; engaged when it cycles in its last stage, settles
-at an unstable model or stalls in its last stage, it replaces the update by
-the residue rule with matched hysteresis and a tabu list, relaxed adaptively
-in shifts and directions. Without convergence it also picks the returned
-iterate: the stable one of smallest exact H2 error among a shortlist
-(option ``shortlist_score``, :mod:`~morsuite.reducers.irka.score`; :attr:`IRKABase.iterate_score` overrides).
+Safeguard (option ``safeguard``, :class:`~morsuite.reducers.irka.safeguards.CycleGuard`): idle while the plain
+iteration may still converge, so that its fixed points and paths are kept bit for bit; engaged when it cycles in
+its last stage (update='auto': a stage ends at a cycle, after half of maxit or, option ``stage_stall``, when it
+stalls), settles at an unstable model or stalls in its last stage, it replaces the update by the residue rule
+with matched hysteresis and a tabu list, relaxed adaptively in shifts and directions. Without convergence it
+also picks the returned iterate: the stable one of smallest exact H2 error among a shortlist (option
+``shortlist_score``, :mod:`~morsuite.reducers.irka.score`; :attr:`IRKABase.iterate_score` overrides).
 
-Options and defaults: :attr:`IRKABase.OPTIONS`. Cost per iteration: one
-factorization per real shift or conjugate pair (``info["lu_count"]``), two
-solves with it (one right, one transposed), and dense work on n1 x r bases and
-r x r matrices. A variant is a subclass that defines the hooks (section
-``hooks`` of :class:`IRKABase`); design notes: ``docs/design/irka.md``.
+Options and defaults: :attr:`IRKABase.OPTIONS`. Cost per iteration: one factorization per real shift or
+conjugate pair (``info["lu_count"]``), two solves with it (one right, one transposed), and dense work on n1 x r
+bases and r x r matrices. A variant is a subclass that defines the hooks (section ``hooks`` of
+:class:`IRKABase`); design notes: ``docs/design/irka.md``.
 """
 
 from __future__ import annotations
@@ -69,7 +64,7 @@ from .safeguards import (GUARD_CYCLES, GUARD_OPTIONS, ITERATE_CYCLE, CycleGuard,
 from .score import iterate_scorer, score_cost
 from .shift_solves import raw_bases
 from .shift_update import (COMPLEX_TOL, UpdateSchedule, bt_rule, initial_shifts, relaxed_update, residue_rule,
-                           shifts_from_poles)
+                           resolve_stage_stall, shifts_from_poles)
 
 __all__ = ["IRKABase"]
 
@@ -134,22 +129,15 @@ class IRKABase(Reducer):
                             "cycle_window sets, while 100 times farther from the current one, is a cycle",
                             low=0, high=1, open_low=True, open_high=True),
         "cycle_window": Option(6, "int", "number of earlier shift sets checked for a cycle", low=0),
-        "stage_stall": Option(None, "int", "update='auto': iterations of a stage that is not the last without a "
-                              "new smallest measure after which it moves to the next stage (the BT update can "
-                              "wander without cycling on long lightly damped chains: tcom at n1 = 1e5 spent its "
-                              "first 50 iterations there; docs/design/irka.md); 0: only a cycle or half of maxit "
-                              "ends a stage; None (default): STAGE_STALL iterations from STAGE_STALL_MIN_N1 "
-                              "positions on, 0 below (where the rule would move converged answers and an "
-                              "iteration is cheap); info['stage_stall']", low=0, nullable=True),
+        "stage_stall": Option(None, "int", "update='auto': a stage but the last ends after this many iterations "
+                              "without a new smallest measure (0: never; None: shift_update.resolve_stage_stall)",
+                              low=0, nullable=True),
         **GUARD_OPTIONS,
         "pivot_tol": Option(0.0, "float", "smallest relative LU pivot before a shift counts as a pole "
                             "(0: only exact singularity and non-finite solves count)", low=0, high=1),
         "shift_perturbation": Option(1e-6, "float", "relative perturbation applied to a shift whose "
                                      "saddle matrix is singular", low=0, high=1, open_low=True),
     }
-
-    #: ``stage_stall=None``: the stall window of a stage of update="auto", from this many positions on
-    STAGE_STALL, STAGE_STALL_MIN_N1 = 10, 50_000
 
     #: Score of the shortlisted stable iterates when the iteration does not converge (safeguard
     #: on): a callable ``(fom, rom) -> float``, smaller is better, or None: option
@@ -327,13 +315,6 @@ class IRKABase(Reducer):
         return initial_shifts(r, fom.band, fom.m, fom.p, init=o["init"], seed=o["seed"], shifts=o["init_shifts"],
                               b=o["init_b"], c=o["init_c"])
 
-    def _stage_stall(self) -> int:
-        """The stall window of the stages of update="auto" (option ``stage_stall``, resolved when None)."""
-        ss = self.options["stage_stall"]
-        if ss is None:
-            ss = self.STAGE_STALL if self.fom.n1 >= self.STAGE_STALL_MIN_N1 else 0
-        return int(ss)
-
     def _criterion(self, lost_rank, d_resp) -> str:
         """The convergence measure in force: option ``criterion``, resolved when "auto"."""
         crit = self.options["criterion"]
@@ -360,8 +341,8 @@ class IRKABase(Reducer):
         stalled = forget = False
         t_proj = t_upd = 0.0
         cap = r
-        schedule = UpdateSchedule(o["update"], o["relaxation"], o["maxit"])
-        stage_stall = self._stage_stall()
+        schedule = UpdateSchedule(o["update"], o["relaxation"], o["maxit"],
+                                  resolve_stage_stall(o["stage_stall"], self.fom.n1))
         how, relax = schedule.rule
         lost_rank = False
         check_grid = np.logspace(np.log10(self.fom.band[0]), np.log10(self.fom.band[1]), o["n_check"])
@@ -436,11 +417,8 @@ class IRKABase(Reducer):
                 else:
                     cycled = True
                     break
-            elif schedule.stage_expired(it):
-                schedule.switch(it, "maxit")  # no convergence within this stage's share of maxit
-                guard.new_stage()
-            elif schedule.can_switch() and stage_stall and guard.stalled(stage_stall):
-                schedule.switch(it, "stall")  # no new smallest measure for stage_stall iterations
+            elif why := schedule.stage_over(it, guard):  # its share of maxit used up, or stalled
+                schedule.switch(it, why)
                 guard.new_stage()
             elif guard.active and not guard.engaged and not schedule.can_switch() and guard.stalled():
                 reason = "stall"
@@ -475,8 +453,7 @@ class IRKABase(Reducer):
         self._stalled = stalled  # read by _outcome (its signature is shared with the variants)
         rom, info = self._outcome(r, chosen, history, it, converged, cycled, times=times, perturbed=perturbed,
                                   switched=schedule.switched_at)
-        info["update_switch_reasons"] = list(schedule.switch_reasons)
-        info["stage_stall"] = stage_stall
+        info.update(update_switch_reasons=list(schedule.switch_reasons), stage_stall=schedule.stall)
         info["safeguard"] = {**guard.info(), "active": guard.active,
                              "scored_by": "iterate_score" if chosen[2] else "measure",
                              "scores": {str(i): v for i, v in chosen[2].items()}, **score_cost(score)}
