@@ -324,7 +324,7 @@ class BT(SquareRootBT):
                                "directions below compress_tol times the factor's largest singular value are "
                                "dropped (0: none); None (default): 0 below COMPRESS_MIN_N1 positions (the exact "
                                "H2 error's error-Gramian route shares uncompressed factors), COMPRESS_AUTO_TOL "
-                               "from there on (tcom at n1 = 1e6: about 1300 columns per factor, 42 GiB plain); "
+                               "from there on (tcom at n1 = 1e6: about 1300 columns per factor, 42 GB plain); "
                                "the value used is info['compress_tol']", low=0, high=1, open_high=True,
                                nullable=True),
         "gramian_cache": Option("model", "choice", "where the LR-ADI factors are kept: in the model's cache, "
