@@ -114,3 +114,25 @@ def test_write_readme_summarises_every_json(tmp_path):
     assert "## irka" in text and "ABOVE TARGET" in text and "| dsms | 20 | 0.5 | 1.2 |" in text
     assert "## other" in text and "## broken" in text and "unreadable" in text
     assert "partial" not in text
+
+
+def test_tcom_large_bench_records_times_memory_and_choices():
+    """The tcom-1e6 benchmark on a small plan: both cases finish in child processes, with their
+    LU counts, phases, peak RSS, the load, and the size-dependent choices resolved as at small n1
+    (no compression, no stage stall); one time and one memory ratio per case, against issue 33's targets."""
+    from morsuite.bench.tcom_large import TARGETS, bench_tcom_large
+
+    res = bench_tcom_large(True, plan={"nc": 40, "timeout_s": {"irka": 300, "bt": 300}, "rss_limit_gib": 4},
+                           echo=None)
+    rows = {r["task"]: r for r in res["rows"]}
+    assert set(rows) == {"irka", "bt"}
+    for task, row in rows.items():
+        assert row["status"] == "ok", row
+        assert row["n1"] == 121 and row["lu_count"] > 0 and row["time_s"] > 0 and row["time_breakdown"]
+        assert 0 < row["peak_rss_gib"] < 4 and len(row["load_before"]) == 3
+        t = res["ratios"][f"{task} time / {TARGETS[task]:g} s"]
+        assert t["value"] == pytest.approx(row["time_s"] / TARGETS[task]) and t["target"] == 1.0
+        assert res["ratios"][f"{task} peak RSS / 24 GiB"]["value"] == pytest.approx(row["peak_rss_gib"] / 24)
+    assert rows["bt"]["compress_tol"] == 0.0 and rows["irka"]["stage_stall"] == 0
+    assert rows["bt"]["factor_ranks"]["controllability"] > 0
+    json.dumps(res, default=json_default)

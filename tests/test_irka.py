@@ -412,3 +412,24 @@ def test_irka_records_the_hysteresis_option():
     assert info["options"]["residue_hysteresis"] == 0.0 and info["options"]["hysteresis_radius"] == 0.05
     with pytest.raises(ms.errors.InputError, match="residue_hysteresis"):
         ms.reducers.make("irka", fom, residue_hysteresis=-1.0)
+
+
+def test_stage_stall_moves_a_wandering_bt_stage_on():
+    """tcom(40) at r = 20: the BT update wanders without cycling for its 50 iterations (half
+    of maxit); with stage_stall = 10 the residue stage starts 10 iterations after the last new
+    smallest measure (read off the history) and the iterate still interpolates. The default
+    (None) resolves to 0 below STAGE_STALL_MIN_N1 positions: the same iterates bit for bit."""
+    fom = ms.models.tcom(nc=40)
+    plain, stall, default = (_reduce(fom, 20, stage_stall=s) for s in (0, 10, None))
+    assert plain.info["update_switch_reasons"] == ["maxit"] and plain.info["stage_stall"] == 0
+    assert default.info["stage_stall"] == 0 and fom.n1 < ms.reducers.irka.shift_update.STAGE_STALL_MIN_N1
+    assert np.array_equal(default.info["shifts"], plain.info["shifts"])
+    assert stall.info["update_switch_reasons"] == ["stall"] and stall.info["stage_stall"] == 10
+    (k,) = stall.info["update_switched_at"]
+    measure = np.asarray(stall.info["history"]["measure"][:k])
+    last_best = max(i for i in range(k) if measure[i] < np.min(measure[:i], initial=np.inf))
+    assert k - 1 - last_best == 10
+    assert stall.info["converged"] and stall.info["iterations"] < plain.info["iterations"]
+    err = _hermite_errors(fom, stall.rom, as_complex(stall.info["shifts"]), as_complex(stall.info["b"]),
+                          as_complex(stall.info["c"]))
+    assert err < 1e-8

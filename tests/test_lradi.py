@@ -374,10 +374,14 @@ def test_factor_store_compression_matches_truncated_svd():
     for j in range(0, 200, 5):
         for st in (plain, comp):
             st.append(2.0, cols[:n1, j:j + 5], cols[n1:, j:j + 5])
+        # compressed, the blocks grow by an eighth (at least a chunk), not by doubling
+        assert comp.Z1.shape[1] <= comp.k_peak + max(comp.chunk, comp.k_peak // 8)
     for st in (plain, comp):
         st.finish()
     Zp, Zc = np.vstack(plain.blocks()), np.vstack(comp.blocks())
     assert Zp.shape[1] == 200 and comp.columns == 200 and Zc.shape[1] == 12
+    # finish trims the blocks to the columns in use (the store is kept for the factor's life)
+    assert plain.Z1.shape[1] == plain.Z2.shape[1] == 200 and comp.Z1.shape[1] == comp.Z2.shape[1] == 12
     P, Pc = Zp @ Zp.T, Zc @ Zc.T
     # each truncation at most tol^2 ||P||, each of the 40 absorptions 20 sqrt(5) eps ||P||
     bound = (comp.compressions * 1e-22 + 40 * 20 * np.sqrt(5) * 2.2e-16) * np.linalg.norm(P, 2)

@@ -5,7 +5,9 @@ r"""One case of the ``scaling`` benchmark: a reduction or a full response, its t
 ``r``, ``nfreq``, ``nfreq_measured``, ``options``, ``trace``. It records wall
 and CPU time, the LU count, and the memory of :class:`~morsuite.bench.memory.MemoryProbe`
 against the :math:`8 n_1^2` bytes of one dense :math:`n_1 \times n_1` array
-(``peak_over_dense_square``). A failure, or the memory guard of
+(``peak_over_dense_square``), the process's lifetime peak RSS (``process_maxrss_mb``) and,
+for a reduction, its ``time_breakdown`` and size-dependent choices (``compress_tol``,
+``stage_stall``, ``update_switch_reasons``, ``factor_ranks``, where its info has them). A failure, or the memory guard of
 ``irka-projected`` refusing, is a result.
 
 :func:`run_isolated` runs a case in a child process (``python -m morsuite.bench
@@ -39,6 +41,15 @@ def _load_average():
     try:
         return [round(x, 2) for x in os.getloadavg()]
     except (AttributeError, OSError):  # pragma: no cover
+        return None
+
+
+def _maxrss_mb():
+    try:
+        import resource
+
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KiB on Linux
+    except ImportError:  # pragma: no cover - not on Linux
         return None
 
 
@@ -103,12 +114,17 @@ def run_case(case: dict) -> dict:
                 row.update(time_s=elapsed, cpu_s=cpu, reducer_time_s=info["time_s"], lu_count=info.get("lu_count"),
                            iterations=info.get("iterations"), converged=info.get("converged"),
                            r_used=info.get("r"), states=info.get("states"), stable=info.get("stable"))
+                # per-phase times and the size-dependent choices the reducer made (recorded in its info)
+                row.update(time_breakdown=info.get("time_breakdown"),
+                           **{k: info[k] for k in ("compress_tol", "stage_stall", "update_switch_reasons",
+                                                   "factor_ranks") if k in info})
         except MemoryBudgetError as exc:
             status = "refused by memory guard"
             row["message"] = str(exc)
         except Exception as exc:  # a failure is a result too
             status = f"error: {type(exc).__name__}"
             row["message"] = str(exc)[:500]
+    row["process_maxrss_mb"] = _maxrss_mb()  # this process's lifetime peak RSS (the model build included)
     row["warnings"] = sorted({f"{w.category.__name__}: {str(w.message)[:160]}" for w in caught})[:8]
     row["status"] = status
     if status == "ok":

@@ -83,6 +83,9 @@ class FactorStore:
     of appended ones, so the store commutes with any projection applied to the rows
     (the observability position block is kept unprojected, see :class:`ADIIteration`).
 
+    Memory: plain, the blocks grow by doubling and are trimmed to the columns in use at
+    :meth:`finish`; compressed, by an eighth (at least ``chunk`` columns).
+
     Cost with r kept columns: an absorption of b columns :math:`8n_1rb` flops (two
     Gram-Schmidt passes) plus a QR of :math:`2n_1 \times b`; a truncation
     :math:`4n_1 r t` (the rotation; t kept), at most about :math:`\log_{1.5}` of the
@@ -100,15 +103,28 @@ class FactorStore:
         self.columns = 0     # columns appended in all
         self.compressions = 0  # truncations
         self.k_truncated = 0   # rank after the last truncation
+        self.k_peak = 0        # most columns held at once (compressed: before a truncation)
         self.t_compress = 0.0
         self.done = False
 
     def _reserve(self, cols):
+        """Room for ``cols`` columns: plain, doubled (amortised appends); compressed, ``cols`` plus
+        an eighth or one ``chunk``, whichever is more (its column count is bounded by the truncation
+        rule, and a doubled Q at n1 = 1e6 would hold gigabytes of unused columns)."""
         if cols > self.Z1.shape[1]:
+            room = max(2 * cols, 32) if self.tol == 0 else cols + max(self.chunk, cols // 8)
             for name in ("Z1", "Z2"):
-                Z = np.empty((self.n1, max(2 * cols, 32)), order="F")
+                Z = np.empty((self.n1, room), order="F")
                 Z[:, :self.k] = getattr(self, name)[:, :self.k]
                 setattr(self, name, Z)
+
+    def _trim(self):
+        """Release the unused columns of the blocks (one block copied at a time): the factor
+        is kept for the reducer's life, and a doubled store can hold twice its columns."""
+        for name in ("Z1", "Z2"):
+            Z = getattr(self, name)
+            if Z.shape[1] > self.k + max(8, self.k // 16):
+                setattr(self, name, np.array(Z[:, :self.k], order="F"))
 
     def append(self, c, X1, X2):
         """Append the columns c [X1; X2]."""
@@ -153,6 +169,7 @@ class FactorStore:
         self.Z1[:, r:r + t] = Qb[:n1, :t]
         self.Z2[:, r:r + t] = Qb[n1:, :t]
         self.k = r + t
+        self.k_peak = max(self.k_peak, self.k)
         self.t_compress += time.perf_counter() - t0
 
     def _rotate(self, X):
@@ -176,14 +193,19 @@ class FactorStore:
         self.t_compress += time.perf_counter() - t0
 
     def finish(self):
-        """Absorb the buffer, truncate, and turn Q into the factor :math:`QF` (in place); once."""
-        if self.tol == 0 or self.done:
+        """Absorb the buffer, truncate, and turn Q into the factor :math:`QF` (in place); once.
+        The blocks are then trimmed to the columns in use."""
+        if self.done:
+            return
+        if self.tol == 0:
+            self._trim()
             self.done = True
             return
         self._absorb()
         self._truncate()
         t0 = time.perf_counter()
         self._rotate(self.F)  # F is diagonal: Q U_t Sigma_t
+        self._trim()
         self.done = True
         self.t_compress += time.perf_counter() - t0
 

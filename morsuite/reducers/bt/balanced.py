@@ -80,6 +80,10 @@ same model object and ADI options, and :func:`morsuite.analysis.h2_norm` /
 
 ``info`` holds ``adi`` (per equation: iterations, converged, residual history,
 shifts, rank, columns, LUs reused, ``shift_reuse``, ``lu_pool_mib``, ``compress_tol``),
+``compress_tol`` (the column compression used: option ``compress_tol``, by default 0 below
+:attr:`BT.COMPRESS_MIN_N1` positions and :attr:`BT.COMPRESS_AUTO_TOL` from there on, where the
+plain factors no longer fit in memory; a compressed factor cannot serve the exact H2 error's
+error-Gramian route, which then runs its own LR-ADI),
 ``adi_iterations``, ``residual_history``, ``factor_ranks``,
 ``lu_count`` (the LR-ADI's LUs when this call ran it, else 0), ``lu_count_shared`` (the
 LR-ADI's LUs, whoever paid them), ``time_breakdown`` (adi, of which lu, solves, shifts; svd;
@@ -316,9 +320,13 @@ class BT(SquareRootBT):
                               "0: exact repeats only; docs/design/lradi.md)", low=0, high=1, open_high=True),
         "lu_pool_mib": Option(ADI_DEFAULTS["lu_pool_mib"], "float", "memory budget (MiB) of the LR-ADI's kept "
                               "LUs, least recently used dropped first (0: none kept)", low=0),
-        "compress_tol": Option(ADI_DEFAULTS["compress_tol"], "float", "column compression of the LR-ADI factors "
-                               "as they grow: new directions below compress_tol times the factor's largest "
-                               "singular value are dropped (0: none)", low=0, high=1, open_high=True),
+        "compress_tol": Option(None, "float", "column compression of the LR-ADI factors as they grow: new "
+                               "directions below compress_tol times the factor's largest singular value are "
+                               "dropped (0: none); None (default): 0 below COMPRESS_MIN_N1 positions (the exact "
+                               "H2 error's error-Gramian route shares uncompressed factors), COMPRESS_AUTO_TOL "
+                               "from there on (tcom at n1 = 1e6: about 1300 columns per factor, 42 GB plain); "
+                               "the value used is info['compress_tol']", low=0, high=1, open_high=True,
+                               nullable=True),
         "gramian_cache": Option("model", "choice", "where the LR-ADI factors are kept: in the model's cache, "
                                 "shared with every bt reducer and analysis.h2_norm / h2_error on the same model "
                                 "object and ADI options (LR-ADI runs once per model), or on this reducer only (a "
@@ -328,9 +336,23 @@ class BT(SquareRootBT):
                           "(caps r)", low=0, high=1, open_high=True),
     }
 
+    #: compress_tol=None: the LR-ADI factors are compressed at COMPRESS_AUTO_TOL from COMPRESS_MIN_N1
+    #: positions on (on tcom(3334), n1 = 1e4: 313 and 325 columns of 1294 and 1336 kept, the reduced
+    #: transfer function at r = 20 moved by 1.8e-10 of its peak, the Hankel singular values by 9e-7;
+    #: docs/design/lradi.md)
+    COMPRESS_MIN_N1, COMPRESS_AUTO_TOL = 200_000, 1e-6
+
     def __init__(self, fom, **options):
         super().__init__(fom, **options)
         self._gram = None  # shared by reducers that agree on ADI_OPTIONS (use_gramians_of)
+
+    def _adi_options(self) -> dict:
+        """The LR-ADI options of the factors, ``compress_tol`` resolved when None."""
+        o = self.options
+        adi = {k: o[k] for k in ADI_OPTIONS}
+        if adi["compress_tol"] is None:
+            adi["compress_tol"] = self.COMPRESS_AUTO_TOL if self.fom.n1 >= self.COMPRESS_MIN_N1 else 0.0
+        return adi
 
     # -- Gramians (once per reducer) --------------------------------------
     def use_gramians_of(self, other: "BT") -> "BT":
@@ -340,7 +362,8 @@ class BT(SquareRootBT):
             raise InputError(f"other must be a BT reducer; got {type(other).__name__}")
         if other.fom is not self.fom:
             raise InputError("other is bound to a different model object; Gramians cannot be shared")
-        diff = [k for k in ADI_OPTIONS if self.options[k] != other.options[k]]
+        mine, theirs = self._adi_options(), other._adi_options()
+        diff = [k for k in ADI_OPTIONS if mine[k] != theirs[k]]
         if diff:
             raise OptionError(f"other has different ADI options ({', '.join(diff)}); Gramians cannot be shared")
         if other._gram is None:
@@ -353,7 +376,7 @@ class BT(SquareRootBT):
         if self._gram is not None:
             return self._gram
         o = self.options
-        gf = gramian_factors(self.fom, use_cache=o["gramian_cache"] == "model", **{k: o[k] for k in ADI_OPTIONS})
+        gf = gramian_factors(self.fom, use_cache=o["gramian_cache"] == "model", **self._adi_options())
         c, ob = gf.controllability, gf.observability
         t1 = time.perf_counter()
         fom = self.fom
@@ -378,7 +401,7 @@ class BT(SquareRootBT):
         times = g["times"]
         st_c = c.times
         info = {
-            "form": form, "converged": bool(c.converged and ob.converged),
+            "form": form, "converged": bool(c.converged and ob.converged), "compress_tol": c.compress_tol,
             "status": "direct" if c.converged and ob.converged else "cap",  # LR-ADI's maxiter
             "iterations": max(c.iterations, ob.iterations),
             "adi_iterations": {"controllability": c.iterations, "observability": ob.iterations},

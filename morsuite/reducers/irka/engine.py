@@ -24,33 +24,28 @@ response once they have lost it or once it changes by less than
 ``response_tol`` (shifts beyond the numerical order are set by rounding and
 never settle). Only a stable iterate counts as converged.
 
-Numerical order: once the bases at the iteration's own shifts (from the second
-iteration on) have rank below the shift count, the shift count is capped for
-good at that rank, so the iteration cannot cycle between orders; the returned
-order ``info["r"]`` is then below ``info["r_requested"]`` with a
-:class:`~morsuite.errors.RankWarning`.
+Numerical order: once the bases at the iteration's own shifts (from the second iteration on) have rank below the
+shift count, the shift count is capped for good at that rank, so the iteration cannot cycle between orders; the
+returned order ``info["r"]`` is then below ``info["r_requested"]`` with a :class:`~morsuite.errors.RankWarning`.
 
-Cycles: a new shift set within ``cycle_tol`` of one of the last
-``cycle_window`` sets while more than 100 ``cycle_tol`` from the current one
-(criterion ``"shifts"``) is a cycle: ``update="auto"`` moves to its next stage,
-otherwise the safeguard engages or (safeguard off) the iteration stops. Without
-convergence the best iterate (stable first) is returned with ``converged=False``, ``status`` "cap"
-or "cycle" (:mod:`.outcome`) and a :class:`~morsuite.errors.ConvergenceWarning`.
+Cycles: a new shift set within ``cycle_tol`` of one of the last ``cycle_window`` sets while more than 100
+``cycle_tol`` from the current one (criterion ``"shifts"``) is a cycle: ``update="auto"`` moves to its next
+stage, otherwise the safeguard engages or (safeguard off) the iteration stops. Without convergence the best
+iterate (stable first) is returned with ``converged=False``, ``status`` "cap" or "cycle" (:mod:`.outcome`) and a
+:class:`~morsuite.errors.ConvergenceWarning`.
 
-Safeguard (option ``safeguard``, :class:`~morsuite.reducers.irka.safeguards.CycleGuard`): idle
-while the plain iteration may still converge, so that its fixed points and
-paths are kept bit for bit; engaged when it cycles in its last stage, settles
-at an unstable model or stalls in its last stage, it replaces the update by
-the residue rule with matched hysteresis and a tabu list, relaxed adaptively
-in shifts and directions. Without convergence it also picks the returned
-iterate: the stable one of smallest exact H2 error among a shortlist
-(option ``shortlist_score``, :mod:`~morsuite.reducers.irka.score`; :attr:`IRKABase.iterate_score` overrides).
+Safeguard (option ``safeguard``, :class:`~morsuite.reducers.irka.safeguards.CycleGuard`): idle while the plain
+iteration may still converge, so that its fixed points and paths are kept bit for bit; engaged when it cycles in
+its last stage (update='auto': a stage ends at a cycle, after half of maxit or, option ``stage_stall``, when it
+stalls), settles at an unstable model or stalls in its last stage, it replaces the update by the residue rule
+with matched hysteresis and a tabu list, relaxed adaptively in shifts and directions. Without convergence it
+also picks the returned iterate: the stable one of smallest exact H2 error among a shortlist (option
+``shortlist_score``, :mod:`~morsuite.reducers.irka.score`; :attr:`IRKABase.iterate_score` overrides).
 
-Options and defaults: :attr:`IRKABase.OPTIONS`. Cost per iteration: one
-factorization per real shift or conjugate pair (``info["lu_count"]``), two
-solves with it (one right, one transposed), and dense work on n1 x r bases and
-r x r matrices. A variant is a subclass that defines the hooks (section
-``hooks`` of :class:`IRKABase`); design notes: ``docs/design/irka.md``.
+Options and defaults: :attr:`IRKABase.OPTIONS`. Cost per iteration: one factorization per real shift or
+conjugate pair (``info["lu_count"]``), two solves with it (one right, one transposed), and dense work on n1 x r
+bases and r x r matrices. A variant is a subclass that defines the hooks (section ``hooks`` of
+:class:`IRKABase`); design notes: ``docs/design/irka.md``.
 """
 
 from __future__ import annotations
@@ -69,7 +64,7 @@ from .safeguards import (GUARD_CYCLES, GUARD_OPTIONS, ITERATE_CYCLE, CycleGuard,
 from .score import iterate_scorer, score_cost
 from .shift_solves import raw_bases
 from .shift_update import (COMPLEX_TOL, UpdateSchedule, bt_rule, initial_shifts, relaxed_update, residue_rule,
-                           shifts_from_poles)
+                           resolve_stage_stall, shifts_from_poles)
 
 __all__ = ["IRKABase"]
 
@@ -134,6 +129,9 @@ class IRKABase(Reducer):
                             "cycle_window sets, while 100 times farther from the current one, is a cycle",
                             low=0, high=1, open_low=True, open_high=True),
         "cycle_window": Option(6, "int", "number of earlier shift sets checked for a cycle", low=0),
+        "stage_stall": Option(None, "int", "update='auto': a stage but the last ends after this many iterations "
+                              "without a new smallest measure (0: never; None: shift_update.resolve_stage_stall)",
+                              low=0, nullable=True),
         **GUARD_OPTIONS,
         "pivot_tol": Option(0.0, "float", "smallest relative LU pivot before a shift counts as a pole "
                             "(0: only exact singularity and non-finite solves count)", low=0, high=1),
@@ -344,7 +342,8 @@ class IRKABase(Reducer):
         stall_why = None
         t_proj = t_upd = 0.0
         cap = r
-        schedule = UpdateSchedule(o["update"], o["relaxation"], o["maxit"])
+        schedule = UpdateSchedule(o["update"], o["relaxation"], o["maxit"],
+                                  resolve_stage_stall(o["stage_stall"], self.fom.n1))
         how, relax = schedule.rule
         lost_rank = False
         check_grid = np.logspace(np.log10(self.fom.band[0]), np.log10(self.fom.band[1]), o["n_check"])
@@ -419,8 +418,8 @@ class IRKABase(Reducer):
                 else:
                     cycled = True
                     break
-            elif schedule.stage_expired(it):
-                schedule.switch(it)  # no convergence within this stage's share of maxit
+            elif why := schedule.stage_over(it, guard):  # its share of maxit used up, or stalled
+                schedule.switch(it, why)
                 guard.new_stage()
             elif guard.active and not guard.engaged and not schedule.can_switch() and guard.stalled():
                 reason = "stall"
@@ -463,6 +462,7 @@ class IRKABase(Reducer):
         self._stalled = stalled and (stall_why or True)  # read by _outcome (its signature is shared with the variants)
         rom, info = self._outcome(r, chosen, history, it, converged, cycled, times=times, perturbed=perturbed,
                                   switched=schedule.switched_at)
+        info.update(update_switch_reasons=list(schedule.switch_reasons), stage_stall=schedule.stall)
         info["safeguard"] = {**guard.info(), "active": guard.active,
                              "scored_by": "iterate_score" if chosen[2] else "measure",
                              "scores": {str(i): v for i, v in chosen[2].items()}, **score_cost(score)}
