@@ -146,9 +146,13 @@ def test_gramian_factors_shared_with_bt_once_per_model():
     fom3 = ms.models.dsms(g=60)
     ms.reducers.make("bt", fom3, gramian_cache="reducer").reduce(6)
     assert cached_gramian_factors(fom3) is None
-    # bt's ADI defaults are the shared ones
+    # bt's ADI defaults are the shared ones; its compress_tol None resolves to the shared 0 below
+    # BT.COMPRESS_MIN_N1 positions (recorded in info), so the factors above were shared
     bt = ms.reducers.get_class("bt")
-    assert {k: bt.OPTIONS[k].default for k in ADI_DEFAULTS} == ADI_DEFAULTS
+    assert bt.OPTIONS["compress_tol"].default is None and fom.n1 < bt.COMPRESS_MIN_N1
+    assert res.info["compress_tol"] == ADI_DEFAULTS["compress_tol"] == 0.0
+    assert {k: bt.OPTIONS[k].default for k in ADI_DEFAULTS if k != "compress_tol"} == \
+        {k: v for k, v in ADI_DEFAULTS.items() if k != "compress_tol"}
 
 
 # -- ||T - Tr||_H2 --------------------------------------------------------------------

@@ -339,7 +339,6 @@ class IRKABase(Reducer):
         chosen = None
         converged = cycled = False
         stalled = forget = False
-        stall_why = None
         t_proj = t_upd = 0.0
         cap = r
         schedule = UpdateSchedule(o["update"], o["relaxation"], o["maxit"],
@@ -423,18 +422,8 @@ class IRKABase(Reducer):
                 guard.new_stage()
             elif guard.active and not guard.engaged and not schedule.can_switch() and guard.stalled():
                 reason = "stall"
-            elif guard.engaged and o["safeguard_stop"] and guard.stalled(o["safeguard_stall"]):
-                stalled = True  # engaged and no new smallest measure for a window: stop
-                guard.events.append((it, f"no progress in {o['safeguard_stall']} iterations: stopped"))
-                break
-            elif (guard.engaged and o["safeguard_stop"] and o["safeguard_reach"]
-                  and guard.out_of_reach(o["safeguard_stall"], o["tol"], o["maxit"] - it)):
-                stalled = True  # engaged, and at its rate of the last window it would not converge by maxit
-                stall_why = (f"at the rate of its last {o['safeguard_stall']} iterations the safeguard would not "
-                             f"reach tol = {o['tol']:g} by maxit = {o['maxit']}")
-                guard.events.append((it, f"tol {o['tol']:g} out of reach by maxit {o['maxit']} at the rate of the "
-                                         f"last {o['safeguard_stall']} iterations: stopped"))
-                break
+            elif guard.engaged and o["safeguard_stop"] and (stalled := guard.stop_reason(o, it)):
+                break  # engaged: no progress in a window, or tol out of reach at its rate
             how, relax = schedule.rule
             if reason is not None:
                 if reason == "unstable fixed point":
@@ -459,7 +448,7 @@ class IRKABase(Reducer):
             chosen = shortlist.choose(None if score is None else (lambda m: score(self.fom, m)))
         times = {"setup": t_setup, **setup_times, **self._phase_times(), "projection": t_proj,
                  "shift_update": t_upd}
-        self._stalled = stalled and (stall_why or True)  # read by _outcome (its signature is shared with the variants)
+        self._stalled = stalled  # read by _outcome (its signature is shared with the variants)
         rom, info = self._outcome(r, chosen, history, it, converged, cycled, times=times, perturbed=perturbed,
                                   switched=schedule.switched_at)
         info.update(update_switch_reasons=list(schedule.switch_reasons), stage_stall=schedule.stall)
@@ -490,10 +479,8 @@ class IRKABase(Reducer):
                       f"the model supports to rank_tol = {o['rank_tol']:g}, hsv_tol = {o['hsv_tol']:g}",
                       RankWarning, stacklevel=4)
         if not converged:
-            stall = getattr(self, "_stalled", False)
-            why = ("a cycle of shift sets was detected" if cycled else stall if isinstance(stall, str) else
-                   f"the safeguard made no progress (safeguard_progress {o['safeguard_progress']:g}) in "
-                   f"{o['safeguard_stall']} iterations" if stall else f"maxit = {o['maxit']} was reached")
+            why = ("a cycle of shift sets was detected" if cycled else getattr(self, "_stalled", False)
+                   or f"maxit = {o['maxit']} was reached")
             what = (f"iteration {best_it} (shift change {history[best_it - 1]['measure']:.2e}, tol {o['tol']:g})"
                     if best_it else "its start")
             self.warn(f"{self.name} did not converge at r = {r}: {why}; returning {what}",

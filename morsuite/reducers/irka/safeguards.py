@@ -308,6 +308,21 @@ class CycleGuard:
         self._best, self._since_best = np.inf, 0
         self._mins = []
 
+    def stop_reason(self, o, it) -> str | None:
+        """Why the engaged safeguard stops at iteration ``it`` (options ``o``), or None: no progress in
+        ``safeguard_stall`` iterations (:meth:`stalled`), or, with ``safeguard_reach``, ``tol`` out of
+        reach by ``maxit`` at the rate of the last ``safeguard_stall`` iterations (:meth:`out_of_reach`).
+        The reason is logged in :attr:`events` and becomes the warning's."""
+        w, why = o["safeguard_stall"], None
+        if self.stalled(w):
+            why = f"the safeguard made no progress (safeguard_progress {o['safeguard_progress']:g}) in {w} iterations"
+        elif o["safeguard_reach"] and self.out_of_reach(w, o["tol"], o["maxit"] - it):
+            why = (f"at the rate of its last {w} iterations the safeguard would not reach tol = {o['tol']:g} by "
+                   f"maxit = {o['maxit']}")
+        if why:
+            self.events.append((it, why + ": stopped"))
+        return why
+
     def out_of_reach(self, window: int, tol: float, left: int) -> bool:
         r"""Whether the stage's smallest measure, decreasing from now on as it did over the last ``window``
         iterations, would stay above ``tol`` after the ``left`` iterations the budget allows.
