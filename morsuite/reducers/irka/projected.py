@@ -390,7 +390,7 @@ class IRKAProjected(IRKABase):
         return pm.M, pm.D, pm.K, pm.F, pm.L
 
     def _lift(self, V):
-        """:math:`\Psi_r V`: the basis in the index-3 model's positions."""
+        r""":math:`\Psi_r V`: the basis in the index-3 model's positions."""
         return self._model.lift(V)
 
     def _begin_bases(self):
