@@ -15,7 +15,6 @@ import time
 
 import numpy as np
 
-from ..errors import OptionError
 from ..linalg.levelset import level_set
 
 __all__ = ["refine_peak", "climb", "certify", "certificate", "RESOLUTION", "LOCAL", "TRUNCATION"]
@@ -25,17 +24,16 @@ EPS = np.finfo(float).eps
 LOCAL = 0.05
 
 
-def refine_peak(sig, lo, c, hi, rtol, budget, bar=None, secant="resonance"):
+def refine_peak(sig, lo, c, hi, rtol, budget, bar=None):
     r"""Maximise sig on [lo, hi] around the sample c (secant on a derivative, bracket safeguard).
 
     The step is the secant root, through the last two samples, of
-    :math:`g = \sigma'/\sigma^3 = -\tfrac12 (\sigma^{-2})'` (``secant="resonance"``, the
-    default): for one lightly damped pole, :math:`\sigma^{-2} = ((\omega - \omega_0)^2 + b)/|\rho|^2`
+    :math:`g = \sigma'/\sigma^3 = -\tfrac12 (\sigma^{-2})'`: for one lightly damped pole, :math:`\sigma^{-2} = ((\omega - \omega_0)^2 + b)/|\rho|^2`
     is quadratic, :math:`g` is linear and the secant lands on the peak; near a peak with a background
     it converges superlinearly. A step outside the bracket's inner 98% falls back to regula falsi on
-    the bracket, then to bisection. ``secant="derivative"``: the previous rule, regula falsi on
-    :math:`\sigma'` itself (kept for comparison; it stagnates at sharp resonances: 32 to 38 samples
-    where the default takes 4 to 6, docs/design/norms.md).
+    the bracket, then to bisection. (Regula falsi on :math:`\sigma'` itself, the rule before
+    2026-11-28, stagnated at sharp resonances: 13 to 38 samples where this takes 5 to 7,
+    docs/design/norms.md.)
 
     At a crossing of the two largest singular values (a kink: a bracket end's slope changes by less
     than :data:`KINK_SLOPE` when the end moves) the step is where the two ends' tangents meet, and
@@ -44,20 +42,21 @@ def refine_peak(sig, lo, c, hi, rtol, budget, bar=None, secant="resonance"):
 
     Stops when the gain still predicted by the local quadratic model,
     :math:`\sigma'(x)^2 / (2|\sigma''|)` with :math:`\sigma''` from the last two
-    derivatives, is below ``rtol`` (times :data:`STOP_MARGIN` with the resonance secant) times the
+    derivatives, is below :data:`STOP_MARGIN` times ``rtol`` times the
     best value, when the bracket has
     shrunk to rounding, or when ``budget`` LUs are spent; with ``bar`` (a value
     found elsewhere) also when the peak the model predicts, raised by
     :data:`BAR_MARGIN`, stays below ``bar``: this maximum cannot be the largest.
     """
-    if secant not in ("resonance", "derivative"):
-        raise OptionError(f"secant: expected 'resonance' or 'derivative', got {secant!r}")
-
     def g(f, d):
-        return d / f ** 3 if secant == "resonance" else d
+        return d / f ** 3
+
+    def meet():  # where the bracket ends' tangents meet, and their value there
+        xt = (fb - fa + da * a - db * b) / (da - db)
+        return xt, fa + da * (xt - a)
 
     # the superlinear secant resolves the peak well inside rtol for one sample or two more
-    stop = STOP_MARGIN * rtol if secant == "resonance" else rtol
+    stop = STOP_MARGIN * rtol
     fl, dl = sig(lo)
     fc, dc = sig(c)
     fh, dh = sig(hi)
@@ -79,8 +78,8 @@ def refine_peak(sig, lo, c, hi, rtol, budget, bar=None, secant="resonance"):
         if da > 0 > db:
             (p, gp), (q, gq) = other, last
             if kink:
-                x = (fb - fa + da * a - db * b) / (da - db)  # where the two sides' tangents meet
-            elif gq != gp and secant == "resonance":
+                x = meet()[0]
+            elif gq != gp:
                 x = q - gq * (q - p) / (gq - gp)  # the secant through the last two samples
             if x is None or not inner[0] < x < inner[1]:
                 ga, gb = g(fa, da), g(fb, db)
@@ -104,7 +103,7 @@ def refine_peak(sig, lo, c, hi, rtol, budget, bar=None, secant="resonance"):
             else:
                 b, fb, db = x, fx, dx
             # a slope that changes by less than KINK_SLOPE while its end moves: the side is a line
-            kink = secant == "resonance" and (kink or abs(dx - old) <= KINK_SLOPE * abs(old))
+            kink = kink or abs(dx - old) <= KINK_SLOPE * abs(old)
         # no sign change at the ends: the sample's slope tells where its peak is (a sign change on one
         # side, or a rise through a sample above that end), the larger end value only otherwise
         elif da > 0 > dx or (dx < 0 and fx >= fb):
@@ -117,8 +116,7 @@ def refine_peak(sig, lo, c, hi, rtol, budget, bar=None, secant="resonance"):
             a, fa, da = x, fx, dx
         if kink and da > 0 > db:
             # two concave sides lie below their tangents: the peak is at most where the tangents meet
-            xt = (fb - fa + da * a - db * b) / (da - db)
-            if fa + da * (xt - a) - best[0] <= stop * best[0]:
+            if meet()[1] - best[0] <= stop * best[0]:
                 break
         elif curv < 0 and fx >= best[0] and dx * dx / (2.0 * -curv) <= stop * fx:
             break

@@ -31,7 +31,7 @@ returned order ``info["r"]`` is then below ``info["r_requested"]`` with a :class
 Cycles: a new shift set within ``cycle_tol`` of one of the last ``cycle_window`` sets while more than 100
 ``cycle_tol`` from the current one (criterion ``"shifts"``) is a cycle: ``update="auto"`` moves to its next
 stage, otherwise the safeguard engages or (safeguard off) the iteration stops. Without convergence the best
-iterate (stable first) is returned with ``converged=False``, ``status`` "cap" or "cycle" (:mod:`.outcome`) and a
+iterate (stable first) is returned with ``converged=False``, ``status`` "cap", "cycle" or "stalled" and a
 :class:`~morsuite.errors.ConvergenceWarning`.
 
 Safeguard (option ``safeguard``, :class:`~morsuite.reducers.irka.safeguards.CycleGuard`): idle while the plain
