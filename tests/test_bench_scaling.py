@@ -136,3 +136,16 @@ def test_tcom_large_bench_records_times_memory_and_choices():
     assert rows["bt"]["compress_tol"] == 0.0 and rows["irka"]["stage_stall"] == 0
     assert rows["bt"]["factor_ranks"]["controllability"] > 0
     json.dumps(res, default=json_default)
+
+
+def test_tcom_large_bench_runs_the_cases_asked_for():
+    """``tcom-1e6-irka`` / ``tcom-1e6-bt`` are registered and run their one case only, with only its ratios."""
+    from morsuite.bench import BENCHMARKS, available
+    from morsuite.bench.tcom_large import bench_tcom_large
+
+    assert {"tcom-1e6", "tcom-1e6-irka", "tcom-1e6-bt"} <= set(available())
+    res = bench_tcom_large(True, plan={"nc": 20, "timeout_s": {"bt": 300}, "rss_limit_gib": 4}, echo=None,
+                           tasks=("bt",))
+    assert [r["task"] for r in res["rows"]] == ["bt"] and res["rows"][0]["status"] == "ok"
+    assert sorted(res["ratios"]) == ["bt peak RSS / 24 GiB", "bt time / 1200 s"]
+    assert BENCHMARKS["tcom-1e6-bt"].__doc__ and BENCHMARKS["tcom-1e6-irka"].__doc__
