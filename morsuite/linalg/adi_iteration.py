@@ -53,11 +53,20 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from scipy.linalg import blas as _blas
+from scipy.linalg import cholesky as _cholesky
+from scipy.linalg.lapack import dtrcon as _dtrcon
 
 from ..errors import InputError
 from .refine import refine_columns
 
 __all__ = ["ADIIteration", "FactorStore"]
+
+
+def _in_place(out, X):
+    """X = out, unless the BLAS wrapper already wrote into X (it does for F-ordered columns)."""
+    if not np.may_share_memory(out, X):
+        X[...] = out
 
 
 class FactorStore:
@@ -67,43 +76,65 @@ class FactorStore:
     not reserve ``maxiter`` columns it may never use).
 
     ``tol > 0``: column compression as the factor grows. The store holds
-    :math:`ZZ^T = QFF^TQ^T` with :math:`Q = [Q_1; Q_2]` orthonormal (stacked) and F
-    square. Appended columns wait in a buffer of ``chunk`` columns, then are absorbed:
-    with :math:`C = Q^TB` and :math:`B - QC = Q_bR_b` (classical Gram-Schmidt twice, then
-    a Householder QR and the SVD of :math:`R_b`, which drops only numerically null
-    directions, singular values below :math:`10\varepsilon\,\sigma_1(Z)`), Q gains those
-    of :math:`Q_b` and F becomes the triangular factor of :math:`[[F, C], [0, R_b]]`.
-    When Q has grown by half since the last
-    truncation (and at the end), the small SVD :math:`F = U\Sigma V^T` truncates: the
-    singular values below ``tol`` times :math:`\sigma_1(Z)` are dropped,
-    :math:`Q \leftarrow QU_t` (in place, by row blocks) and :math:`F = \Sigma_t`. A
-    truncation changes :math:`ZZ^T` by at most :math:`\mathrm{tol}^2\sigma_1(Z)^2`
-    (the rank-revealing SVD of Z itself); an absorption by at most
-    :math:`20\sqrt{b}\,\varepsilon\,\sigma_1(Z)^2`. Every kept column is a combination
-    of appended ones, so the store commutes with any projection applied to the rows
-    (the observability position block is kept unprojected, see :class:`ADIIteration`).
+    :math:`ZZ^T = QFF^TQ^T` with :math:`Q = [Q_1; Q_2]` orthonormal (stacked, k columns)
+    and F k x c, c >= k. Appended columns B are written straight into the blocks after Q
+    and absorbed once ``chunk`` of them wait (reorthogonalised block classical
+    Gram-Schmidt, BCGS2, all BLAS 3 and in place): :math:`C_1 = Q^TB`,
+    :math:`B \leftarrow B - QC_1`, then :math:`B = XR_1` by Cholesky-QR
+    (:math:`R_1^TR_1 = B_1^TB_1 + B_2^TB_2`, the blocks never stacked,
+    :math:`X = BR_1^{-1}` in place); the second pass repeats both on the normalised X,
+    :math:`H = Q^TX`, :math:`X \leftarrow X - QH`, :math:`X = Q_bR_2`, so that
+    :math:`B = Q(C_1 + HR_1) + Q_bR_2R_1` and F becomes :math:`[[F, C],[0, R_2R_1]]`.
+    Cholesky-QR is used while the Gram matrix's condition number is at most
+    ``GRAM_COND_MAX`` (1e8; its loss of orthogonality is :math:`\varepsilon` times that
+    before the second pass, :math:`O(\varepsilon)` after); when the Cholesky fails or
+    the block is worse conditioned (ADI columns of close shifts, a rank-deficient
+    block) that normalisation is a Householder QR of a stacked copy and the SVD of its
+    R, dropping only numerically null directions (singular values below
+    :math:`10\varepsilon\,\sigma_1(Z)`), counted in ``householder``. When Q has grown
+    to ``GROWTH`` (1.5) times its rank at the last truncation (and at the end), the SVD
+    :math:`F = U\Sigma V^T` truncates: the singular values below ``tol`` times
+    :math:`\sigma_1(Z)` are dropped, :math:`Q \leftarrow QU_t` (in place, by row blocks)
+    and :math:`F = \Sigma_t`. A truncation changes :math:`ZZ^T` by at most
+    :math:`\mathrm{tol}^2\sigma_1(Z)^2` (the rank-revealing SVD of Z itself); an
+    absorption by at most :math:`20\sqrt{b}\,\varepsilon\,\sigma_1(Z)^2`. Every kept
+    column is a combination of appended ones, so the store commutes with any
+    projection applied to the rows (the observability position block is kept
+    unprojected, see :class:`ADIIteration`).
 
     Memory: plain, the blocks grow by doubling and are trimmed to the columns in use at
-    :meth:`finish`; compressed, by an eighth (at least ``chunk`` columns).
+    :meth:`finish`; compressed, by an eighth (at least ``chunk`` columns); Q and the
+    waiting columns share the blocks (``k_peak``: the most held at once, at most
+    ``GROWTH`` times the kept rank plus about two chunks, instead of every column
+    produced).
 
-    Cost with r kept columns: an absorption of b columns :math:`8n_1rb` flops (two
-    Gram-Schmidt passes) plus a QR of :math:`2n_1 \times b`; a truncation
-    :math:`4n_1 r t` (the rotation; t kept), at most about :math:`\log_{1.5}` of the
-    final rank times. Memory: at most 1.5 times the kept columns plus ``chunk``, instead
-    of every column produced.
+    Cost with k columns in Q: an absorption of b columns :math:`16n_1kb` flops (two
+    passes of two products with Q), :math:`8n_1b^2` for the Gram matrices and the
+    triangular solves, no n1-sized copy (a Householder fallback adds a QR of a stacked
+    :math:`2n_1 \times b` copy); a truncation :math:`4n_1kt` (the rotation; t kept).
+    Measured against the earlier store (Householder QR of every block, a stacked copy,
+    truncation at 1.5 times the rank), see ``docs/design/lradi.md``.
     """
+
+    #: truncate when Q has grown to GROWTH times the rank of the last truncation
+    GROWTH = 1.5
+    #: Cholesky-QR accepted while the Gram matrix's condition number (cond(R)^2) is at most this
+    GRAM_COND_MAX = 1e8
 
     def __init__(self, n1, tol=0.0, chunk=64):
         self.n1, self.tol, self.chunk = int(n1), float(tol), int(chunk)
         self.Z1 = np.empty((self.n1, 0), order="F")
         self.Z2 = np.empty((self.n1, 0), order="F")
         self.k = 0           # plain: columns stored; compressed: columns of Q
+        self.nb = 0          # compressed: appended columns waiting in Z[:, k:k + nb]
         self.F = np.zeros((0, 0))
-        self.buf1, self.buf2 = [], []
+        self.sigma1 = 0.0    # compressed: a lower bound of sigma_1(Z) (a column norm, a truncation's sigma_1)
         self.columns = 0     # columns appended in all
         self.compressions = 0  # truncations
+        self.absorptions = 0   # blocks absorbed
+        self.householder = 0   # normalisations that fell back to Householder
         self.k_truncated = 0   # rank after the last truncation
-        self.k_peak = 0        # most columns held at once (compressed: before a truncation)
+        self.k_peak = 0        # most columns held at once (compressed: Q and the waiting ones)
         self.t_compress = 0.0
         self.done = False
 
@@ -113,9 +144,10 @@ class FactorStore:
         rule, and a doubled Q at n1 = 1e6 would hold gigabytes of unused columns)."""
         if cols > self.Z1.shape[1]:
             room = max(2 * cols, 32) if self.tol == 0 else cols + max(self.chunk, cols // 8)
+            used = self.k + self.nb
             for name in ("Z1", "Z2"):
                 Z = np.empty((self.n1, room), order="F")
-                Z[:, :self.k] = getattr(self, name)[:, :self.k]
+                Z[:, :used] = getattr(self, name)[:, :used]
                 setattr(self, name, Z)
 
     def _trim(self):
@@ -136,40 +168,76 @@ class FactorStore:
             np.multiply(X2, c, out=self.Z2[:, self.k:self.k + j])
             self.k += j
             return
-        self.buf1.append(c * X1)
-        self.buf2.append(c * X2)
-        if sum(b.shape[1] for b in self.buf1) >= self.chunk:
+        t0 = time.perf_counter()
+        s = self.k + self.nb
+        self._reserve(s + j)
+        np.multiply(X1, c, out=self.Z1[:, s:s + j])  # straight into the waiting room after Q
+        np.multiply(X2, c, out=self.Z2[:, s:s + j])
+        self.nb += j
+        self.k_peak = max(self.k_peak, s + j)
+        self.t_compress += time.perf_counter() - t0
+        if self.nb >= self.chunk:
             self._absorb()
-            if self.k >= max(2 * self.chunk, 1.5 * self.k_truncated):
+            if self.k >= max(2 * self.chunk, self.GROWTH * self.k_truncated):
                 self._truncate()
 
+    def _project(self, k, lo, hi):
+        r"""One block Gram-Schmidt pass of the columns lo:hi against Q: :math:`H = Q^TX`,
+        :math:`X \leftarrow X - QH` in place; returns H."""
+        H = self.Z1[:, :k].T @ self.Z1[:, lo:hi]
+        H += self.Z2[:, :k].T @ self.Z2[:, lo:hi]
+        for Z in (self.Z1, self.Z2):
+            _in_place(_blas.dgemm(-1.0, Z[:, :k], H, 1.0, Z[:, lo:hi], overwrite_c=1), Z[:, lo:hi])
+        return H
+
+    def _normalise(self, lo, hi, floor):
+        r"""Orthonormalise the columns X = lo:hi in place: X = X_new R, X_new the first t of them.
+
+        Cholesky-QR (:math:`X^TX = R^TR`, :math:`X \leftarrow XR^{-1}` in place, t = hi - lo) when
+        the Cholesky succeeds and cond(R)^2 <= ``GRAM_COND_MAX`` (LAPACK trcon's 1-norm estimate); else Householder on a stacked
+        copy and the SVD of its R, keeping the t directions with singular values above ``floor``.
+        Returns (R, t), R t x (hi - lo)."""
+        X1, X2 = self.Z1[:, lo:hi], self.Z2[:, lo:hi]
+        G = X1.T @ X1
+        G += X2.T @ X2
+        try:
+            R = _cholesky(G, lower=False, check_finite=False)
+            ok = _dtrcon(R, norm="1", uplo="U")[0] ** 2 * self.GRAM_COND_MAX >= 1.0
+        except np.linalg.LinAlgError:
+            ok = False
+        if ok:
+            for X in (X1, X2):
+                _in_place(_blas.dtrsm(1.0, R, X, side=1, lower=0, overwrite_b=1), X)
+            return R, hi - lo
+        self.householder += 1
+        Qh, Rh = np.linalg.qr(np.vstack([X1, X2]))
+        U, s, Vt = np.linalg.svd(Rh)
+        t = int(np.sum(s > floor))
+        Qh = Qh @ U[:, :t]
+        X1[:, :t], X2[:, :t] = Qh[:self.n1], Qh[self.n1:]
+        return s[:t, None] * Vt[:t], t
+
     def _absorb(self):
-        if not self.buf1:
+        b = self.nb
+        if not b:
             return
         t0 = time.perf_counter()
-        B1, B2 = np.hstack(self.buf1), np.hstack(self.buf2)
-        self.buf1, self.buf2 = [], []
-        r, b, n1 = self.k, B1.shape[1], self.n1
-        C = np.zeros((r, b))
-        if r:
-            Q1, Q2 = self.Z1[:, :r], self.Z2[:, :r]
-            for _ in range(2):  # classical Gram-Schmidt twice (BLAS 3)
-                H = Q1.T @ B1 + Q2.T @ B2
-                B1 -= Q1 @ H
-                B2 -= Q2 @ H
-                C += H
-        Qb, Rb = np.linalg.qr(np.vstack([B1, B2]))  # Householder (BLAS 3)
-        Ub, sb, Vbt = np.linalg.svd(Rb)  # B - QC = (Qb Ub) diag(sb) Vbt: its numerical rank
-        big = np.block([[self.F, C], [np.zeros((sb.size, r)), sb[:, None] * Vbt]])
-        s1 = np.linalg.norm(big, 2)
-        t = int(np.sum(sb > 10 * np.finfo(float).eps * s1)) if s1 > 0 else 0
-        Qb = Qb @ Ub[:, :t]
-        self.F = np.linalg.qr(big[:r + t].T, mode="r").T  # big big^T = F F^T
-        self._reserve(r + t)
-        self.Z1[:, r:r + t] = Qb[:n1, :t]
-        self.Z2[:, r:r + t] = Qb[n1:, :t]
-        self.k = r + t
-        self.k_peak = max(self.k_peak, self.k)
+        k, hi = self.k, self.k + self.nb
+        floor = 10 * np.finfo(float).eps * self.sigma1
+        C = self._project(k, k, hi) if k else np.zeros((0, b))        # pass 1
+        R1, t = self._normalise(k, hi, floor)                           # B - QC = X R1
+        r1 = np.sqrt(np.max(np.sum(R1 * R1, axis=0), initial=0.0))     # <= ||R1||_2 <= sqrt(b) r1
+        self.sigma1 = max(self.sigma1, r1)                              # a column of Z: <= sigma_1(Z)
+        floor = 10 * np.finfo(float).eps * self.sigma1
+        if k and t:                                                     # pass 2, on X normalised
+            H = self._project(k, k, k + t)
+            C += H @ R1
+        R2, t2 = self._normalise(k, k + t, floor / max(np.sqrt(b) * r1, floor)) if t else (R1[:0, :0], 0)
+        Rb = R2 @ R1                                                    # B = QC + Q_b Rb
+        # F stays k x c, c >= k columns (square again after a truncation): ZZ^T = Q F F^T Q^T
+        self.F = np.block([[self.F, C], [np.zeros((t2, self.F.shape[1])), Rb]])
+        self.k, self.nb = k + t2, 0
+        self.absorptions += 1
         self.t_compress += time.perf_counter() - t0
 
     def _rotate(self, X):
@@ -184,17 +252,18 @@ class FactorStore:
     def _truncate(self):
         """Drop the singular values of F below tol times the largest (rotating Q)."""
         t0 = time.perf_counter()
-        U, s, _ = np.linalg.svd(self.F)
+        U, s, _ = np.linalg.svd(self.F, full_matrices=False)
         t = int(np.sum(s > self.tol * s[0])) if s.size and s[0] > 0 else 0
         self._rotate(U[:, :t])
         self.F = np.diag(s[:t])
+        self.sigma1 = max(self.sigma1, s[0] if s.size else 0.0)
         self.k_truncated = t
         self.compressions += 1
         self.t_compress += time.perf_counter() - t0
 
     def finish(self):
-        """Absorb the buffer, truncate, and turn Q into the factor :math:`QF` (in place); once.
-        The blocks are then trimmed to the columns in use."""
+        """Absorb the waiting columns, truncate, and turn Q into the factor :math:`QF` (in place);
+        once. The blocks are then trimmed to the columns in use."""
         if self.done:
             return
         if self.tol == 0:
