@@ -416,12 +416,12 @@ def test_compressed_store_keeps_the_plain_gramian_on_both_normalisations():
                 fallback = comp.householder - before
     for st in (plain, comp):
         st.finish()
-    assert fallback >= 1 and comp.householder < 2 * comp.absorptions and comp.compressions >= 2
+    assert fallback >= 1 and comp.householder < 2 * comp.compressions and comp.compressions >= 2
     P, Pc = (np.vstack(st.blocks()) for st in (plain, comp))
     P, Pc = P @ P.T, Pc @ Pc.T
     assert comp.k < plain.k == cols.shape[1]
-    # each truncation at most tol^2 ||P||, each absorption 20 sqrt(b) eps ||P||
-    bound = (comp.compressions * tol ** 2 + comp.absorptions * 20 * np.sqrt(chunk) * 2.2e-16) * np.linalg.norm(P, 2)
+    # each absorption with its truncation at most (tol^2 + 20 sqrt(b) eps) ||P||
+    bound = comp.compressions * (tol ** 2 + 20 * np.sqrt(chunk) * 2.2e-16) * np.linalg.norm(P, 2)
     assert np.linalg.norm(P - Pc, 2) <= bound
 
 

@@ -55,6 +55,7 @@ import time
 import numpy as np
 from scipy.linalg import blas as _blas
 from scipy.linalg import cholesky as _cholesky
+from scipy.linalg import solve_triangular as _solve_triangular
 from scipy.linalg.lapack import dtrcon as _dtrcon
 
 from ..errors import InputError
@@ -77,43 +78,55 @@ class FactorStore:
 
     ``tol > 0``: column compression as the factor grows. The store holds
     :math:`ZZ^T = QFF^TQ^T` with :math:`Q = [Q_1; Q_2]` orthonormal (stacked, k columns)
-    and F k x c, c >= k. Appended columns B are written straight into the blocks after Q
-    and absorbed once ``chunk`` of them wait (reorthogonalised block classical
-    Gram-Schmidt, BCGS2, all BLAS 3 and in place): :math:`C_1 = Q^TB`,
-    :math:`B \leftarrow B - QC_1`, then :math:`B = XR_1` by Cholesky-QR
-    (:math:`R_1^TR_1 = B_1^TB_1 + B_2^TB_2`, the blocks never stacked,
-    :math:`X = BR_1^{-1}` in place); the second pass repeats both on the normalised X,
-    :math:`H = Q^TX`, :math:`X \leftarrow X - QH`, :math:`X = Q_bR_2`, so that
-    :math:`B = Q(C_1 + HR_1) + Q_bR_2R_1` and F becomes :math:`[[F, C],[0, R_2R_1]]`.
-    Cholesky-QR is used while the Gram matrix's condition number is at most
-    ``GRAM_COND_MAX`` (1e8; its loss of orthogonality is :math:`\varepsilon` times that
-    before the second pass, :math:`O(\varepsilon)` after); when the Cholesky fails or
-    the block is worse conditioned (ADI columns of close shifts, a rank-deficient
-    block) that normalisation is a Householder QR of a stacked copy and the SVD of its
-    R, dropping only numerically null directions (singular values below
-    :math:`10\varepsilon\,\sigma_1(Z)`), counted in ``householder``. When Q has grown
-    to ``GROWTH`` (1.5) times its rank at the last truncation (and at the end), the SVD
-    :math:`F = U\Sigma V^T` truncates: the singular values below ``tol`` times
-    :math:`\sigma_1(Z)` are dropped, :math:`Q \leftarrow QU_t` (in place, by row blocks)
-    and :math:`F = \Sigma_t`. A truncation changes :math:`ZZ^T` by at most
-    :math:`\mathrm{tol}^2\sigma_1(Z)^2` (the rank-revealing SVD of Z itself); an
-    absorption by at most :math:`20\sqrt{b}\,\varepsilon\,\sigma_1(Z)^2`. Every kept
-    column is a combination of appended ones, so the store commutes with any
-    projection applied to the rows (the observability position block is kept
-    unprojected, see :class:`ADIIteration`).
+    and F diagonal. Appended columns B are written straight into the blocks after Q and
+    compressed once :math:`b = \max(\texttt{chunk}, (\texttt{GROWTH} - 1)k)` of them
+    wait (``GROWTH`` 1.5: Q and the waiting columns reach 1.5 times the last rank), by
+    reorthogonalised block classical Gram-Schmidt (BCGS2), all BLAS 3 and in place,
+    the two blocks never stacked:
+
+    1. :math:`C_1 = Q^TB`, :math:`B \leftarrow B - QC_1`; :math:`B = XR_1` by
+       Cholesky-QR (:math:`R_1^TR_1 = B_1^TB_1 + B_2^TB_2`, :math:`X = BR_1^{-1}`);
+    2. on the normalised X, one product gives :math:`H = Q^TX` and :math:`X^TX`;
+       :math:`X - QH = Q_bR_2` with :math:`R_2^TR_2 = X^TX - H^TH` (Cholesky), so that
+       :math:`B = Q(C_1 + HR_1) + Q_bR_2R_1` and
+       :math:`ZZ^T = [Q, Q_b]\,\hat F\hat F^T[Q, Q_b]^T`,
+       :math:`\hat F = [[F, C_1 + HR_1], [0, R_2R_1]]`;
+    3. the SVD :math:`\hat F = U\Sigma V^T` truncates: singular values below ``tol``
+       times :math:`\sigma_1(Z)` are dropped, and
+       :math:`Q \leftarrow [Q, Q_b]U_t = [Q, X]\,[[U_Q - HW], [W]]`,
+       :math:`W = R_2^{-1}U_b`: one in-place product by row blocks, into which the
+       second pass's :math:`X - QH` is folded (it is never formed); :math:`F = \Sigma_t`.
+
+    A Cholesky-QR is accepted while the Gram matrix's condition number is at most
+    ``GRAM_COND_MAX`` (1e8: a loss of orthogonality of at most about
+    :math:`10^8\varepsilon` after step 1, :math:`O(\varepsilon)` after step 2). When
+    step 1's Cholesky fails or the block is worse conditioned (ADI columns of close
+    shifts, a rank-deficient block), that normalisation is a Householder QR of a
+    stacked copy and the SVD of its R, which drops only numerically null directions
+    (singular values below :math:`10\varepsilon` times a lower bound of
+    :math:`\sigma_1(Z)`); when step 2's does, :math:`X - QH` is formed and normalised
+    the same way (both counted in ``householder``). A compression changes :math:`ZZ^T`
+    by at most :math:`\mathrm{tol}^2\sigma_1(Z)^2` (the truncation: the rank-revealing
+    SVD of Z itself) plus :math:`20\sqrt{b}\,\varepsilon\,\sigma_1(Z)^2` (the
+    absorption). Every kept column is a combination of appended ones, so the store
+    commutes with any projection applied to the rows (the observability position
+    block is kept unprojected, see :class:`ADIIteration`).
 
     Memory: plain, the blocks grow by doubling and are trimmed to the columns in use at
     :meth:`finish`; compressed, by an eighth (at least ``chunk`` columns); Q and the
-    waiting columns share the blocks (``k_peak``: the most held at once, at most
-    ``GROWTH`` times the kept rank plus about two chunks, instead of every column
-    produced).
+    waiting columns share the blocks (``k_peak``: the most held at once, about
+    ``GROWTH`` times the kept rank, at least the rank plus ``chunk``, instead of every
+    column produced).
 
-    Cost with k columns in Q: an absorption of b columns :math:`16n_1kb` flops (two
-    passes of two products with Q), :math:`8n_1b^2` for the Gram matrices and the
-    triangular solves, no n1-sized copy (a Householder fallback adds a QR of a stacked
-    :math:`2n_1 \times b` copy); a truncation :math:`4n_1kt` (the rotation; t kept).
-    Measured against the earlier store (Householder QR of every block, a stacked copy,
-    truncation at 1.5 times the rank), see ``docs/design/lradi.md``.
+    Cost of a compression with k columns in Q, b waiting and t kept: :math:`8n_1kb`
+    (step 1's two products with Q) :math:`+ 4n_1(k+b)b` (step 2's one product)
+    :math:`+ 4n_1b^2` (step 1's Gram matrix and triangular solve)
+    :math:`+ 4n_1(k+b)t` (the rotation) flops, no n1-sized copy (a Householder fallback
+    adds a QR of a stacked :math:`2n_1 \times b` copy). With b = k/2 and t = k that is
+    about :math:`28n_1k` flops per column produced, against about :math:`38n_1k` for
+    the earlier store (two full Gram-Schmidt passes per 64 columns, a Householder QR
+    with Q formed, its rotation and a stacked copy per block, a separate truncation
+    rotating Q); measured in ``docs/design/lradi.md``.
     """
 
     #: truncate when Q has grown to GROWTH times the rank of the last truncation
@@ -130,8 +143,7 @@ class FactorStore:
         self.F = np.zeros((0, 0))
         self.sigma1 = 0.0    # compressed: a lower bound of sigma_1(Z) (a column norm, a truncation's sigma_1)
         self.columns = 0     # columns appended in all
-        self.compressions = 0  # truncations
-        self.absorptions = 0   # blocks absorbed
+        self.compressions = 0  # absorptions of waiting columns, each with its truncation
         self.householder = 0   # normalisations that fell back to Householder
         self.k_truncated = 0   # rank after the last truncation
         self.k_peak = 0        # most columns held at once (compressed: Q and the waiting ones)
@@ -176,10 +188,8 @@ class FactorStore:
         self.nb += j
         self.k_peak = max(self.k_peak, s + j)
         self.t_compress += time.perf_counter() - t0
-        if self.nb >= self.chunk:
-            self._absorb()
-            if self.k >= max(2 * self.chunk, self.GROWTH * self.k_truncated):
-                self._truncate()
+        if self.nb >= max(self.chunk, (self.GROWTH - 1) * self.k_truncated):
+            self._compress()
 
     def _project(self, k, lo, hi):
         r"""One block Gram-Schmidt pass of the columns lo:hi against Q: :math:`H = Q^TX`,
@@ -194,9 +204,9 @@ class FactorStore:
         r"""Orthonormalise the columns X = lo:hi in place: X = X_new R, X_new the first t of them.
 
         Cholesky-QR (:math:`X^TX = R^TR`, :math:`X \leftarrow XR^{-1}` in place, t = hi - lo) when
-        the Cholesky succeeds and cond(R)^2 <= ``GRAM_COND_MAX`` (LAPACK trcon's 1-norm estimate); else Householder on a stacked
-        copy and the SVD of its R, keeping the t directions with singular values above ``floor``.
-        Returns (R, t), R t x (hi - lo)."""
+        the Cholesky succeeds and cond(R)^2 <= ``GRAM_COND_MAX`` (LAPACK trcon's 1-norm
+        estimate); else Householder on a stacked copy and the SVD of its R, keeping the t
+        directions with singular values above ``floor``. Returns (R, t), R t x (hi - lo)."""
         X1, X2 = self.Z1[:, lo:hi], self.Z2[:, lo:hi]
         G = X1.T @ X1
         G += X2.T @ X2
@@ -217,27 +227,49 @@ class FactorStore:
         X1[:, :t], X2[:, :t] = Qh[:self.n1], Qh[self.n1:]
         return s[:t, None] * Vt[:t], t
 
-    def _absorb(self):
+    def _compress(self):
+        """Absorb the waiting columns and truncate: one rotation of [Q, X] (see the class)."""
         b = self.nb
-        if not b:
-            return
         t0 = time.perf_counter()
-        k, hi = self.k, self.k + self.nb
-        floor = 10 * np.finfo(float).eps * self.sigma1
-        C = self._project(k, k, hi) if k else np.zeros((0, b))        # pass 1
-        R1, t = self._normalise(k, hi, floor)                           # B - QC = X R1
-        r1 = np.sqrt(np.max(np.sum(R1 * R1, axis=0), initial=0.0))     # <= ||R1||_2 <= sqrt(b) r1
-        self.sigma1 = max(self.sigma1, r1)                              # a column of Z: <= sigma_1(Z)
-        floor = 10 * np.finfo(float).eps * self.sigma1
-        if k and t:                                                     # pass 2, on X normalised
-            H = self._project(k, k, k + t)
+        k, hi = self.k, self.k + b
+        eps = np.finfo(float).eps
+        C = self._project(k, k, hi) if k else np.zeros((0, b))         # pass 1: B - QC
+        R1, t = self._normalise(k, hi, 10 * eps * self.sigma1)          # = X R1
+        r1 = np.sqrt(np.max(np.sum(R1 * R1, axis=0), initial=0.0))      # <= ||R1||_2 <= sqrt(b) r1
+        self.sigma1 = max(self.sigma1, r1)                               # a column of Z: <= sigma_1(Z)
+        Z1, Z2 = self.Z1, self.Z2
+        folded = False
+        if t:  # pass 2 on the normalised X: H = Q^T X, and X - QH = Q_b R2 by Cholesky-QR of its Gram
+            HG = Z1[:, :k + t].T @ Z1[:, k:k + t]                        # [H; X^T X] in one product
+            HG += Z2[:, :k + t].T @ Z2[:, k:k + t]
+            H = HG[:k]
+            try:
+                R2 = _cholesky(HG[k:] - H.T @ H, lower=False, check_finite=False)
+                folded = _dtrcon(R2, norm="1", uplo="U")[0] ** 2 * self.GRAM_COND_MAX >= 1.0
+            except np.linalg.LinAlgError:
+                pass
+            if not folded:  # X - QH formed, and normalised (Householder if need be)
+                if k:
+                    for Z in (Z1, Z2):
+                        _in_place(_blas.dgemm(-1.0, Z[:, :k], H, 1.0, Z[:, k:k + t], overwrite_c=1), Z[:, k:k + t])
+                R2, t = self._normalise(k, k + t, 10 * eps * self.sigma1 / max(np.sqrt(b) * r1, 1e-300))
             C += H @ R1
-        R2, t2 = self._normalise(k, k + t, floor / max(np.sqrt(b) * r1, floor)) if t else (R1[:0, :0], 0)
-        Rb = R2 @ R1                                                    # B = QC + Q_b Rb
-        # F stays k x c, c >= k columns (square again after a truncation): ZZ^T = Q F F^T Q^T
-        self.F = np.block([[self.F, C], [np.zeros((t2, self.F.shape[1])), Rb]])
-        self.k, self.nb = k + t2, 0
-        self.absorptions += 1
+            Rb = R2 @ R1                                                 # B = QC + Q_b Rb
+        else:
+            Rb = R1
+        # ZZ^T = [Q, Q_b] F F^T [Q, Q_b]^T, F = [[F, C], [0, Rb]]; its SVD truncates
+        U, s, _ = np.linalg.svd(np.block([[self.F, C], [np.zeros((t, self.F.shape[1])), Rb]]),
+                                full_matrices=False)
+        kept = int(np.sum(s > self.tol * s[0])) if s.size and s[0] > 0 else 0
+        U = U[:, :kept]
+        if folded:  # [Q, (X - QH) R2^{-1}] U = [Q, X] [[U_Q - H W], [W]], W = R2^{-1} U_b
+            W = _solve_triangular(R2, U[k:], lower=False, check_finite=False)
+            U = np.vstack([U[:k] - H @ W, W])
+        self._rotate(U)
+        self.F = np.diag(s[:kept])
+        self.sigma1 = max(self.sigma1, s[0] if s.size else 0.0)
+        self.k_truncated, self.nb = kept, 0
+        self.compressions += 1
         self.t_compress += time.perf_counter() - t0
 
     def _rotate(self, X):
@@ -249,29 +281,17 @@ class FactorStore:
                 Z[i:i + step, :t] = Z[i:i + step, :r] @ X
         self.k = t
 
-    def _truncate(self):
-        """Drop the singular values of F below tol times the largest (rotating Q)."""
-        t0 = time.perf_counter()
-        U, s, _ = np.linalg.svd(self.F, full_matrices=False)
-        t = int(np.sum(s > self.tol * s[0])) if s.size and s[0] > 0 else 0
-        self._rotate(U[:, :t])
-        self.F = np.diag(s[:t])
-        self.sigma1 = max(self.sigma1, s[0] if s.size else 0.0)
-        self.k_truncated = t
-        self.compressions += 1
-        self.t_compress += time.perf_counter() - t0
-
     def finish(self):
-        """Absorb the waiting columns, truncate, and turn Q into the factor :math:`QF` (in place);
-        once. The blocks are then trimmed to the columns in use."""
+        """Absorb the waiting columns (and truncate), then turn Q into the factor :math:`QF`
+        (in place); once. The blocks are then trimmed to the columns in use."""
         if self.done:
             return
         if self.tol == 0:
             self._trim()
             self.done = True
             return
-        self._absorb()
-        self._truncate()
+        if self.nb:
+            self._compress()
         t0 = time.perf_counter()
         self._rotate(self.F)  # F is diagonal: Q U_t Sigma_t
         self._trim()
