@@ -200,22 +200,27 @@ class FactorStore:
             _in_place(_blas.dgemm(-1.0, Z[:, :k], H, 1.0, Z[:, lo:hi], overwrite_c=1), Z[:, lo:hi])
         return H
 
+    def _cholesky(self, G):
+        """The upper Cholesky factor R of the Gram matrix G, or None when the Cholesky fails or
+        cond(R)^2 > ``GRAM_COND_MAX`` (LAPACK trcon's 1-norm estimate)."""
+        try:
+            R = _cholesky(G, lower=False, check_finite=False)
+        except np.linalg.LinAlgError:
+            return None
+        return R if _dtrcon(R, norm="1", uplo="U")[0] ** 2 * self.GRAM_COND_MAX >= 1.0 else None
+
     def _normalise(self, lo, hi, floor):
         r"""Orthonormalise the columns X = lo:hi in place: X = X_new R, X_new the first t of them.
 
         Cholesky-QR (:math:`X^TX = R^TR`, :math:`X \leftarrow XR^{-1}` in place, t = hi - lo) when
-        the Cholesky succeeds and cond(R)^2 <= ``GRAM_COND_MAX`` (LAPACK trcon's 1-norm
-        estimate); else Householder on a stacked copy and the SVD of its R, keeping the t
-        directions with singular values above ``floor``. Returns (R, t), R t x (hi - lo)."""
+        :meth:`_cholesky` accepts the Gram matrix; else Householder on a stacked copy and the SVD
+        of its R, keeping the t directions with singular values above ``floor``. Returns (R, t),
+        R t x (hi - lo)."""
         X1, X2 = self.Z1[:, lo:hi], self.Z2[:, lo:hi]
         G = X1.T @ X1
         G += X2.T @ X2
-        try:
-            R = _cholesky(G, lower=False, check_finite=False)
-            ok = _dtrcon(R, norm="1", uplo="U")[0] ** 2 * self.GRAM_COND_MAX >= 1.0
-        except np.linalg.LinAlgError:
-            ok = False
-        if ok:
+        R = self._cholesky(G)
+        if R is not None:
             for X in (X1, X2):
                 _in_place(_blas.dtrsm(1.0, R, X, side=1, lower=0, overwrite_b=1), X)
             return R, hi - lo
@@ -243,11 +248,8 @@ class FactorStore:
             HG = Z1[:, :k + t].T @ Z1[:, k:k + t]                        # [H; X^T X] in one product
             HG += Z2[:, :k + t].T @ Z2[:, k:k + t]
             H = HG[:k]
-            try:
-                R2 = _cholesky(HG[k:] - H.T @ H, lower=False, check_finite=False)
-                folded = _dtrcon(R2, norm="1", uplo="U")[0] ** 2 * self.GRAM_COND_MAX >= 1.0
-            except np.linalg.LinAlgError:
-                pass
+            R2 = self._cholesky(HG[k:] - H.T @ H)
+            folded = R2 is not None
             if not folded:  # X - QH formed, and normalised (Householder if need be)
                 if k:
                     for Z in (Z1, Z2):
