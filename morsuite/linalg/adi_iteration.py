@@ -87,7 +87,9 @@ class FactorStore:
     1. :math:`C_1 = Q^TB`, :math:`B \leftarrow B - QC_1`; :math:`B = XR_1` by
        Cholesky-QR (:math:`R_1^TR_1 = B_1^TB_1 + B_2^TB_2`, :math:`X = BR_1^{-1}`);
     2. on the normalised X, one product gives :math:`H = Q^TX` and :math:`X^TX`;
-       :math:`X - QH = Q_bR_2` with :math:`R_2^TR_2 = X^TX - H^TH` (Cholesky), so that
+       :math:`X - QH = Q_bR_2` with :math:`R_2^TR_2 = X^TX - H^TH` (Cholesky; accepted
+       while its condition number is at most ``FOLD_COND_MAX``, 100, so that the
+       difference loses no accuracy: after step 1, :math:`X^TX \approx I` and H is tiny), so that
        :math:`B = Q(C_1 + HR_1) + Q_bR_2R_1` and
        :math:`ZZ^T = [Q, Q_b]\,\hat F\hat F^T[Q, Q_b]^T`,
        :math:`\hat F = [[F, C_1 + HR_1], [0, R_2R_1]]`;
@@ -104,8 +106,9 @@ class FactorStore:
     shifts, a rank-deficient block), that normalisation is a Householder QR of a
     stacked copy and the SVD of its R, which drops only numerically null directions
     (singular values below :math:`10\varepsilon` times a lower bound of
-    :math:`\sigma_1(Z)`); when step 2's does, :math:`X - QH` is formed and normalised
-    the same way (both counted in ``householder``). A compression changes :math:`ZZ^T`
+    :math:`\sigma_1(Z)`); when step 2's Cholesky fails or exceeds ``FOLD_COND_MAX``,
+    :math:`X - QH` is formed and normalised as in step 1, Cholesky-QR or Householder
+    (each Householder fallback counted in ``householder``). A compression changes :math:`ZZ^T`
     by at most :math:`\mathrm{tol}^2\sigma_1(Z)^2` (the truncation: the rank-revealing
     SVD of Z itself) plus :math:`20\sqrt{b}\,\varepsilon\,\sigma_1(Z)^2` (the
     absorption). Every kept column is a combination of appended ones, so the store
@@ -133,6 +136,8 @@ class FactorStore:
     GROWTH = 1.5
     #: Cholesky-QR accepted while the Gram matrix's condition number (cond(R)^2) is at most this
     GRAM_COND_MAX = 1e8
+    #: the second pass's Gram matrix X^TX - H^TH (Pythagoras) accepted while its condition number is at most this
+    FOLD_COND_MAX = 1e2
 
     def __init__(self, n1, tol=0.0, chunk=64):
         self.n1, self.tol, self.chunk = int(n1), float(tol), int(chunk)
@@ -200,14 +205,15 @@ class FactorStore:
             _in_place(_blas.dgemm(-1.0, Z[:, :k], H, 1.0, Z[:, lo:hi], overwrite_c=1), Z[:, lo:hi])
         return H
 
-    def _cholesky(self, G):
+    @staticmethod
+    def _cholesky(G, cond_max):
         """The upper Cholesky factor R of the Gram matrix G, or None when the Cholesky fails or
-        cond(R)^2 > ``GRAM_COND_MAX`` (LAPACK trcon's 1-norm estimate)."""
+        cond(R)^2 > ``cond_max`` (LAPACK trcon's 1-norm estimate)."""
         try:
             R = _cholesky(G, lower=False, check_finite=False)
         except np.linalg.LinAlgError:
             return None
-        return R if _dtrcon(R, norm="1", uplo="U")[0] ** 2 * self.GRAM_COND_MAX >= 1.0 else None
+        return R if _dtrcon(R, norm="1", uplo="U")[0] ** 2 * cond_max >= 1.0 else None
 
     def _normalise(self, lo, hi, floor):
         r"""Orthonormalise the columns X = lo:hi in place: X = X_new R, X_new the first t of them.
@@ -219,7 +225,7 @@ class FactorStore:
         X1, X2 = self.Z1[:, lo:hi], self.Z2[:, lo:hi]
         G = X1.T @ X1
         G += X2.T @ X2
-        R = self._cholesky(G)
+        R = self._cholesky(G, self.GRAM_COND_MAX)
         if R is not None:
             for X in (X1, X2):
                 _in_place(_blas.dtrsm(1.0, R, X, side=1, lower=0, overwrite_b=1), X)
@@ -248,7 +254,7 @@ class FactorStore:
             HG = Z1[:, :k + t].T @ Z1[:, k:k + t]                        # [H; X^T X] in one product
             HG += Z2[:, :k + t].T @ Z2[:, k:k + t]
             H = HG[:k]
-            R2 = self._cholesky(HG[k:] - H.T @ H)
+            R2 = self._cholesky(HG[k:] - H.T @ H, self.FOLD_COND_MAX)  # Pythagoras: accurate if ||H|| < 1
             folded = R2 is not None
             if not folded:  # X - QH formed, and normalised (Householder if need be)
                 if k:
