@@ -390,6 +390,41 @@ def test_factor_store_compression_matches_truncated_svd():
                       rtol=1e-6, what="kept singular values")
 
 
+def test_compressed_store_keeps_the_plain_gramian_on_both_normalisations():
+    """A model's own ADI columns (tcom(30), in the iteration's order) with a nearly repeated
+    pair inserted: the compressed store's ZZ^T is within the documented bound of the plain
+    store's fed the same columns; the well-conditioned blocks take Cholesky-QR, the block
+    with the pair (Gram condition about 1e20) the Householder fallback; Q stays orthonormal."""
+    from morsuite.linalg.adi_iteration import FactorStore
+    fom = ms.models.tcom(nc=30)
+    n1 = fom.n1
+    Z = lradi(fom, "controllability", tol=1e-12, compress_tol=0.0).Z
+    x = Z[:, 40]
+    pair = np.column_stack([x, x + 1e-10 * np.linalg.norm(x) * np.roll(x, 1) / np.linalg.norm(x)])
+    cols = np.hstack([Z[:, :41], pair, Z[:, 41:]])
+    tol, chunk = 1e-6, 16
+    plain, comp = FactorStore(n1, 0.0), FactorStore(n1, tol, chunk=chunk)
+    fallback = None  # Householder normalisations in the absorption of the block with the pair
+    for j in range(0, cols.shape[1], 2):
+        before = comp.householder
+        for st in (plain, comp):
+            st.append(1.0, cols[:n1, j:j + 2], cols[n1:, j:j + 2])
+        if comp.k and comp.nb == 0:  # just absorbed: Q orthonormal to rounding
+            Q = np.vstack([comp.Z1[:, :comp.k], comp.Z2[:, :comp.k]])
+            assert np.linalg.norm(Q.T @ Q - np.eye(comp.k), 2) < 1e-13
+            if fallback is None and j + 2 > 42:
+                fallback = comp.householder - before
+    for st in (plain, comp):
+        st.finish()
+    assert fallback >= 1 and comp.householder < 2 * comp.compressions and comp.compressions >= 2
+    P, Pc = (np.vstack(st.blocks()) for st in (plain, comp))
+    P, Pc = P @ P.T, Pc @ Pc.T
+    assert comp.k < plain.k == cols.shape[1]
+    # each absorption with its truncation at most (tol^2 + 20 sqrt(b) eps) ||P||
+    bound = comp.compressions * (tol ** 2 + 20 * np.sqrt(chunk) * 2.2e-16) * np.linalg.norm(P, 2)
+    assert np.linalg.norm(P - Pc, 2) <= bound
+
+
 def test_compressed_factors_keep_the_hankel_singular_values():
     """The compressed factors' Gramians are within the compression bound of the uncompressed
     ones, and both give the dense model's Hankel singular values."""
@@ -405,7 +440,7 @@ def test_compressed_factors_keep_the_hankel_singular_values():
     for a, b in zip(full, comp):
         assert a.rank == a.columns and b.columns == a.columns and b.rank < a.rank
         Pa, Pb = a.Z @ a.Z.T, b.Z @ b.Z.T
-        absorbed = -(-b.columns // 64)
+        absorbed = -(-b.columns // 64)  # at most: an absorption takes 64 waiting columns or more
         bound = (b.compressions * tau ** 2 + absorbed * 20 * 8 * 2.2e-16) * np.linalg.norm(Pa, 2)
         assert np.linalg.norm(Pa - Pb, 2) <= bound
     for c, o in (full, comp):
