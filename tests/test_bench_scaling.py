@@ -149,3 +149,18 @@ def test_tcom_large_bench_runs_the_cases_asked_for():
     assert [r["task"] for r in res["rows"]] == ["bt"] and res["rows"][0]["status"] == "ok"
     assert sorted(res["ratios"]) == ["bt peak RSS / 24 GiB", "bt time / 1200 s"]
     assert BENCHMARKS["tcom-1e6-bt"].__doc__ and BENCHMARKS["tcom-1e6-irka"].__doc__
+
+
+def test_bench_run_records_the_code_of_every_benchmark(tmp_path):
+    """``bench.run`` adds the code state (git HEAD, digests) before and after to a result that has none."""
+    from morsuite import bench
+    from morsuite.bench.output import code_state
+
+    bench.BENCHMARKS["_probe"] = lambda quick: {"ratios": {}}
+    try:
+        res = bench.run(["_probe"], out_dir=tmp_path, quick=True, echo=None)["_probe"]
+    finally:
+        del bench.BENCHMARKS["_probe"]
+    now = code_state(git=False)
+    assert res["code"]["digest"] == res["code_start"]["digest"] == now["digest"]
+    assert json.loads((tmp_path / "_probe.json").read_text())["code"]["modules"] == now["modules"]

@@ -40,7 +40,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from ..errors import OptionError
-from .output import CURRENT_OUT_DIR, machine_info, write_json
+from .output import CURRENT_OUT_DIR, code_state, machine_info, write_json
 
 __all__ = ["BENCHMARKS", "benchmark", "available", "describe", "run", "machine_info"]
 
@@ -112,7 +112,9 @@ def run(names=None, out_dir="results/bench", quick: bool = False, echo=print) ->
 
     Returns ``{name: result}``. Unknown names raise :class:`OptionError`
     before anything runs. ``manifest.json`` keeps the entries of benchmarks
-    not run this time.
+    not run this time. Every result records the code it ran (``code_start`` and ``code``:
+    :func:`~morsuite.bench.output.code_state`, git HEAD, uncommitted files and the timed
+    modules' digests, before and after), unless the benchmark recorded its own.
     """
     avail = available()
     names = list(names or avail)
@@ -124,12 +126,16 @@ def run(names=None, out_dir="results/bench", quick: bool = False, echo=print) ->
     started = datetime.now(timezone.utc).isoformat(timespec="seconds")
     for name in names:
         t0 = time.perf_counter()
+        code_start = code_state()
         token = CURRENT_OUT_DIR.set(out)
         try:
             res = dict(BENCHMARKS[name](bool(quick)))
         finally:
             CURRENT_OUT_DIR.reset(token)
         res.setdefault("benchmark", name)
+        # the code it ran, for every benchmark (a benchmark may record its own, e.g. per case)
+        res.setdefault("code_start", code_start)
+        res.setdefault("code", code_state())
         res["quick"] = bool(quick)
         res["wall_time_s"] = time.perf_counter() - t0
         res["finished"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
