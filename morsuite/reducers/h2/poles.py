@@ -248,6 +248,11 @@ class PoleEvaluation:
         return self._rho
 
 
+#: unit roundoff of the extended precision of :func:`evaluate` with long-double values (1.1e-19 on x86-64,
+#: the double's 2.2e-16 where long double is double)
+EPS_EXTENDED = float(np.finfo(np.longdouble).eps)
+
+
 def evaluate(co: Coordinates, x, target, *, hessian: bool = True, values=None) -> PoleEvaluation | None:
     """J and its derivatives at x against ``target`` (:class:`ModalValues` or :class:`FullValues`;
     ``hessian`` needs the target's second derivative); None outside the domain (module docstring).
@@ -257,21 +262,28 @@ def evaluate(co: Coordinates, x, target, *, hessian: bool = True, values=None) -
     lam, phi = co.split(x)
     n = co.n
     t0, t1, t2 = values if values is not None else target.values(-lam, second=hessian)
-    if np.asarray(t0).dtype == np.clongdouble:
-        return _evaluate_extended(co, x, lam, phi, target, (t0, t1, t2), hessian)
-    S = lam[:, None] + lam[None, :]
-    iS = 1.0 / S
-    iS2 = iS * iS
-    r0 = -(iS @ phi)
-    r1 = -(iS2 @ phi)
-    e0, e1 = t0 - r0, t1 - r1
-    cross = phi * t0
-    selfm = phi[:, None] * phi[None, :] * (-iS)
-    J = target.norm2 - 2.0 * float(np.sum(cross).real) + float(np.sum(selfm).real)
-    floor = target.norm2_floor + 2.0 * EPS * np.sqrt(n) * (target.norm2 + 2.0 * np.sum(np.abs(cross))
-                                                           + np.sum(np.abs(selfm)))
-    e2 = t2 - (-2.0 * ((iS2 * iS) @ phi)) if hessian else None
-    g, G, H = _derivatives(co, phi, iS, iS2, e0, e1, e2)
+    # the error's values and J in the precision of the target's values: long double (``clongdouble``,
+    # the SIMO surrogate) keeps the rounding of the error at eps_ext ||T|| instead of eps ||T||: on
+    # dsms(g=60) at r = 10 the gradient from double values was off by 4e-5 to 7e-4 of its norm against a
+    # 34-digit reference, from long-double ones by 7e-8 to 4e-7; the target's ``norm2`` is then read in
+    # long double and the floor is in the extended unit
+    ext = np.asarray(t0).dtype == np.clongdouble
+    lamX, phiX = (lam.astype(np.clongdouble), phi.astype(np.clongdouble)) if ext else (lam, phi)
+    norm2 = np.longdouble(target.norm2) if ext else target.norm2
+    iSX = 1.0 / (lamX[:, None] + lamX[None, :])
+    iS2X = iSX * iSX
+    e0, e1 = t0 - (-(iSX @ phiX)), t1 - (-(iS2X @ phiX))
+    e2 = t2 - (-2.0 * ((iS2X * iSX) @ phiX)) if hessian else None
+    cross = phiX * t0
+    selfm = phiX[:, None] * phiX[None, :] * (-iSX)
+    J = float(norm2 - 2.0 * np.sum(cross).real + np.sum(selfm).real)
+    floor = float(target.norm2_floor) + 2.0 * (EPS_EXTENDED if ext else EPS) * np.sqrt(n) * float(
+        abs(norm2) + 2.0 * np.sum(np.abs(cross)) + np.sum(np.abs(selfm)))
+    if ext:  # the derivatives' assembly in double
+        e0, e1, e2 = e0.astype(complex), e1.astype(complex), None if e2 is None else e2.astype(complex)
+        iSX = 1.0 / (lam[:, None] + lam[None, :])
+        iS2X = iSX * iSX
+    g, G, H = _derivatives(co, phi, iSX, iS2X, e0, e1, e2)
     return PoleEvaluation(np.asarray(x, float), J, float(floor), g, H, G, (t0, t1, t2))
 
 
@@ -297,40 +309,6 @@ def _derivatives(co, phi, iS, iS2, e0, e1, e2):
         Hz[n + idx, idx] += 2.0 * e1
         H = Z.T @ (P.T @ Hz @ P).real @ Z
     return g, G, H
-
-
-#: unit roundoff of the extended precision of :func:`_evaluate_extended` (long double: 1.1e-19 on x86-64, the
-#: double's 2.2e-16 where long double is double)
-EPS_EXTENDED = float(np.finfo(np.longdouble).eps)
-
-
-def _evaluate_extended(co, x, lam, phi, target, values, hessian):
-    r""":func:`evaluate` where the target's values are given in long double (``clongdouble``):
-    the reduced model's values, the errors :math:`E^{(j)}(-\lambda_k) = T^{(j)} - T_r^{(j)}` and J are
-    formed in long double before they are rounded to double, so that the gradient and the Hessian
-    carry the rounding of the error (:math:`\varepsilon_{ext}\|T\|` instead of
-    :math:`\varepsilon\|T\|`: on dsms(g=60) at r = 10 the gradient from double values was off by 4e-5 to
-    7e-4 of its norm against a 34-digit reference, from long-double ones by 7e-8 to 4e-7). The target's
-    ``norm2`` must be long double too (its floor in the extended unit). Same result as :func:`evaluate`
-    otherwise."""
-    L = np.clongdouble
-    n = co.n
-    t0, t1, t2 = values
-    lamL, phiL = lam.astype(L), phi.astype(L)
-    iS = 1.0 / (lamL[:, None] + lamL[None, :])
-    iS2 = iS * iS
-    e0 = (t0 - (-(iS @ phiL))).astype(complex)
-    e1 = (t1 - (-(iS2 @ phiL))).astype(complex)
-    cross = phiL * t0
-    selfm = phiL[:, None] * phiL[None, :] * (-iS)
-    JL = np.longdouble(target.norm2) - 2.0 * np.sum(cross).real + np.sum(selfm).real
-    J = float(JL)
-    floor = float(target.norm2_floor) + 2.0 * EPS_EXTENDED * np.sqrt(n) * float(
-        abs(np.longdouble(target.norm2)) + 2.0 * np.sum(np.abs(cross)) + np.sum(np.abs(selfm)))
-    iSd = 1.0 / (lam[:, None] + lam[None, :])
-    e2 = (t2 - (-2.0 * ((iS2 * iS) @ phiL))).astype(complex) if hessian else None
-    g, G, H = _derivatives(co, phi, iSd, iSd * iSd, e0, e1, e2)
-    return PoleEvaluation(np.asarray(x, float), J, float(floor), g, H, G, values)
 
 
 def relative_gradient(g, G, J) -> float:
