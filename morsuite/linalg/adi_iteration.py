@@ -201,9 +201,13 @@ class FactorStore:
         :math:`X \leftarrow X - QH` in place; returns H."""
         H = self.Z1[:, :k].T @ self.Z1[:, lo:hi]
         H += self.Z2[:, :k].T @ self.Z2[:, lo:hi]
+        self._subtract(k, lo, hi, H)
+        return H
+
+    def _subtract(self, k, lo, hi, H):
+        r""":math:`X \leftarrow X - QH` in place for the columns X = lo:hi and Q the first k (BLAS 3)."""
         for Z in (self.Z1, self.Z2):
             _in_place(_blas.dgemm(-1.0, Z[:, :k], H, 1.0, Z[:, lo:hi], overwrite_c=1), Z[:, lo:hi])
-        return H
 
     @staticmethod
     def _cholesky(G, cond_max):
@@ -258,8 +262,7 @@ class FactorStore:
             folded = R2 is not None
             if not folded:  # X - QH formed, and normalised (Householder if need be)
                 if k:
-                    for Z in (Z1, Z2):
-                        _in_place(_blas.dgemm(-1.0, Z[:, :k], H, 1.0, Z[:, k:k + t], overwrite_c=1), Z[:, k:k + t])
+                    self._subtract(k, k, k + t, H)
                 R2, t = self._normalise(k, k + t, 10 * eps * self.sigma1 / max(np.sqrt(b) * r1, 1e-300))
             C += H @ R1
             Rb = R2 @ R1                                                 # B = QC + Q_b Rb
