@@ -35,6 +35,7 @@ import tempfile
 
 import numpy as np
 
+from ..rom import SecondOrderROM
 from . import benchmark
 
 __all__ = ["bench_so_h2_threads", "run_orders", "rom_distance", "CASE", "QUICK"]
@@ -90,13 +91,6 @@ def run_orders(spec: str, orders, *, threads: int = 1, permute: bool = False) ->
     return rows, roms
 
 
-def _response(rom, s):
-    """T(s) of a second-order model (M, D, K, F, L) at the points s, shape (len(s), p, m)."""
-    M, D, K, F, L = (np.asarray(x, dtype=complex) for x in rom)
-    X = np.linalg.solve(s[:, None, None] ** 2 * M + s[:, None, None] * D + K, np.broadcast_to(F, (s.size,) + F.shape))
-    return L @ X
-
-
 #: the frequency grid of :func:`rom_distance` [rad/s]: log-spaced, 200 points per decade
 GRID = np.geomspace(1e-5, 1e4, 1801)
 
@@ -109,7 +103,7 @@ def rom_distance(a, b, grid=GRID) -> float:
     solution of the difference system does). An estimate (the rule's error depends on the grid's resolution of
     the resonances): for comparing reduced models that are equal or nearly so."""
     s = 1j * np.asarray(grid, dtype=float)
-    d = np.sum(np.abs(_response(a, s) - _response(b, s)) ** 2, axis=(1, 2))
+    d = np.sum(np.abs(SecondOrderROM(*a).transfer_many(s) - SecondOrderROM(*b).transfer_many(s)) ** 2, axis=(1, 2))
     return float(np.sqrt(max(np.trapezoid(d, grid) / np.pi, 0.0)))
 
 
