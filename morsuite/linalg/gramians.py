@@ -25,21 +25,30 @@ puts into the floor of :math:`\|T\|_{\mathcal H_2}^2` (``docs/design/norms.md``)
 
 Memory: the factors stay with the model (``fom.cache.clear()`` drops them);
 on tcom(2000) at tol 1e-12 they hold about 4 x 6001 x 1200 doubles (230 MB).
+
+Across processes: :func:`use_store` gives this process a persistent store (the studies'
+worker processes use :class:`morsuite.studies.gramian_store.GramianStore`, in the artifact
+cache), which :func:`gramian_factors` reads after the model's cache and fills after an LR-ADI
+run, so that a run's workers pay a model's factors once between them instead of once each.
+:func:`factors_to_arrays` and :func:`factors_from_arrays` are the store's format: the factors'
+arrays and their record as plain data, read back to the same bits.
 """
 
 from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
 from ..errors import ConvergenceWarning, InputError
 from .lradi import COMPRESS_TOL, LU_POOL_MIB, SHIFT_REUSE, LRADIResult, lradi_pair
+from .manifold import ManifoldProjector
+from .system import new_solver
 
 __all__ = ["ADI_DEFAULTS", "GramianFactors", "gramian_factors", "cached_gramian_factors", "residual_weights", "residual_selection",
-           "residual_factor", "h2_tail"]
+           "residual_factor", "h2_tail", "use_store", "factors_to_arrays", "factors_from_arrays"]
 
 #: LR-ADI options of the shared factors, with balanced truncation's defaults (``bt`` declares the same);
 #: tol 1e-12 (not lradi's 1e-10): see morsuite.reducers.bt.balanced; refine 1 (not lradi's 0): one long-double
@@ -101,6 +110,73 @@ def _options(adi: dict) -> dict:
     return {**ADI_DEFAULTS, **adi}
 
 
+#: the process's persistent store of factors (:func:`use_store`); None: the model's cache only
+_STORE = None
+
+
+def use_store(store):
+    """Set this process's persistent store of Gramian factors; returns the one it replaces.
+
+    Parameters
+    ----------
+    store : object or None
+        With methods ``load(fom, options) -> GramianFactors | None`` and
+        ``save(fom, options, factors)`` (e.g. :class:`morsuite.studies.gramian_store.GramianStore`);
+        None (the default of a process) keeps the factors in the model's cache only.
+
+    Returns
+    -------
+    object or None
+        The store used before this call.
+    """
+    global _STORE
+    previous, _STORE = _STORE, store
+    return previous
+
+
+#: the array fields of an LRADIResult in the store's format (the rest is plain data)
+_ARRAY_FIELDS = ("position_unprojected", "velocity", "residuals", "shifts", "residual_w1", "residual_w2")
+_SIDES = (("controllability", "c"), ("observability", "o"))
+
+
+def factors_to_arrays(gf: GramianFactors):
+    """``(arrays, meta)``: the factors' arrays (npz-ready) and everything else as plain data.
+
+    The observability result's pending projector (an LU) is not stored; ``meta`` records that
+    it was pending and :func:`factors_from_arrays` makes it again (one LU), so that the first
+    read of ``position`` gives the same bits as in the process that ran LR-ADI.
+    Cost: none (references to the arrays).
+    """
+    arrays, results = {}, {}
+    for side, tag in _SIDES:
+        res = getattr(gf, side)
+        for name in _ARRAY_FIELDS:
+            value = getattr(res, name)
+            if value is not None:
+                arrays[f"{tag}_{name}"] = value
+        rec = {f.name: getattr(res, f.name) for f in fields(LRADIResult) if f.name not in _ARRAY_FIELDS + ("projector",)}
+        rec["projector_pending"] = res.projector is not None
+        results[side] = rec
+    meta = {"options": dict(gf.options), "time_s": float(gf.time_s), "lu_count": int(gf.lu_count), "results": results}
+    return arrays, meta
+
+
+def factors_from_arrays(fom, arrays: dict, meta: dict) -> GramianFactors:
+    """The :class:`GramianFactors` of :func:`factors_to_arrays`'s output, for model ``fom``
+    (``computed=False``: read, not run). Cost: one sparse LU of the saddle matrix of M when the
+    observability factor's projection was pending (none without constraints)."""
+    out = {}
+    for side, tag in _SIDES:
+        rec = dict(meta["results"][side])
+        pending = rec.pop("projector_pending")
+        kw = {name: arrays.get(f"{tag}_{name}") for name in _ARRAY_FIELDS}
+        projector = ManifoldProjector(fom, new_solver(fom, cache_size=0)) if pending else None
+        out[side] = LRADIResult(**rec, **kw, projector=projector if projector is not None and projector.lu is not None
+                                else None)
+    return GramianFactors(out["controllability"], out["observability"], dict(meta["options"]), float(meta["time_s"]),
+                          int(meta["lu_count"]), computed=False)
+
+
 def cached_gramian_factors(fom, **adi) -> GramianFactors | None:
     """The factors for these ADI options if the model's cache holds them, else None (no work)."""
     cache = getattr(fom, "cache", None)
@@ -117,8 +193,8 @@ def gramian_factors(fom, *, use_cache: bool = True, **adi) -> GramianFactors:
     ----------
     fom : Index3Model
     use_cache : bool
-        Read and fill ``fom.cache`` (default). False runs LR-ADI and keeps
-        nothing (benchmarks that time whole runs).
+        Read and fill ``fom.cache`` (default) and the process's store, if one is set
+        (:func:`use_store`). False runs LR-ADI and keeps nothing (benchmarks that time whole runs).
     **adi
         LR-ADI options (``tol``, ``maxiter``, ``shifts``, ``num_shifts``,
         ``selection``, ``refine``); missing ones take :data:`ADI_DEFAULTS`, the
@@ -137,6 +213,10 @@ def gramian_factors(fom, *, use_cache: bool = True, **adi) -> GramianFactors:
     """
     options = _options(adi)
     hit = cached_gramian_factors(fom, **options) if use_cache else None
+    if hit is None and use_cache and _STORE is not None:
+        hit = _STORE.load(fom, options)
+        if hit is not None and getattr(fom, "cache", None) is not None:
+            fom.cache[_key(options)] = hit
     if hit is not None:
         return hit
     t0 = time.perf_counter()
@@ -150,6 +230,8 @@ def gramian_factors(fom, *, use_cache: bool = True, **adi) -> GramianFactors:
     cache = getattr(fom, "cache", None)
     if use_cache and cache is not None:
         cache[_key(options)] = replace(out, computed=False)
+    if use_cache and _STORE is not None:
+        _STORE.save(fom, options, out)
     return out
 
 

@@ -15,6 +15,8 @@ Its transfer function is evaluated without the hidden-manifold projector:
 
 from __future__ import annotations
 
+import hashlib
+
 import warnings
 from dataclasses import dataclass
 
@@ -200,6 +202,29 @@ class Index3Model:
                 "first_order_states": 2 * self.n1 + self.n2,
                 "nnz": {k: int(getattr(self, k).nnz) for k in ("M", "D", "K", "G")},
                 "band": list(self.band)}
+
+    def digest(self) -> str:
+        """SHA-256 of the matrices M, D, K, G, F, L (shapes, sparsity patterns and values).
+
+        Two models with equal digests have the same matrices bit for bit, whatever their names
+        and bands: the key of what is computed from the matrices alone across processes
+        (the Gramian factors' store, :func:`morsuite.linalg.gramians.use_store`). Computed once
+        per model (kept in ``cache``); cost: one pass over the matrices' data.
+        """
+        hit = self.cache.get("digest")
+        if hit is None:
+            h = hashlib.sha256()
+            for name in ("M", "D", "K", "G"):
+                X = getattr(self, name).tocsr()  # as stored: equal models built alike have equal layouts
+                h.update(f"{name}{X.shape}{X.data.dtype}".encode())
+                for a in (X.indptr.astype(np.int64), X.indices.astype(np.int64), X.data):
+                    h.update(np.ascontiguousarray(a).tobytes())
+            for name in ("F", "L"):
+                X = np.ascontiguousarray(getattr(self, name))
+                h.update(f"{name}{X.shape}{X.dtype}".encode())
+                h.update(X.tobytes())
+            hit = self.cache["digest"] = h.hexdigest()
+        return hit
 
     # -- checks ----------------------------------------------------------
     def _check_constraint_rank(self):

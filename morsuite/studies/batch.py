@@ -15,12 +15,11 @@ cores) first computes what any of the studies lacks, all at once, with :func:`sh
   own graph, except for reducers with no r-independent work (``irka``) or a small one
   (``irka-projected``: its projector), whose orders are split into chunks
   (:data:`SPLIT`) that run side by side;
-- a model's norm units start when the model's reductions that read its Gramian factors
-  (:data:`GRAMIAN_READERS`) and their own reductions have finished (in a study's own graph
-  they wait for all of the model's reductions: a ``bt`` reduction pays, and reports, the
-  Gramian factors it computed; the other reducers do not read them);
-- the longest units start first (their times in the results folder's manifests when a
-  previous run left them, unknown units before known ones), each new unit on the first
+- a model's norm units start when its Gramian factors (below) and their own reductions have
+  finished (in a study's own graph they wait for all of the model's reductions: there a ``bt``
+  reduction pays, and reports, the Gramian factors it computed);
+- the Gramian factors' units start first, then the longest units (their times in the results
+  folder's manifests when a previous run left them, unknown units before known ones), each new unit on the first
   free worker; a study's own run (figures, tables, page) is a unit too, which starts as
   soon as the units it reads are done; when only study runs are left, it draws its figures on
   ``jobs`` processes (:func:`~morsuite.studies.outputs.realize_many`: nothing timed shares the
@@ -32,8 +31,16 @@ cache, and the first study (in command-line order) that reads an artifact comput
 records it as computed, the later ones as reused, as in a sequential run. Failures are not
 cached; they are handed to the studies from memory, so that no study computes them again.
 
-Cost: the units' own; each worker process builds the models it meets (once) and computes
-their Gramian factors when a unit needs them (once per worker and model).
+A model's LR-ADI Gramian factors, which the ``bt``, ``so-h2`` and ``irka-fo`` reductions and
+every norm read, are a unit of their own (:func:`~morsuite.studies.gramian_store.compute_factors`)
+that starts first; the units that read them wait for it and load them from the artifact cache
+(:class:`~morsuite.studies.gramian_store.GramianStore`, set in every worker), so that a run pays
+them once, not once per worker (at n1 = 20,577 they are 204 LUs and 26 minutes). The paper's IRKA
+reads them only to score its shortlist when it does not converge: it does not wait, and finds them
+in the store if the unit has finished by then (else it computes them, as before).
+
+Cost: the units' own; each worker process builds the models it meets (once) and reads a
+model's Gramian factors from the store when a unit needs them (once per worker and model).
 """
 
 from __future__ import annotations
@@ -43,6 +50,7 @@ import multiprocessing
 import os
 import sys
 import time
+import uuid
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -57,9 +65,8 @@ SPLIT = {"irka": 1, "irka-projected": 3}
 
 RUN_BY = "processes (shared)"
 
-#: Reducers that read the model's LR-ADI Gramian factors: a model's norm units (which read them
-#: too) start after these reductions, so that a ``bt`` reduction pays and reports its own LR-ADI
-#: where it runs first (the rule of a study's own graph).
+#: Reducers that read the model's LR-ADI Gramian factors: they and the model's norm units (which read
+#: them too) start after the model's Gramian factors' unit (module docstring).
 GRAMIAN_READERS = ("bt", "so-h2", "irka-fo")
 
 
@@ -93,8 +100,15 @@ class Shared:
 
 
 # -- workers -----------------------------------------------------------------
-def _pin(counter, cores):
-    """Worker initializer: pin this process to the next core of ``cores``; compile the kernels."""
+def _pin(counter, cores, store=None):
+    """Worker initializer: pin this process to the next core of ``cores``; compile the kernels; set
+    the Gramian factors' store (``store``: the cache's root, write flag and the key's salt)."""
+    if store is not None:
+        from ..linalg.gramians import use_store
+        from .cache import Cache
+        from .gramian_store import GramianStore
+        root, write, salt = store
+        use_store(GramianStore(Cache(root, write=write), salt=salt))
     with counter.get_lock():
         i = counter.value
         counter.value += 1
@@ -122,7 +136,7 @@ class _Unit:
     id: str
     fn: str
     args: tuple
-    kind: str                 # what it stores: fom, reduction, model_norm, norm_error, simulation
+    kind: str                 # what it stores: fom, reduction, model_norm, norm_error, simulation, gramians
     model: str                # model_id: norm units wait for the model's reductions
     estimate: float
     deps: set = field(default_factory=set)
@@ -225,11 +239,19 @@ def _units(plans, cache, prev):
                           keys={r: ng.keys[r] for r in part}, rom_from=[(src, {r: red.keys[r] for r in part})],
                           label=f"{ng.kind} errors {red.method.reducer} {red.model.name} r = {part}",
                           gramians=True))
-    # a model's norm units wait for the reduction units that read its Gramian factors (and their own)
+    # a model's error norms wait for their reductions
     for u in units.values():
-        if u.kind in ("model_norm", "norm_error"):
-            u.deps = {v.id for v in units.values() if v.kind == "reduction" and v.model == u.model
-                      and (v.gramians or any(src == v.id for src, _ in u.rom_from))}
+        if u.kind == "norm_error":
+            u.deps = {src for src, _ in u.rom_from if src is not None}
+    # the Gramian factors of each model that a unit reads: a unit of their own, first, read from the store
+    sources = {u.model: u.args[0] for u in units.values() if u.gramians}
+    for model, source in sources.items():
+        uid = "gramians-" + model
+        add(_Unit(uid, "morsuite.studies.gramian_store:compute_factors", (source, RUN_BY), "gramians",
+                  model, float("inf"), keys={None: uid}, label=f"Gramian factors {model}"))
+        for u in units.values():
+            if u.gramians and u.model == model:
+                u.deps.add(uid)
     return units
 
 
@@ -361,12 +383,18 @@ def _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0):
     """List scheduling: the longest ready unit goes to the first free worker."""
     ctx = multiprocessing.get_context("spawn")
     counter = ctx.Value("i", 0)
+    # the workers share the Gramian factors through the cache; a run that does not read the cache
+    # reads only the factors it makes itself (a salt of its own in their keys)
+    salt = "" if cache.read else uuid.uuid4().hex
     wall0 = time.time() - (time.perf_counter() - t0)  # the run's start on the workers' clock
     results, done, running = {}, set(), {}
     pending = dict(units)
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_pin, initargs=(counter, cores)) as pool:
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_pin,
+                             initargs=(counter, cores, (str(cache.root), cache.write, salt))) as pool:
         while pending or running:
-            ready = sorted((u for u in pending.values() if u.deps <= done), key=lambda u: -u.estimate)
+            # the Gramian factors first (their readers wait for them), then the longest units
+            ready = sorted((u for u in pending.values() if u.deps <= done),
+                           key=lambda u: (u.kind != "gramians", -u.estimate))
             for u in ready[: max(0, jobs - len(running))]:
                 if u.kind == "study":  # its share: what it claims of what was computed, the failures it may meet
                     part = Shared(shared.jobs, owners[u.id] & shared.fresh, dict(shared.failed),
