@@ -151,6 +151,23 @@ def test_tcom_large_bench_runs_the_cases_asked_for():
     assert BENCHMARKS["tcom-1e6-bt"].__doc__ and BENCHMARKS["tcom-1e6-irka"].__doc__
 
 
+def test_fem_large_bench_runs_irka_fo_on_a_3d_solid():
+    """``fem-1e5-irka-fo`` on a small plan: the case runs in a child process on fem_block, with its LU
+    count, time per LU, peak RSS and the time ratio over its limit; the three fem benches are registered."""
+    from morsuite.bench import BENCHMARKS, available
+    from morsuite.bench.tcom_large import bench_fem_large
+
+    assert {"fem-1e5", "fem-1e5-irka-fo", "fem-1e5-bt"} <= set(available())
+    res = bench_fem_large(True, plan={"n1": 600, "timeout_s": {"irka-fo": 300}, "rss_limit_gib": 4}, echo=None,
+                          tasks=("irka-fo",))
+    (row,) = res["rows"]
+    assert row["status"] == "ok" and row["model"] == "fem_block" and 500 < row["n1"] < 700, row
+    assert row["lu_count"] > 0 and row["time_per_lu_s"] == pytest.approx(row["time_s"] / row["lu_count"])
+    assert sorted(res["ratios"]) == ["irka-fo peak RSS / 24 GiB", "irka-fo time / 300 s"]
+    assert res["ratios"]["irka-fo time / 300 s"]["value"] == pytest.approx(row["time_s"] / 300)
+    assert BENCHMARKS["fem-1e5-bt"].__doc__ and BENCHMARKS["fem-1e5-irka-fo"].__doc__
+
+
 def test_bench_run_records_the_code_of_every_benchmark(tmp_path):
     """``bench.run`` adds the code state (git HEAD, digests) before and after to a result that has none."""
     from morsuite import bench

@@ -1,7 +1,7 @@
 r"""One case of the ``scaling`` benchmark: a reduction or a full response, its time and memory.
 
-:func:`run_case` runs one case in this process: ``model`` ("dsms" | "tcom") at
-``size`` (g or nc), ``task`` ("irka" | "bt" | "freqresp" | "irka-projected"),
+:func:`run_case` runs one case in this process: ``model`` ("dsms" | "tcom" | "fem_block") at
+``size`` (g, nc or n1), ``task`` ("irka" | "bt" | "freqresp" | "irka-projected"),
 ``r``, ``nfreq``, ``nfreq_measured``, ``options``, ``trace``. It records wall
 and CPU time, the LU count, and the memory of :class:`~morsuite.bench.memory.MemoryProbe`
 against the :math:`8 n_1^2` bytes of one dense :math:`n_1 \times n_1` array
@@ -60,14 +60,16 @@ def _model(family: str, size: int):
         return models.dsms(int(size))
     if family == "tcom":
         return models.tcom(int(size))
-    raise OptionError(f"scaling case: unknown 'model' {family!r}; expected 'dsms' or 'tcom'")
+    if family == "fem_block":
+        return models.fem_block(int(size))
+    raise OptionError(f"scaling case: unknown 'model' {family!r}; expected 'dsms', 'tcom' or 'fem_block'")
 
 
 def run_case(case: dict) -> dict:
     """Run one scaling case in this process; plain-data result.
 
-    ``case``: ``model`` ("dsms" | "tcom"), ``size`` (g or nc), ``task``
-    ("irka" | "bt" | "freqresp" | "irka-projected"), ``r``, ``nfreq`` (grid
+    ``case``: ``model`` ("dsms" | "tcom" | "fem_block"), ``size`` (g, nc or n1), ``task``
+    ("freqresp" or a reducer's name: "irka", "bt", "irka-projected", "irka-fo", ...), ``r``, ``nfreq`` (grid
     size of the response), ``nfreq_measured`` (frequencies actually solved,
     every k-th of the grid), ``options`` (reducer options), ``trace``
     (tracemalloc on).
