@@ -178,11 +178,18 @@ def factors_from_arrays(fom, arrays: dict, meta: dict) -> GramianFactors:
 
 
 def cached_gramian_factors(fom, **adi) -> GramianFactors | None:
-    """The factors for these ADI options if the model's cache holds them, else None (no work)."""
+    """The factors for these ADI options if the model's cache or the process's store (:func:`use_store`)
+    holds them, else None. No LR-ADI; a read from the store costs a file read and, for a constrained
+    model, one LU (:func:`factors_from_arrays`), and puts them into the model's cache."""
     cache = getattr(fom, "cache", None)
     if cache is None:
         return None
-    hit = cache.get(_key(_options(adi)))
+    options = _options(adi)
+    hit = cache.get(_key(options))
+    if hit is None and _STORE is not None:
+        hit = _STORE.load(fom, options)
+        if hit is not None:
+            cache[_key(options)] = hit
     return None if hit is None else replace(hit, computed=False)
 
 
@@ -213,10 +220,6 @@ def gramian_factors(fom, *, use_cache: bool = True, **adi) -> GramianFactors:
     """
     options = _options(adi)
     hit = cached_gramian_factors(fom, **options) if use_cache else None
-    if hit is None and use_cache and _STORE is not None:
-        hit = _STORE.load(fom, options)
-        if hit is not None and getattr(fom, "cache", None) is not None:
-            fom.cache[_key(options)] = hit
     if hit is not None:
         return hit
     t0 = time.perf_counter()

@@ -32,10 +32,11 @@ records it as computed, the later ones as reused, as in a sequential run. Failur
 cached; they are handed to the studies from memory, so that no study computes them again.
 
 A model's LR-ADI Gramian factors, which the ``bt``, ``so-h2`` and ``irka-fo`` reductions and
-every norm read, are a unit of their own (:func:`~morsuite.studies.gramian_store.compute_factors`)
+the H2 norms read, are a unit of their own (:func:`~morsuite.studies.gramian_store.compute_factors`)
 that starts first; the units that read them wait for it and load them from the artifact cache
-(:class:`~morsuite.studies.gramian_store.GramianStore`, set in every worker), so that a run pays
-them once, not once per worker (at n1 = 20,577 they are 204 LUs and 26 minutes). The paper's IRKA
+(:class:`~morsuite.studies.gramian_store.GramianStore`, set in every worker; the model's Hinf norms
+wait for it too, and their start grid uses the factors' shifts, as in a study's own graph, where
+they run after the reductions), so that a run pays them once, not once per worker (at n1 = 20,577 they are 204 LUs and 26 minutes). The paper's IRKA
 reads them only to score its shortlist when it does not converge: it does not wait, and finds them
 in the store if the unit has finished by then (else it computes them, as before).
 
@@ -143,7 +144,7 @@ class _Unit:
     rom_from: list = field(default_factory=list)   # (reduce unit ids or None, {r: key}) whose entries it needs
     keys: dict = field(default_factory=dict)       # r -> key (group units) or {None: key}
     label: str = ""
-    gramians: bool = False    # reads the model's Gramian factors (GRAMIAN_READERS, the norms)
+    gramians: bool = False    # reads the model's Gramian factors (GRAMIAN_READERS, the H2 norms)
 
 
 def _previous_times(out: Path) -> dict:
@@ -222,7 +223,7 @@ def _units(plans, cache, prev):
             if uid not in units and cache.get_json("model_norm", n.key) is None:
                 add(_Unit(uid, "morsuite.studies.norms:model_norm", (n.model.source, n.kind, n.options, n.key, RUN_BY),
                           "model_norm", n.model.model_id, 1.0, keys={None: n.key}, label=f"{n.kind} norm {n.model.name}",
-                          gramians=True))
+                          gramians=n.kind == "h2"))
         for ng in plan.norm_groups.values():
             red = plan.reduces[ng.reduce]
             by_src = {}  # the norms of a reduce unit's orders (None: cached reductions) form one unit
@@ -238,20 +239,21 @@ def _units(plans, cache, prev):
                           "norm_error", red.model.model_id, float("inf") if None in est else sum(est),
                           keys={r: ng.keys[r] for r in part}, rom_from=[(src, {r: red.keys[r] for r in part})],
                           label=f"{ng.kind} errors {red.method.reducer} {red.model.name} r = {part}",
-                          gramians=True))
+                          gramians=ng.kind == "h2"))
     # a model's error norms wait for their reductions
     for u in units.values():
         if u.kind == "norm_error":
             u.deps = {src for src, _ in u.rom_from if src is not None}
-    # the Gramian factors of each model that a unit reads: a unit of their own, first, read from the store
+    # the Gramian factors of each model that a unit reads: a unit of their own, first, read from the store;
+    # the model's Hinf norms wait for it too (their start grid uses the factors' shifts when they exist)
     sources = {u.model: u.args[0] for u in units.values() if u.gramians}
     for model, source in sources.items():
         uid = "gramians-" + model
+        for u in units.values():
+            if u.model == model and (u.gramians or u.kind in ("model_norm", "norm_error")):
+                u.deps.add(uid)
         add(_Unit(uid, "morsuite.studies.gramian_store:compute_factors", (source, RUN_BY), "gramians",
                   model, float("inf"), keys={None: uid}, label=f"Gramian factors {model}"))
-        for u in units.values():
-            if u.gramians and u.model == model:
-                u.deps.add(uid)
     return units
 
 
@@ -322,7 +324,8 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, 
         :func:`~morsuite.studies.runner.run` (``out`` required): each study (from a spec file,
         ``study.path``) is also run, on the same workers, as soon as what it reads is computed
         (figures and tables while other units still compute), with its share of what was
-        computed (:func:`split_claims`); the results folder's index is written at the end.
+        computed (:func:`split_claims`); the results folder's index and ``run.json`` (the run's
+        record below) are written at the end.
 
     Returns
     -------
@@ -353,10 +356,25 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, 
     if run_kwargs is not None:
         from .pages import write_index
         write_index(run_kwargs["out"])
+        _write_run_record(run_kwargs["out"], studies, shared.record)
     if not quiet:
         print(f"morsuite run: {n_units} units of work shared by {len(studies)} studies on {jobs} worker "
               f"processes: {wall:.1f} s ({busy:.1f} s busy)", file=sys.stderr)
     return shared
+
+
+def _write_run_record(out, studies, record) -> None:
+    """``OUT/run.json``: the run's studies, when it finished, its wall and busy time, jobs and each unit's
+    label, worker and time (the figures the README quotes for the main job's run)."""
+    import datetime
+
+    from ..utils import atomic_write_text, to_plain
+
+    rec = {"studies": [s.name for s in studies],
+           "finished": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+           "load_average": [round(x, 2) for x in os.getloadavg()] if hasattr(os, "getloadavg") else None,
+           **record}
+    atomic_write_text(Path(out) / "run.json", json.dumps(to_plain(rec), indent=1, sort_keys=True))
 
 
 def _add_study_units(units, studies, plans, run_kwargs) -> dict:
