@@ -39,6 +39,20 @@ def to_coordinates(res, Th):
     return np.vstack([Th.T @ res.position, Th.T @ res.velocity])
 
 
+def dense_controllability_gramian(fom):
+    """The dense controllability Gramian on ker G (null-space coordinates) and Theta."""
+    E, A, B, C, Th = projected_system(fom)
+    As, Bs = np.linalg.solve(E, A), np.linalg.solve(E, B)
+    return sla.solve_continuous_lyapunov(As, -Bs @ Bs.T), Th
+
+
+def assert_converged_to(res, P, Th, rtol=1e-9):
+    """A converged controllability run whose ZZ^T on ker G is within rtol (2-norm) of P."""
+    assert res.converged
+    Zq = to_coordinates(res, Th)
+    assert np.linalg.norm(Zq @ Zq.T - P, 2) / np.linalg.norm(P, 2) < rtol
+
+
 def dense_residuals(fom, c, o):
     """Relative 2-norm residuals of both Lyapunov equations, computed densely on ker G."""
     E, A, B, C, Th = projected_system(fom)
@@ -333,9 +347,7 @@ def test_shift_reuse_saves_lus_and_keeps_the_dense_gramians(make_random_model):
     """Reused LUs change the shift sequence, not the answer: both runs match the dense Lyapunov
     solutions on ker G to the ADI tolerance, and reuse pays fewer LUs than steps."""
     fom = ms.models.tcom(nc=30)
-    E, A, B, C, Th = projected_system(fom)
-    As, Bs = np.linalg.solve(E, A), np.linalg.solve(E, B)
-    P = sla.solve_continuous_lyapunov(As, -Bs @ Bs.T)
+    P, Th = dense_controllability_gramian(fom)
     fresh = lradi(fom, "controllability", tol=1e-12, shift_reuse=0.0, lu_pool_mib=0.0)
     kept = lradi(fom, "controllability", tol=1e-12, shift_reuse=0.5)
     assert fresh.lu_reused == 0 and kept.lu_reused > 0
@@ -344,9 +356,7 @@ def test_shift_reuse_saves_lus_and_keeps_the_dense_gramians(make_random_model):
     steps = int(np.sum(kept.shifts.imag >= 0))
     assert kept.lu_count - 1 + kept.lu_reused == steps
     for res in (fresh, kept):
-        assert res.converged
-        Zq = to_coordinates(res, Th)
-        assert np.linalg.norm(Zq @ Zq.T - P, 2) / np.linalg.norm(P, 2) < 1e-9
+        assert_converged_to(res, P, Th)
 
 
 def test_given_shifts_are_factored_once_each():
@@ -453,9 +463,30 @@ def test_compressed_factors_keep_the_hankel_singular_values():
     ({"shift_reuse": 1.0}, "shift_reuse"),
     ({"shift_reuse": -0.1}, "shift_reuse"),
     ({"compress_tol": 1.0}, "compress_tol"),
+    ({"pool_full_reuse": 1.0}, "pool_full_reuse"),
+    ({"pool_full_reuse": -0.2}, "pool_full_reuse"),
     ({"lu_pool_mib": -1.0}, "lu_pool_mib"),
     ({"lu_pool_mib": float("inf")}, "lu_pool_mib"),
 ])
 def test_bad_reuse_and_compression_options(kwargs, match):
     with pytest.raises(ms.InputError, match=match):
         lradi(ms.models.dsms(g=20), **kwargs)
+
+
+def test_full_pool_rule_saves_lus_and_keeps_the_dense_gramian():
+    """A pool too small for the run (about 4 of fem_block(200)'s LUs): the full-pool rule
+    (pool_full_reuse, default) pays fewer LUs than the plain one (0: least recently used
+    dropped, radius shift_reuse) and both match the dense Lyapunov solution on ker G to the
+    ADI tolerance; a pool that never fills gives the same bits with either rule."""
+    fom = ms.models.fem_block(n1=200)
+    P, Th = dense_controllability_gramian(fom)
+    plain = lradi(fom, "controllability", tol=1e-12, lu_pool_mib=2.2, pool_full_reuse=0.0)
+    full = lradi(fom, "controllability", tol=1e-12, lu_pool_mib=2.2)
+    assert full.pool_full_reuse == 0.8 and full.summary()["pool_full_reuse"] == 0.8
+    assert plain.lu_dropped > 0 and full.lu_dropped > 0
+    assert full.lu_count < 0.9 * plain.lu_count
+    for res in (plain, full):
+        assert_converged_to(res, P, Th)
+    roomy = [lradi(fom, "controllability", tol=1e-12, pool_full_reuse=f) for f in (0.0, 0.8)]
+    assert roomy[0].lu_dropped == 0 and roomy[0].lu_count == roomy[1].lu_count
+    assert np.array_equal(roomy[0].Z, roomy[1].Z)

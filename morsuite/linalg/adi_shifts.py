@@ -21,7 +21,8 @@ small on the spectrum of the pencil :math:`(A, E)` of :mod:`morsuite.linalg.lrad
     Penzl's greedy min-max choice among candidates.
 :class:`LUPool`
     Kept LUs: a shift within ADI distance ``shift_reuse`` (:func:`adi_distance`) of a
-    kept LU's shift is served by that LU instead of a new one.
+    kept LU's shift is served by that LU instead of a new one; once the pool is full,
+    within ``pool_full_reuse``, and the LU farthest from the current batch is dropped.
 
 All return representatives (Im >= 0) of the shifts, a complex pair counted once.
 """
@@ -329,7 +330,7 @@ def lu_bytes(lu) -> int:
 
 
 class LUPool:
-    r"""Factorizations kept for reuse, within a memory budget (least recently used dropped first).
+    r"""Factorizations kept for reuse, within a memory budget.
 
     :meth:`get` serves a shift p with the kept factorization of the shift q nearest to it
     (:func:`adi_distance`) if that distance is at most ``radius``, otherwise factors at p and
@@ -338,20 +339,45 @@ class LUPool:
     solve instead of an LU and reduces the residual at p by the factor :math:`\le` ``radius``
     instead of annihilating it. ``radius = 0`` reuses exact repeats only (cyclic shift sets).
 
+    When the kept LUs exceed ``budget_mib``, the least recently used are dropped; with
+    ``full_radius`` > ``radius`` the pool is *full* once it has dropped one, and from then on
+
+    * a shift is served by the nearest kept LU within ADI distance ``full_radius`` (instead of
+      ``radius``): a small pool keeps too few LUs for a later batch's shift to find its
+      neighbour within ``radius``, so it would pay an LU for most shifts;
+    * the LU dropped is the kept one whose shift is farthest, in ADI distance, from every shift
+      of the current batch (:meth:`expect`; the least recently used among equals, and without a
+      batch): the LUs next to what the iteration is about to ask for stay.
+
+    A pool that never exceeds its budget is unchanged by ``full_radius``.
+
     Cost: one LU per served shift that no kept one is near; memory at most ``budget_mib``
-    (:func:`lu_bytes`; at least the LU in use is kept).
+    (:func:`lu_bytes`; at least the LU in use is kept); the eviction compares each kept shift
+    with the batch's (a few hundred distances).
     """
 
-    def __init__(self, solver, radius: float, budget_mib: float):
+    def __init__(self, solver, radius: float, budget_mib: float, full_radius: float | None = None):
         self.solver, self.radius, self.budget = solver, float(radius), float(budget_mib) * 2.0 ** 20
-        self._kept = OrderedDict()  # shift -> (lu, bytes)
+        self.full_radius = self.radius if full_radius is None else float(full_radius)
+        self._kept = OrderedDict()  # shift -> (lu, bytes), least recently used first
+        self._batch = ()
         self.reused = 0
+        self.dropped = 0
         self.peak_bytes = 0
+
+    @property
+    def full(self) -> bool:
+        """True once an LU was dropped and the full-pool rule (``full_radius`` > ``radius``) applies."""
+        return self.dropped > 0 and self.full_radius > self.radius
+
+    def expect(self, shifts):
+        """The shifts of the current batch (what the eviction of a full pool keeps LUs near)."""
+        self._batch = tuple(complex(p) for p in shifts)
 
     def get(self, p):
         """(shift actually used, its LU)."""
         best = min(self._kept, key=lambda q: adi_distance(p, q), default=None)
-        if best is not None and adi_distance(p, best) <= self.radius:
+        if best is not None and adi_distance(p, best) <= (self.full_radius if self.full else self.radius):
             self._kept.move_to_end(best)
             self.reused += 1
             return best, self._kept[best][0]
@@ -359,9 +385,19 @@ class LUPool:
         if self.budget > 0:
             self._kept[p] = (lu, lu_bytes(lu))
             while len(self._kept) > 1 and self.bytes > self.budget:
-                self._kept.popitem(last=False)
+                self._drop(p)
             self.peak_bytes = max(self.peak_bytes, self.bytes)
         return p, lu
+
+    def _drop(self, p):
+        """Drop one kept LU other than p's: the least recently used, or when full the farthest from the batch."""
+        self.dropped += 1
+        if not (self.full and self._batch):
+            self._kept.popitem(last=False)
+            return
+        far = max((q for q in self._kept if q != p),
+                  key=lambda q: min(adi_distance(b, q) for b in self._batch))
+        del self._kept[far]
 
     @property
     def bytes(self) -> int:

@@ -43,7 +43,7 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 from ..errors import ConvergenceWarning, InputError
-from .lradi import COMPRESS_TOL, LU_POOL_MIB, SHIFT_REUSE, LRADIResult, lradi_pair
+from .lradi import COMPRESS_TOL, LU_POOL_MIB, POOL_FULL_REUSE, SHIFT_REUSE, LRADIResult, lradi_pair
 from .manifold import ManifoldProjector
 from .system import new_solver
 
@@ -54,10 +54,12 @@ __all__ = ["ADI_DEFAULTS", "GramianFactors", "gramian_factors", "cached_gramian_
 #: tol 1e-12 (not lradi's 1e-10): see morsuite.reducers.bt.balanced; refine 1 (not lradi's 0): one long-double
 #: refinement step of every controllability solve, without which ||T||_H2^2 from the factor is off by the
 #: solves' forward error (7.9e-12 relative on tcom(2000), docs/design/norms.md); it costs no LU, +25% (dsms(6000))
-#: and +47% (tcom(2000)) of the LR-ADI time; shift_reuse, lu_pool_mib and compress_tol as lradi's (kept LUs serve
-#: nearby shifts; no column compression, whose factors the exact H2 error's error-Gramian route cannot replay)
+#: and +47% (tcom(2000)) of the LR-ADI time; shift_reuse, lu_pool_mib, pool_full_reuse and compress_tol as lradi's
+#: (kept LUs serve nearby shifts, farther ones once the pool is full; no column compression, whose factors the exact
+#: H2 error's error-Gramian route cannot replay)
 ADI_DEFAULTS = {"tol": 1e-12, "maxiter": 3000, "shifts": "projection", "num_shifts": 16, "selection": "residual",
-                "refine": 1, "shift_reuse": SHIFT_REUSE, "lu_pool_mib": LU_POOL_MIB, "compress_tol": COMPRESS_TOL}
+                "refine": 1, "shift_reuse": SHIFT_REUSE, "lu_pool_mib": LU_POOL_MIB, "compress_tol": COMPRESS_TOL,
+                "pool_full_reuse": POOL_FULL_REUSE}
 
 
 @dataclass

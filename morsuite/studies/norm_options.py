@@ -19,7 +19,7 @@ NORM_KINDS = ("h2", "hinf")
 NORM_MEASURES = {"h2": ("h2", False), "h2_rel": ("h2", True), "hinf": ("hinf", False), "hinf_rel": ("hinf", True)}
 #: the LR-ADI options of the Gramian factors (morsuite.linalg.gramians.ADI_DEFAULTS)
 ADI_KEYS = ("tol", "maxiter", "shifts", "num_shifts", "selection", "refine", "shift_reuse", "lu_pool_mib",
-            "compress_tol")
+            "compress_tol", "pool_full_reuse")
 
 
 def _nonnegative_below_1(ctx, where, value):
@@ -41,7 +41,8 @@ def _adi(ctx, where, value):
         return None
     ctx.keys(where, value, ADI_KEYS)
     checks = {"tol": float_in_01, "maxiter": positive_int, "num_shifts": positive_int, "refine": nonnegative_int,
-              "shift_reuse": _nonnegative_below_1, "lu_pool_mib": _nonnegative, "compress_tol": _nonnegative_below_1}
+              "shift_reuse": _nonnegative_below_1, "lu_pool_mib": _nonnegative, "compress_tol": _nonnegative_below_1,
+              "pool_full_reuse": _nonnegative_below_1}
     out = {}
     for k, v in value.items():
         out[k] = checks[k](ctx, f"{where}.{k}", v) if k in checks else v

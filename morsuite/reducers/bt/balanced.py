@@ -79,7 +79,8 @@ same model object and ADI options, and :func:`morsuite.analysis.h2_norm` /
 ``h2_error``, share one LR-ADI run.
 
 ``info`` holds ``adi`` (per equation: iterations, converged, residual history,
-shifts, rank, columns, LUs reused, ``shift_reuse``, ``lu_pool_mib``, ``compress_tol``),
+shifts, rank, columns, LUs reused and dropped, ``shift_reuse``, ``lu_pool_mib``, ``pool_full_reuse``,
+``compress_tol``),
 ``compress_tol`` (the column compression used: option ``compress_tol``, by default 0 below
 :attr:`BT.COMPRESS_MIN_N1` positions and :attr:`BT.COMPRESS_AUTO_TOL` from there on, where the
 plain factors no longer fit in memory; a compressed factor cannot serve the exact H2 error's
@@ -114,7 +115,7 @@ FORMS = ("first-order", "pp", "pv", "vp", "vv", "fv")
 
 #: options that change the Gramian factors (reducers agreeing on them can share factors)
 ADI_OPTIONS = ("tol", "maxiter", "shifts", "num_shifts", "selection", "refine", "shift_reuse", "lu_pool_mib",
-               "compress_tol")
+               "compress_tol", "pool_full_reuse")
 
 #: which products Y_a^T (M) Z_b give the right (V) and left (W) bases of each level
 _LEVELS = {  # form: (svd for V, factor block of V, svd for W)
@@ -320,6 +321,11 @@ class BT(SquareRootBT):
                               "0: exact repeats only; docs/design/lradi.md)", low=0, high=1, open_high=True),
         "lu_pool_mib": Option(ADI_DEFAULTS["lu_pool_mib"], "float", "memory budget (MiB) of the LR-ADI's kept "
                               "LUs, least recently used dropped first (0: none kept)", low=0),
+        "pool_full_reuse": Option(ADI_DEFAULTS["pool_full_reuse"], "float", "once the kept-LU pool is full (an "
+                                  "LU was dropped): a projection shift within this ADI distance of a kept LU's "
+                                  "shift is served by it, and the kept LU farthest from the current shift batch "
+                                  "is dropped first (<= shift_reuse: the plain rule; a pool that never fills is "
+                                  "unchanged; docs/design/lradi.md)", low=0, high=1, open_high=True),
         "compress_tol": Option(None, "float", "column compression of the LR-ADI factors as they grow: new "
                                "directions below compress_tol times the factor's largest singular value are "
                                "dropped (0: none); None (default): 0 below COMPRESS_MIN_N1 positions (the exact "
