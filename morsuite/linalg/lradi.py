@@ -228,8 +228,8 @@ class LRADIResult:
                "num_shifts": self.num_shifts, "shifts": self.shifts.tolist(),
                "shift_batches": list(self.shift_batches), "times": dict(self.times),
                "refine": self.refine, "solve_rho": self.solve_rho, "solve_error": self.solve_error,
-               "shift_reuse": self.shift_reuse, "lu_pool_mib": self.lu_pool_mib, "pool_full_reuse": self.pool_full_reuse,
-               "lu_dropped": self.lu_dropped, "lu_reused": self.lu_reused,
+               "shift_reuse": self.shift_reuse, "lu_pool_mib": self.lu_pool_mib,
+               "pool_full_reuse": self.pool_full_reuse, "lu_dropped": self.lu_dropped, "lu_reused": self.lu_reused,
                "lu_pool_peak_mib": self.lu_pool_peak_mib, "compress_tol": self.compress_tol,
                "columns": self.columns, "compressions": self.compressions,
                "ritz_standard_rcond": adi_shifts.STANDARD_RCOND if self.strategy == "projection" else None}
