@@ -5,7 +5,8 @@ never the model class: :mod:`morsuite.models` builds on this package, not the re
 """
 
 from .saddle import SaddleLU, SaddlePointSolver, SolverStats
-from .lradi import LRADIResult, lradi, lradi_pair  # noqa: F401
+from .adi_result import LRADIResult  # noqa: F401
+from .lradi import lradi, lradi_pair  # noqa: F401
 from .system import ConstrainedSystem
 
 __all__ = ["SaddlePointSolver", "SaddleLU", "SolverStats", "LRADIResult", "lradi", "lradi_pair",

@@ -43,7 +43,8 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 from ..errors import ConvergenceWarning, InputError
-from .lradi import COMPRESS_TOL, LU_POOL_MIB, POOL_FULL_REUSE, SHIFT_REUSE, LRADIResult, lradi_pair
+from .adi_result import LRADIResult
+from .lradi import COMPRESS_TOL, LU_POOL_MIB, POOL_FULL_REUSE, SHIFT_REUSE, lradi_pair
 from .manifold import ManifoldProjector
 from .system import new_solver
 
