@@ -135,7 +135,7 @@ class SquareRootBT(Reducer):
     ``{"c": ..., "o": ..., "prods": level_products(c, o, fom), "svd": {}, "svd_times": {},
     "projected": {}}``, where ``c`` and ``o`` have the blocks ``position``,
     ``velocity`` (and ``o.position_unprojected``) and ``rank`` of
-    :class:`~morsuite.linalg.lradi.LRADIResult`. :meth:`_truncate` then makes the
+    :class:`~morsuite.linalg.adi_result.LRADIResult`. :meth:`_truncate` then makes the
     reduced model of any r from the cached SVDs and projections.
     """
 
