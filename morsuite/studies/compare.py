@@ -31,7 +31,7 @@ from ..modelfiles import is_model_path
 from ..utils import atomic_write_text
 from .checks import suggest
 
-__all__ = ["METHODS", "DEFAULT_METHODS", "INPUTS", "compare_spec", "compare", "to_toml", "verdict_lines",
+__all__ = ["METHODS", "DEFAULT_METHODS", "INPUTS", "compare_spec", "compare", "to_toml", "verdict_lines", "verdict_row",
            "rigid_line"]
 
 #: method name -> (reducer, options, first-order states per order, label)
@@ -267,16 +267,7 @@ def verdict_lines(result) -> list:
         out.append(f"== {scene.title or scene.name}")
         out.append(f"{'method':<16}{'states':>7} {'conv':>5} {'H2 error':>12} {'Hinf error':>12} "
                    f"{'band max':>11} {'time (s)':>9}")
-        for r in rows:
-            h2 = "" if r.get("h2_error") is None else \
-                ("~" if r.get("h2_trusted") is False else "") + f"{r['h2_error']:.4g}"
-            hinf = "" if r.get("hinf_error") is None else \
-                ("" if r.get("hinf_certified") is True else ">=") + f"{r['hinf_error']:.4g}"
-            band = "" if r.get("max_abs_error") is None else f"{r['max_abs_error']:.4g}"
-            conv = "yes" if r.get("converged") else ("FAIL" if r.get("status") != "ok" else "no")
-            t = r.get("time_standalone_s")
-            out.append(f"{r['method']:<16}{r.get('states') or '':>7} {conv:>5} {h2:>12} {hinf:>12} {band:>11} "
-                       f"{'' if t is None else format(t, '.3g'):>9}")
+        out += [verdict_row(r) for r in rows]
         note = _table_note(result, scene.name)
         if note:
             out.append(note)
@@ -284,6 +275,22 @@ def verdict_lines(result) -> list:
     out.append("(~: H2 value not accurate to four digits; >=: the Hinf peak found, a lower bound; "
                "time: the reduction at this order alone)")
     return out
+
+
+def verdict_row(r: dict) -> str:
+    """One method's line of :func:`verdict_lines` from its summary row (``method``, ``states``,
+    ``converged``, ``status``, ``h2_error``, ``h2_trusted``, ``hinf_error``, ``hinf_certified``,
+    ``max_abs_error``, ``time_standalone_s``; a missing value is None): errors to 4 digits, time to 3,
+    ``~`` before an H2 value not accurate to four digits, ``>=`` before a Hinf value that is a lower bound."""
+    h2 = "" if r.get("h2_error") is None else \
+        ("~" if r.get("h2_trusted") is False else "") + f"{r['h2_error']:.4g}"
+    hinf = "" if r.get("hinf_error") is None else \
+        ("" if r.get("hinf_certified") is True else ">=") + f"{r['hinf_error']:.4g}"
+    band = "" if r.get("max_abs_error") is None else f"{r['max_abs_error']:.4g}"
+    conv = "yes" if r.get("converged") else ("FAIL" if r.get("status") != "ok" else "no")
+    t = r.get("time_standalone_s")
+    return (f"{r['method']:<16}{r.get('states') or '':>7} {conv:>5} {h2:>12} {hinf:>12} {band:>11} "
+            f"{'' if t is None else format(t, '.3g'):>9}")
 
 
 def _table_note(result, name) -> str:
