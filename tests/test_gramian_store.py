@@ -114,3 +114,22 @@ def test_a_shared_run_pays_the_factors_once(tmp_path):
         for r in g.rs:
             info = cache.get("reduction", g.keys[r])[1]["info"]
             assert info["lu_count_shared"] > 0 and info["lu_count"] < info["lu_count_shared"], (g.method.reducer, r)
+
+
+def test_irka_waits_for_the_factors_unit_but_does_not_call_for_one(tmp_path):
+    """The paper's IRKA reads the factors only to score an unconverged shortlist: beside a reader it
+    waits for the model's factors' unit; alone (no reader, no H2 norm) no such unit is made."""
+    from morsuite.studies import load_spec
+    from morsuite.studies.batch import _units
+    from morsuite.studies.plan import build_plan
+
+    with_bt = TOML.replace('reducer = "irka-fo"', 'reducer = "irka"')
+    alone = with_bt.replace('norms = ["h2"]', 'norms = []').replace('methods = ["bt", "fo"]', 'methods = ["fo"]')
+    alone = alone.replace('measure = "h2"\n', '').replace('[methods.bt]\nreducer = "bt"\n', '')
+    for text, expect in ((with_bt, True), (alone, False)):
+        (tmp_path / "s.toml").write_text(text)
+        units = _units([build_plan(load_spec(tmp_path / "s.toml"))], Cache(tmp_path / "cache"), {})
+        grams = [u.id for u in units.values() if u.kind == "gramians"]
+        irka = [u for u in units.values() if u.kind == "reduction" and u.args[1] == "irka"]
+        assert irka and len(grams) == int(expect), (expect, sorted(units))
+        assert all((set(grams) <= u.deps) for u in irka)

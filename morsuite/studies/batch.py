@@ -36,9 +36,9 @@ the H2 norms read, are a unit of their own (:func:`~morsuite.studies.gramian_sto
 that starts first; the units that read them wait for it and load them from the artifact cache
 (:class:`~morsuite.studies.gramian_store.GramianStore`, set in every worker; the model's Hinf norms
 wait for it too, and their start grid uses the factors' shifts, as in a study's own graph, where
-they run after the reductions), so that a run pays them once, not once per worker (at n1 = 20,577 they are 204 LUs and 26 minutes). The paper's IRKA
-reads them only to score its shortlist when it does not converge: it does not wait, and finds them
-in the store if the unit has finished by then (else it computes them, as before).
+they run after the reductions), so that a run pays them once, not once per worker (at n1 = 20,577 they are 204 LUs and 26 minutes).
+The paper's IRKA reads them only to score its shortlist when it does not converge
+(:data:`GRAMIAN_WAITERS`): it waits for the unit when there is one, but does not call for one.
 
 Cost: the units' own; each worker process builds the models it meets (once) and reads a
 model's Gramian factors from the store when a unit needs them (once per worker and model).
@@ -69,6 +69,11 @@ RUN_BY = "processes (shared)"
 #: Reducers that read the model's LR-ADI Gramian factors: they and the model's norm units (which read
 #: them too) start after the model's Gramian factors' unit (module docstring).
 GRAMIAN_READERS = ("bt", "so-h2", "irka-fo")
+#: Reducers that read the factors only when they do not converge (the exact H2 score of IRKA's
+#: shortlist): they wait for the model's Gramian factors' unit when there is one, but do not call
+#: for one (at n1 = 20,577 the paper's IRKA stalled before the unit had finished and paid the
+#: factors a second time: 171 LUs, 1,085 s, 2026-11-28)
+GRAMIAN_WAITERS = ("irka", "irka-projected")
 
 
 def usable_cores() -> list:
@@ -250,7 +255,8 @@ def _units(plans, cache, prev):
     for model, source in sources.items():
         uid = "gramians-" + model
         for u in units.values():
-            if u.model == model and (u.gramians or u.kind in ("model_norm", "norm_error")):
+            if u.model == model and (u.gramians or u.kind in ("model_norm", "norm_error")
+                                     or (u.kind == "reduction" and u.args[1] in GRAMIAN_WAITERS)):
                 u.deps.add(uid)
         add(_Unit(uid, "morsuite.studies.gramian_store:compute_factors", (source, RUN_BY), "gramians",
                   model, float("inf"), keys={None: uid}, label=f"Gramian factors {model}"))

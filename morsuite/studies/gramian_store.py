@@ -7,7 +7,8 @@ n1 = 20,577 (fem_block(20000)) 204 LUs and 26 minutes per worker (docs/design/ba
 2026-11-28). With a :class:`GramianStore` set (:func:`~morsuite.linalg.gramians.use_store`),
 the factors computed in one worker are written to the cache and every later reader in any
 worker loads them; the batch computes them first, as a unit of their own
-(:func:`compute_factors`), and starts the units that read them after it.
+(:func:`compute_factors`), and starts the units that read them (and the paper's IRKA, which
+may) after it.
 
 An entry is keyed by the model's matrices (:meth:`~morsuite.models.index3.Index3Model.digest`),
 its LU backend (the requested one and, for ``"auto"``, the one chosen), the LR-ADI options and
