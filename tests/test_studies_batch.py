@@ -120,6 +120,15 @@ def test_shared_artifacts_are_computed_once_and_claimed_by_the_first_study(two_r
     assert "shared_compute" not in _manifest(two_runs / "seq", "sb")
 
 
+def test_the_shared_run_writes_its_record(two_runs):
+    """OUT/run.json: the studies in command-line order, the wall and busy time, and one log entry per
+    unit (the same count as the manifests' record); the sequential run writes none."""
+    rec = json.loads((two_runs / "par" / "run.json").read_text())
+    assert rec["studies"] == ["sa", "sb"] and rec["jobs"] == 2 and rec["wall_s"] > 0 and rec["busy_s"] > 0
+    assert len([e for e in rec["log"] if e["kind"] != "study"]) == _manifest(two_runs / "par", "sa")["shared_compute"]["units"]
+    assert not (two_runs / "seq" / "run.json").exists()
+
+
 def test_a_cached_shared_run_computes_nothing(two_runs, tmp_path):
     """The same command again: no unit of work, every computed artifact taken from the cache. Into a
     copy of the shared run's folder: the module's other tests read its manifests as the first run wrote
