@@ -68,3 +68,32 @@ def test_the_expression_language_refuses_anything_else(tmp_path):
 def test_the_measurement_pages_quote_their_headline_figures_with_sources(page, least):
     """The pages of measured figures mark what they take from results/ (checked above), not only the README."""
     assert len(find_quotes((ROOT / page).read_text(encoding="utf-8"))) >= least
+
+
+def test_the_readme_compare_example_is_the_committed_run():
+    """The README's `morsuite compare` example (the 12-state table) is what `verdict_row` prints from
+    results/compare_mess_msd_ind3_g600/summary.csv, which the main job writes (studies/compare_g600.toml
+    is the study that command writes): every digit and flag of it comes from the committed run."""
+    import math
+
+    import pandas as pd
+
+    from morsuite.studies.compare import verdict_row
+
+    lines = (ROOT / "README.md").read_text(encoding="utf-8").splitlines()
+    start = lines.index("    == mess_msd_ind3_g600: 12 states")
+    shown = []
+    for ln in lines[start + 2:]:
+        if not ln.startswith("    ") or ln.startswith("    Compared"):
+            break
+        shown.append(ln[4:])
+    df = pd.read_csv(ROOT / "results" / "compare_mess_msd_ind3_g600" / "summary.csv")
+    df = df[df["states"] == 12]
+    expected = []
+    for method in [row.split()[0] for row in shown]:
+        rows = df[df["method"] == method].to_dict("records")
+        assert rows, f"no 12-state row of {method} in the committed run"
+        row = next((r for r in rows if not pd.isna(r.get("max_abs_error"))), rows[0])
+        row = {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in row.items()}
+        expected.append(verdict_row(row))
+    assert len(shown) == 7 and shown == expected
