@@ -133,3 +133,16 @@ def test_irka_waits_for_the_factors_unit_but_does_not_call_for_one(tmp_path):
         irka = [u for u in units.values() if u.kind == "reduction" and u.args[1] == "irka"]
         assert irka and len(grams) == int(expect), (expect, sorted(units))
         assert all((set(grams) <= u.deps) for u in irka)
+
+
+def test_a_free_floating_model_gets_no_factors_unit_work(store):
+    """A model with rigid-body modes has a pole at 0 (its LR-ADI cannot converge): the factors' unit
+    skips it, writes nothing, and leaves the readers to the flexible part's factors."""
+    from morsuite.studies.gramian_store import compute_factors
+
+    rec = compute_factors("dsms:g=40,free=true")
+    assert "skipped" in rec and rec["lu_count"] == 0
+    assert not list((store.cache.root).rglob("*.npz"))
+    done = compute_factors("dsms:g=40")
+    assert done["lu_count"] > 0 and done["converged"]
+    assert len(list((store.cache.root / KIND).rglob("*.npz"))) == 1

@@ -81,14 +81,20 @@ def compute_factors(source: str, run_by: str = "") -> dict:
     The worker's initializer sets the store (:func:`morsuite.studies.batch.shared_compute`); without
     one the factors stay in this process's model cache. Returns a plain record: ``lu_count`` and
     ``time_s`` of the LR-ADI run (0 and ``cached`` True when the store held them), ``converged``,
-    ``rank`` of each factor, ``wall_s``, ``scheduler``; or ``error`` for a failure of
+    ``rank`` of each factor, ``wall_s``, ``scheduler``; ``skipped`` for a model with rigid-body modes
+    (a pole at 0: no Gramians; the reducers and norms work on its flexible part); or ``error`` for a failure of
     :data:`~morsuite.studies.task_common.CAUGHT` (the readers then meet it themselves).
     """
+    from ..models.rigid import rigid_body_modes
     from .task_common import CAUGHT, model_of
 
     t0 = time.perf_counter()
     try:
-        gf = gramians.gramian_factors(model_of(source))
+        fom = model_of(source)
+        if rigid_body_modes(fom).k:  # a pole at 0: its LR-ADI cannot converge; the readers use the flexible part's
+            return {"kind": KIND, "skipped": "rigid-body modes: the readers use the flexible part's factors",
+                    "lu_count": 0, "time_s": 0.0, "wall_s": time.perf_counter() - t0, "scheduler": run_by}
+        gf = gramians.gramian_factors(fom)
     except CAUGHT as exc:
         return {"kind": KIND, "error": f"{type(exc).__name__}: {exc}", "wall_s": time.perf_counter() - t0,
                 "scheduler": run_by}
