@@ -18,7 +18,6 @@ the machine's memory and its memory is measured from a clean state.
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import tempfile
@@ -28,6 +27,7 @@ import warnings
 import numpy as np
 
 from ..errors import MemoryBudgetError, OptionError
+from ..utils import load_average
 from .memory import MIB, MemoryProbe
 from .output import code_state
 
@@ -36,12 +36,6 @@ __all__ = ["run_case", "run_isolated", "derive_row", "CASE_RESULT_TAG"]
 #: the line of the child's stdout that carries its result
 CASE_RESULT_TAG = "MORSUITE_CASE_RESULT "
 
-
-def _load_average():
-    try:
-        return [round(x, 2) for x in os.getloadavg()]
-    except (AttributeError, OSError):  # pragma: no cover
-        return None
 
 
 def _maxrss_mb():
@@ -82,7 +76,7 @@ def run_case(case: dict) -> dict:
     build = time.perf_counter() - t0
     task, r = case["task"], int(case.get("r", 20))
     row = {"model": case["model"], "size": int(case["size"]), "n1": fom.n1, "n2": fom.n2, "task": task,
-           "r": r, "model_build_s": build, "load_average": _load_average(),
+           "r": r, "model_build_s": build, "load_average": load_average(),
            "code_digest": code_state(git=False)["digest"],
            "dense_square_mb": 8.0 * fom.n1 ** 2 / MIB}
     opts = dict(case.get("options") or {})

@@ -27,10 +27,10 @@ machine the times are only as good as the load says. ``quick``: :math:`n_1 \appr
 
 from __future__ import annotations
 
-import os
 import subprocess
 
 from . import benchmark
+from ..utils import load_average
 from .memory import MIB
 from .scaling_case import run_isolated
 
@@ -57,12 +57,6 @@ def _uptime() -> str | None:
         return None
 
 
-def _load():
-    try:
-        return [round(x, 2) for x in os.getloadavg()]
-    except (AttributeError, OSError):  # pragma: no cover
-        return None
-
 
 def run_large(name, model: str, size: int, tasks, *, r: int, timeout_s: dict, rss_limit_gib: float, targets: dict,
               echo=print) -> tuple:
@@ -76,9 +70,9 @@ def run_large(name, model: str, size: int, tasks, *, r: int, timeout_s: dict, rs
     rows, ratios = [], {}
     for task in tasks:
         case = {"model": model, "size": int(size), "task": task, "r": int(r), "trace": False}
-        before = {"load_average": _load(), "uptime": _uptime()}
+        before = {"load_average": load_average(), "uptime": _uptime()}
         row = run_isolated(case, timeout_s=float(timeout_s[task]), rss_limit_gib=float(rss_limit_gib))
-        row.update(load_before=before["load_average"], uptime_before=before["uptime"], load_after=_load(),
+        row.update(load_before=before["load_average"], uptime_before=before["uptime"], load_after=load_average(),
                    uptime_after=_uptime())
         peaks = [row.get(k) for k in ("process_maxrss_mb", "watchdog_peak_rss_mb") if row.get(k) is not None]
         row["peak_rss_gib"] = max(peaks) * MIB / 2 ** 30 if peaks else None

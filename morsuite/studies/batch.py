@@ -374,11 +374,11 @@ def _write_run_record(out, studies, record) -> None:
     label, worker and time (the figures the README quotes for the main job's run)."""
     import datetime
 
-    from ..utils import atomic_write_text, to_plain
+    from ..utils import atomic_write_text, load_average, to_plain
 
     rec = {"studies": [s.name for s in studies],
            "finished": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-           "load_average": [round(x, 2) for x in os.getloadavg()] if hasattr(os, "getloadavg") else None,
+           "load_average": load_average(),
            **record}
     atomic_write_text(Path(out) / "run.json", json.dumps(to_plain(rec), indent=1, sort_keys=True))
 
