@@ -243,12 +243,12 @@ def test_a_missing_library_is_reported_and_auto_does_without_it(dsms50, monkeypa
 def test_auto_does_without_rslab_when_its_analysis_fails(monkeypatch):
     """rslab installed but failing to analyse a pattern: "auto" records why and takes SuperLU,
     forcing rslab raises an InputError."""
-    from morsuite.linalg import backends_ext
+    from morsuite.linalg import backends_rslab
     _need("rslab")
 
     def fails(pattern):
         raise RuntimeError("analysis failed")
-    monkeypatch.setattr(backends_ext, "rslab_symbolic", fails)
+    monkeypatch.setattr(backends_rslab, "rslab_symbolic", fails)
     fom = ms.models.fem_block(1500)
     a = fom.lu_analysis()
     assert a["backend"] == "superlu" and "analysis failed" in a["reason"]
@@ -266,17 +266,17 @@ def test_auto_choice_on_3d_patterns_is_deterministic_and_recorded():
         assert a["backend"] == "rslab" and "rslab" in a["reason"] and a["predicted_factor_nnz"] > a["nnz"]
 
 
-@pytest.mark.parametrize("backend", ["klu", "rslab"])
-def test_a_tampered_factor_falls_back_to_superlu(backend, tcom20, monkeypatch):
+@pytest.mark.parametrize("backend, kind, s", [("klu", "KLULU", 0.4 + 1.3j), ("rslab", "RslabLU", 0.4),
+                                               ("rslab", "RslabLDLT", 0.4 + 1.3j)])
+def test_a_tampered_factor_falls_back_to_superlu(backend, kind, s, tcom20, monkeypatch):
     """A library's factorization whose solves are wrong (tampered) fails the backward-error check:
-    the solver refactors with SuperLU (counted), and the solution is the dense one."""
-    from morsuite.linalg import backends_ext
+    the solver refactors (SuperLU; rslab's LU for its LDL^T, counted), and the solution is the dense one."""
+    from morsuite.linalg import backends_ext, backends_rslab
     _need(backend)
-    cls = {"klu": backends_ext.KLULU, "rslab": backends_ext.RslabLU}[backend]
+    cls = getattr(backends_rslab if kind.startswith("Rslab") else backends_ext, kind)
     honest = cls.solve
     monkeypatch.setattr(cls, "solve", lambda self, b, trans="N": 1.001 * honest(self, b, trans))
     solver = tcom20.new_solver(backend=backend)
-    s = 0.4 + 1.3j
     f = solver.factor(s)
     assert isinstance(f.lu, cls)
     for trans in (False, True):
@@ -375,3 +375,31 @@ def test_library_backends_pickle_without_their_handles(backend, tcom20):
     assert len(copy._cache) == 0
     assert np.allclose(copy.factor(0.3j).solve(tcom20.F), x, rtol=1e-12, atol=0)
     assert default_threads("klu") == 1
+
+
+def test_rslab_takes_its_ldlt_at_complex_symmetric_shifts_only():
+    """fem_block (M, D, K symmetric): at a complex shift rslab factors S(s) by its LDL^T (perturbed
+    pivots, refined solves), at a real one by its LU; both solves, plain and transposed, equal the
+    dense ones. With an unsymmetric D the complex shift gets the LU."""
+    from morsuite.linalg.backends_rslab import RslabLDLT, RslabLU
+    _need("rslab")
+    fom = ms.models.fem_block(300)
+    B = np.vstack([np.asarray(fom.F.todense() if sp.issparse(fom.F) else fom.F), np.zeros((fom.n2, fom.m))])
+    solver = fom.new_solver(backend="rslab")
+    for s, cls in ((0.7j, RslabLDLT), (0.05 + 2.0j, RslabLDLT), (0.7, RslabLU)):
+        f = solver.factor(s)
+        assert type(f.lu) is cls and solver.stats.refactorizations == 0
+        S = _dense(fom, s)
+        for trans in (False, True):
+            ref = np.linalg.solve(S.T if trans else S, B)
+            x = f.solve(B, trans=trans, full=True)
+            assert np.linalg.norm(x - ref) <= 1e-10 * np.linalg.norm(ref)
+    D = fom.D.tolil()
+    D[0, 1] += 1e-3 * abs(D[0, 0]) + 1e-3  # unsymmetric damping: S(s) is not complex symmetric
+    other = ms.models.Index3Model(fom.M, D.tocsr(), fom.K, fom.G, fom.F, fom.L, name="fem unsym",
+                                  check_constraints=False)
+    f = other.new_solver(backend="rslab").factor(0.7j)
+    assert type(f.lu) is RslabLU
+    S = _dense(other, 0.7j)
+    ref = np.linalg.solve(S, B)
+    assert np.linalg.norm(f.solve(B, full=True) - ref) <= 1e-10 * np.linalg.norm(ref)

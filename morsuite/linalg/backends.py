@@ -55,7 +55,7 @@ import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from ..errors import InputError, SingularShiftError
-from . import kernels, backends_ext
+from . import kernels, backends_ext, backends_rslab
 
 __all__ = ["BACKENDS", "BAND_RULE", "LIBRARY_BACKENDS", "BandedBorderLU", "analyse", "banded_structure", "choose",
            "factor_nnz", "permuted_pattern", "resolve_backend", "superlu_ordering"]
@@ -252,7 +252,7 @@ def analyse(pattern, backend: str = "auto") -> dict:
     extra = {}
     if name == "rslab":  # the analysis' prediction, for the record
         try:
-            sym = backends_ext.rslab_symbolic(pattern)
+            sym = backends_rslab.rslab_symbolic(pattern)
             extra = {"predicted_factor_nnz": int(sym.factor_nnz),
                      "predicted_flops": float(sym.estimate_memory("complex128")["factor_flops"])}
         except (RuntimeError, ValueError) as exc:  # rslab could not analyse the pattern: SuperLU

@@ -10,10 +10,8 @@ of SuperLU's ``solve``; :class:`~morsuite.linalg.saddle_lu.SaddleLU` checks ever
 backward error and falls back to SuperLU as for the other backends.
 
 ``"rslab"``
-    rslab's supernodal left-looking LU (``path="lu"``) with threshold partial pivoting: its
-    analysis (MC64 matching, the fill-reducing ordering of least fill among AMD, AMF, RCM and
-    nested dissection) once per pattern from the pattern's magnitudes; per shift one numeric
-    factorization on one thread (:data:`RSLAB_SETTINGS`). The fast one on 3D solids.
+    rslab's supernodal LU, and its LDL^T at complex-symmetric shifts: :mod:`morsuite.linalg.backends_rslab`
+    (which takes the helpers here). The fast one on 3D solids.
 ``"klu"``
     KLU through ``nbklu``: symbolic analysis (BTF, AMD) and a reference pivot order (a
     factorization of the pattern's magnitudes) once per pattern and value type; per shift a
@@ -52,8 +50,7 @@ import scipy.sparse as sp
 
 from ..errors import InputError, SingularShiftError
 
-__all__ = ["INSTALL", "KLULU", "KLU_MIN_RGROWTH", "PardisoLU", "RSLAB_SETTINGS", "RslabLU", "available", "klu_pool",
-           "pardiso_ordering", "rslab_symbolic"]
+__all__ = ["INSTALL", "KLULU", "KLU_MIN_RGROWTH", "PardisoLU", "available", "klu_pool", "pardiso_ordering"]
 
 _LOCK = threading.Lock()
 _MKL: dict = {}
@@ -122,7 +119,7 @@ def _magnitudes(pattern):
     return data, pattern["_indices"], pattern["_indptr"]
 
 
-# -- KLU (nbklu) and the supernodal LU (rslab) --------------------------------------------------
+# -- helpers of the libraries; KLU (nbklu) ---------------------------------------------------------------
 class _Local:
     """A value kept with the pattern but not pickled (the libraries' handles are not picklable; a Dask
     worker's copy of the pattern recomputes it)."""
@@ -245,69 +242,6 @@ class KLULU:
         B = np.array(b.reshape(b.shape[0], -1).T, dtype=self.dtype, order="C")  # nbklu: (nrhs, n) rows
         X = self._kls.solve_(B) if trans == "N" else self._kls.tsolve_(B, 0)
         X = np.asarray(X).reshape(B.shape).T
-        return X[:, 0] if vec else X
-
-
-#: rslab's settings of every analysis and factorization: one worker (the factor is the same bits
-#: for every thread count; one thread keeps a solver thread to one core) and the ordering race
-#: open to nested dissection at every size (the cheap orderings alone filled 1.34x more on
-#: fem_block(4000) and factored 2x slower: docs/design/backends.md, 2026-11-27)
-RSLAB_SETTINGS = {"threads": 1, "race_nd_min_n": 0, "race_nd_min_work": 0}
-
-
-def rslab_symbolic(pattern):
-    """rslab's supernodal-LU analysis of the pattern (``path="lu"``), made once per pattern.
-
-    Analysed from the matrix of the pattern's magnitudes :math:`|m| + |d| + |k| + |g|` (its MC64
-    row matching and the fill-reducing ordering -- the smallest fill of minimum degree, minimum
-    fill, RCM and nested dissection, :data:`RSLAB_SETTINGS` -- depend on the pattern only).
-    Returns the ``LuSymbolic``; its ``factor_nnz`` and ``estimate_memory()["factor_flops"]`` are the
-    predicted fill and work. Cost: the orderings' race (0.1-4 s from n1 = 4e3 to 2e4 on fem_block).
-    """
-    def make():
-        rslab = _rslab()
-        data, ind, ptr = _magnitudes(pattern)
-        N = ptr.size - 1
-        A = sp.csc_matrix((np.asarray(data, dtype=float), ind.copy(), ptr.copy()), shape=(N, N))
-        return rslab.analyze(A, path="lu", **RSLAB_SETTINGS)
-    return _stored(pattern, ("rslab",), make)
-
-
-class RslabLU:
-    r"""rslab's supernodal LU (``path="lu"``; MIT, pure Rust) of an equilibrated saddle matrix ``As``.
-
-    :math:`P_r^T A_s P_c = LU` with threshold partial pivoting (0.1) on the analysis of
-    :func:`rslab_symbolic`; one numeric factorization per shift, real or complex by the values'
-    type, on one thread. ``solve(b, trans)`` as SuperLU's (``"T"``: the plain transpose). rslab's
-    LDL^T path (Bunch-Kaufman, complex symmetric) is not used: on the saddle matrices its pivots
-    stay 1 x 1 and the zero block makes it stop ("numerically rank-deficient") unless pivots are
-    perturbed, and perturbed it was slower than the LU (docs/design/backends.md, 2026-11-27).
-    Raises :class:`~morsuite.errors.SingularShiftError` on a zero pivot (the solver then tries SuperLU).
-    """
-
-    def __init__(self, As, pattern):
-        sym = rslab_symbolic(pattern)
-        self.dtype = np.complex128 if np.iscomplexobj(As.data) else np.float64
-        self.shape = As.shape
-        try:
-            self._f = sym.factor(np.asarray(As.data, dtype=self.dtype), threads=1)
-        except RuntimeError as exc:
-            raise SingularShiftError(f"rslab LU: the matrix is singular ({exc})") from exc
-        self.nnz = int(self._f.factor_nnz)
-
-    def __reduce__(self):
-        raise TypeError("an rslab factorization is a handle of this process; it cannot be pickled")
-
-    def solve(self, b, trans: str = "N"):
-        """Solve ``A x = b`` (``trans="N"``) or ``A^T x = b`` (``"T"``); b of shape (N, k) or (N,)."""
-        b = np.asarray(b)
-        vec = b.ndim == 1
-        B = np.asarray(b.reshape(b.shape[0], -1), dtype=self.dtype)
-        if trans == "N":
-            X = self._f.solve_many(np.ascontiguousarray(B)) if B.shape[1] > 1 else \
-                self._f.solve(np.ascontiguousarray(B[:, 0]))[:, None]
-        else:
-            X = np.column_stack([self._f.solve_transpose(np.ascontiguousarray(B[:, j])) for j in range(B.shape[1])])
         return X[:, 0] if vec else X
 
 

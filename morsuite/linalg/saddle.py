@@ -50,13 +50,14 @@ import scipy.sparse.linalg as spla
 from ..errors import InputError, SingularShiftError
 from . import kernels
 from .backends import LIBRARY_BACKENDS, BandedBorderLU, analyse, permuted_pattern, resolve_backend, superlu_ordering
-from .backends_ext import KLULU, PardisoLU, RslabLU
+from .backends_ext import KLULU, PardisoLU
+from .backends_rslab import RslabLDLT, RslabLU, rslab_factor
 from .saddle_lu import SaddleLU, SolverStats, rcond_estimate
 
 __all__ = ["SaddlePointSolver", "SaddleLU", "SolverStats"]
 
 #: the factorization class of each library backend
-_LIBRARY_LU = {"klu": KLULU, "rslab": RslabLU, "pardiso": PardisoLU}
+_LIBRARY_LU = {"klu": KLULU, "rslab": rslab_factor, "pardiso": PardisoLU}
 
 
 class SaddlePointSolver:
@@ -321,9 +322,12 @@ class SaddlePointSolver:
 
         spec = "NATURAL" if perm and not banded else self.permc_spec
         fallback = ((
+            # rslab's LDL^T perturbs tiny pivots: its own LU (threshold pivoting) of the same matrix first
+            lambda As=As: RslabLU(As, self.pattern),
+        ) if checked and isinstance(lu, RslabLDLT) else ()) + ((
             # the banded LU pivots within A11 only (KLU, PARDISO: own pivoting): SuperLU on the same matrix first
             lambda As=As: spla.splu(As, permc_spec="COLAMD", diag_pivot_thresh=self.diag_pivot_thresh),
-        ) if other and isinstance(lu, (BandedBorderLU, KLULU, RslabLU, PardisoLU)) else ()) + (
+        ) if other and isinstance(lu, (BandedBorderLU, KLULU, RslabLU, RslabLDLT, PardisoLU)) else ()) + (
             # more weight on the diagonal of the equilibrated matrix, same ordering (cheap)
             lambda As=As: spla.splu(As, permc_spec=spec, diag_pivot_thresh=min(0.01, self.diag_pivot_thresh)),
             # a fresh column ordering

@@ -1,0 +1,162 @@
+r"""rslab's sparse factorizations (MIT, pure Rust; a default dependency): the supernodal LU and, for
+complex-symmetric shifts, the supernodal Bunch-Kaufman LDL^T.
+
+``"rslab"`` (:func:`rslab_factor`, the backend's entry in :class:`~morsuite.linalg.saddle.SaddlePointSolver`)
+    rslab's supernodal left-looking LU (``path="lu"``) with threshold partial pivoting: its
+    analysis (MC64 matching, the fill-reducing ordering of least fill among AMD, AMF, RCM and
+    nested dissection) once per pattern from the pattern's magnitudes; per shift one numeric
+    factorization on one thread (:data:`RSLAB_SETTINGS`). At a complex shift of a model whose M, D
+    and K are symmetric, the LDL^T of :class:`RslabLDLT` instead (half the fill; 1.4-2x faster on
+    fem_block), its LU the first fallback. The fast backend on 3D solids.
+
+The helpers (the library's import, the pattern's magnitudes, values kept with the pattern) are those
+of :mod:`morsuite.linalg.backends_ext`. Measurements: ``docs/design/backends.md`` (2026-11-27, 2026-11-28).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import SingularShiftError
+from .backends_ext import _magnitudes, _rslab, _stored, _symmetric_blocks
+
+__all__ = ["RSLAB_LDLT_SETTINGS", "RSLAB_SETTINGS", "RslabLDLT", "RslabLU", "rslab_factor", "rslab_ldlt_symbolic",
+           "rslab_symbolic"]
+
+#: rslab's settings of every analysis and factorization: one worker (the factor is the same bits
+#: for every thread count; one thread keeps a solver thread to one core) and the ordering race
+#: open to nested dissection at every size (the cheap orderings alone filled 1.34x more on
+#: fem_block(4000) and factored 2x slower: docs/design/backends.md, 2026-11-27)
+RSLAB_SETTINGS = {"threads": 1, "race_nd_min_n": 0, "race_nd_min_work": 0}
+
+
+def rslab_symbolic(pattern):
+    """rslab's supernodal-LU analysis of the pattern (``path="lu"``), made once per pattern.
+
+    Analysed from the matrix of the pattern's magnitudes :math:`|m| + |d| + |k| + |g|` (its MC64
+    row matching and the fill-reducing ordering -- the smallest fill of minimum degree, minimum
+    fill, RCM and nested dissection, :data:`RSLAB_SETTINGS` -- depend on the pattern only).
+    Returns the ``LuSymbolic``; its ``factor_nnz`` and ``estimate_memory()["factor_flops"]`` are the
+    predicted fill and work. Cost: the orderings' race (0.1-4 s from n1 = 4e3 to 2e4 on fem_block).
+    """
+    def make():
+        rslab = _rslab()
+        data, ind, ptr = _magnitudes(pattern)
+        N = ptr.size - 1
+        A = sp.csc_matrix((np.asarray(data, dtype=float), ind.copy(), ptr.copy()), shape=(N, N))
+        return rslab.analyze(A, path="lu", **RSLAB_SETTINGS)
+    return _stored(pattern, ("rslab",), make)
+
+
+class RslabLU:
+    r"""rslab's supernodal LU (``path="lu"``; MIT, pure Rust) of an equilibrated saddle matrix ``As``.
+
+    :math:`P_r^T A_s P_c = LU` with threshold partial pivoting (0.1) on the analysis of
+    :func:`rslab_symbolic`; one numeric factorization per shift, real or complex by the values'
+    type, on one thread. ``solve(b, trans)`` as SuperLU's (``"T"``: the plain transpose). rslab's
+    LDL^T path (Bunch-Kaufman, complex symmetric) is not used: on the saddle matrices its pivots
+    stay 1 x 1 and the zero block makes it stop ("numerically rank-deficient") unless pivots are
+    perturbed, and perturbed it was slower than the LU (docs/design/backends.md, 2026-11-27).
+    Raises :class:`~morsuite.errors.SingularShiftError` on a zero pivot (the solver then tries SuperLU).
+    """
+
+    def __init__(self, As, pattern):
+        sym = rslab_symbolic(pattern)
+        self.dtype = np.complex128 if np.iscomplexobj(As.data) else np.float64
+        self.shape = As.shape
+        try:
+            self._f = sym.factor(np.asarray(As.data, dtype=self.dtype), threads=1)
+        except RuntimeError as exc:
+            raise SingularShiftError(f"rslab LU: the matrix is singular ({exc})") from exc
+        self.nnz = int(self._f.factor_nnz)
+
+    def __reduce__(self):
+        raise TypeError("an rslab factorization is a handle of this process; it cannot be pickled")
+
+    def solve(self, b, trans: str = "N"):
+        """Solve ``A x = b`` (``trans="N"``) or ``A^T x = b`` (``"T"``); b of shape (N, k) or (N,)."""
+        b = np.asarray(b)
+        vec = b.ndim == 1
+        B = np.asarray(b.reshape(b.shape[0], -1), dtype=self.dtype)
+        if trans == "N":
+            X = self._f.solve_many(np.ascontiguousarray(B)) if B.shape[1] > 1 else \
+                self._f.solve(np.ascontiguousarray(B[:, 0]))[:, None]
+        else:
+            X = np.column_stack([self._f.solve_transpose(np.ascontiguousarray(B[:, j])) for j in range(B.shape[1])])
+        return X[:, 0] if vec else X
+
+
+#: rslab's LDL^T of a complex-symmetric S(s) (:class:`RslabLDLT`): METIS ordering, static pivot
+#: perturbation (the zero block stops Bunch-Kaufman otherwise) and refinement steps per solve (2026-11-28)
+RSLAB_LDLT_SETTINGS = {"ordering": "metis", "preconditioner": 1e-10, "refine": 2}
+
+
+def rslab_ldlt_symbolic(pattern):
+    """``(LdltSymbolic, sel)``: rslab's LDL^T analysis of the pattern's lower triangle (METIS, from the
+    pattern's magnitudes) and the positions of the lower triangle's entries in the pattern's CSC data;
+    ``None`` when M, D or K is not exactly symmetric (S(s) is then not complex symmetric). Made once per
+    pattern. Cost: one METIS ordering (0.25 s at fem_block(4000), 1.7 s at 20000)."""
+    def make():
+        if not _symmetric_blocks(pattern):
+            return None
+        rslab = _rslab()
+        data, ind, ptr = _magnitudes(pattern)
+        N = ptr.size - 1
+        cols = np.repeat(np.arange(N), np.diff(ptr))
+        sel = np.flatnonzero(ind >= cols)
+        A = sp.csc_matrix((np.asarray(data, dtype=float), ind.copy(), ptr.copy()), shape=(N, N))
+        sym = rslab.analyze(A, path="ldlt", ordering=RSLAB_LDLT_SETTINGS["ordering"], threads=1)
+        return sym, sel
+    return _stored(pattern, ("rslab-ldlt",), make)
+
+
+class RslabLDLT:
+    r"""rslab's supernodal Bunch-Kaufman :math:`LDL^T` (MIT) of a complex-symmetric equilibrated saddle matrix.
+
+    :math:`S(s)` is complex symmetric when M, D and K are symmetric (:math:`A_s = D S D` too, the
+    diagonal scaling being symmetric), so its plain transpose is itself: one factor of half the
+    fill of the LU serves ``solve`` with and without ``"T"``. The zero block of the constraints
+    stops Bunch-Kaufman's 1 x 1 pivots, so pivots below ``preconditioner`` (1e-10, relative) are
+    perturbed and every solve refines ``refine`` (2) times against the matrix itself: the backward
+    error reaches rounding (measured 4e-17 to 1.2e-16 on tcom(20) and fem_block; with 1e-12 the
+    tiny perturbed pivots grew the factor and two steps left 4e-13 to 8e-11 on tcom(20)) and :class:`~morsuite.linalg.saddle_lu.SaddleLU` checks
+    it on every solve as for any backend, falling back to rslab's LU. Used by
+    :func:`rslab_factor` for complex shifts, where it is 1.4-2x faster than the LU on fem_block
+    (docs/design/backends.md, 2026-11-28). Raises :class:`~morsuite.errors.SingularShiftError` when
+    the factorization fails.
+    """
+
+    def __init__(self, As, pattern, symbolic=None):
+        sym, sel = symbolic if symbolic is not None else rslab_ldlt_symbolic(pattern)
+        self.dtype = np.complex128
+        self.shape = As.shape
+        st = RSLAB_LDLT_SETTINGS
+        try:
+            self._f = sym.factor(np.ascontiguousarray(As.data[sel], dtype=self.dtype), threads=1,
+                                 preconditioner=st["preconditioner"])
+        except (RuntimeError, ValueError) as exc:
+            raise SingularShiftError(f"rslab LDL^T: the factorization failed ({exc})") from exc
+        self.nnz = int(self._f.factor_nnz)
+
+    def __reduce__(self):
+        raise TypeError("an rslab factorization is a handle of this process; it cannot be pickled")
+
+    def solve(self, b, trans: str = "N"):
+        """Solve ``A x = b``; ``trans="T"`` is the same solve (A is symmetric); b of shape (N, k) or (N,)."""
+        b = np.asarray(b)
+        B = np.asarray(b.reshape(b.shape[0], -1), dtype=self.dtype)
+        refine = RSLAB_LDLT_SETTINGS["refine"]
+        X = np.column_stack([self._f.solve(np.ascontiguousarray(B[:, j]), refine=refine) for j in range(B.shape[1])])
+        return X[:, 0] if b.ndim == 1 else X
+
+
+def rslab_factor(As, pattern):
+    """rslab's factorization of ``As``: :class:`RslabLDLT` for complex values of a symmetric pattern
+    (:func:`rslab_ldlt_symbolic`) whose values are symmetric too, else :class:`RslabLU`. The values'
+    symmetry is checked exactly (the CSR order of the data equals the CSC order), O(nnz)."""
+    if np.iscomplexobj(As.data):
+        ldlt = rslab_ldlt_symbolic(pattern)
+        if ldlt is not None and np.array_equal(As.data[pattern["_csr_perm"]], As.data):
+            return RslabLDLT(As, pattern, ldlt)
+    return RslabLU(As, pattern)
