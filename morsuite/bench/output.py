@@ -79,6 +79,7 @@ def machine_info() -> dict:
 _KEY_MODULES = ("linalg/saddle.py", "linalg/saddle_lu.py", "linalg/lradi.py", "linalg/adi_iteration.py",
                 "linalg/adi_shifts.py", "linalg/manifold.py", "linalg/system.py", "linalg/dense.py",
                 "linalg/orthonormal.py", "linalg/refine.py", "linalg/backends.py", "linalg/backends_ext.py",
+                "linalg/backends_rslab.py",
                 "reducers/irka/second_order.py", "reducers/irka/engine.py", "reducers/irka/shift_update.py",
                 "reducers/irka/safeguards.py", "reducers/bt/balanced.py", "reducers/irka/projected.py",
                 "reducers/base.py", "models/index3.py", "rom.py")

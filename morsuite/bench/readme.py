@@ -115,7 +115,9 @@ _SECTIONS = {"pareto": _section_pareto, "scaling": _section_scaling, "peers": _s
              "projected": lambda res: _section_rows(res, ("g", "n1", "r", "iterations", "time_projected_s",
                                                           "time_irka_s", "ratio", "ratio_per_iteration")),
              "bt": lambda res: _section_rows(res, ("model", "run", "time_s", "lu_count", "floor_s", "ratio",
-                                                   "ratios"))}
+                                                   "ratios")),
+             "rslab-ldlt": lambda res: _section_rows(res, ("model", "n1", "t_ldlt", "t_lu", "ldlt_over_lu",
+                                                           "factor_nnz", "berr"))}
 
 
 _OWN_TABLES = ("pareto", "scaling", "peers")
