@@ -129,7 +129,7 @@ class RslabLDLT:
 
     def __init__(self, As, pattern, symbolic=None):
         sym, sel = symbolic if symbolic is not None else rslab_ldlt_symbolic(pattern)
-        self.dtype = np.complex128
+        self.dtype = np.complex128 if np.iscomplexobj(As.data) else np.float64
         self.shape = As.shape
         st = RSLAB_LDLT_SETTINGS
         try:
