@@ -97,3 +97,21 @@ def test_the_readme_compare_example_is_the_committed_run():
         row = {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in row.items()}
         expected.append(verdict_row(row))
     assert len(shown) == 7 and shown == expected
+
+
+def test_the_committed_fe_study_is_the_committed_spec():
+    """results/fem (not part of the main job: run by hand, docs/results.md quotes it) was made from
+    studies/fem.toml as committed: its manifest's spec hash is the file's, and every method of the
+    spec has its row, converged or flagged."""
+    import hashlib
+    import json
+
+    import pandas as pd
+    import tomllib
+
+    spec = (ROOT / "studies" / "fem.toml").read_text(encoding="utf-8")
+    manifest = json.loads((ROOT / "results" / "fem" / "manifest.json").read_text(encoding="utf-8"))
+    assert manifest["spec_sha256"] == hashlib.sha256(spec.encode()).hexdigest()
+    df = pd.read_csv(ROOT / "results" / "fem" / "summary.csv")
+    assert set(df["method"]) == set(tomllib.loads(spec)["methods"])
+    assert df["h2_trusted"].all() and (df["status"] == "ok").all()
