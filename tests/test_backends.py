@@ -266,14 +266,16 @@ def test_auto_choice_on_3d_patterns_is_deterministic_and_recorded():
         assert a["backend"] == "rslab" and "rslab" in a["reason"] and a["predicted_factor_nnz"] > a["nnz"]
 
 
-@pytest.mark.parametrize("backend, kind, s", [("klu", "KLULU", 0.4 + 1.3j), ("rslab", "RslabLU", 0.4),
-                                               ("rslab", "RslabLDLT", 0.4 + 1.3j)])
+@pytest.mark.parametrize("backend, kind, s", [("klu", "KLULU", 0.4 + 1.3j), ("rslab", "RslabLU", 0.4 + 1.3j),
+                                               ("rslab", "RslabLDLT", 0.4 + 1.3j), ("rslab", "RslabLDLT", 0.4)])
 def test_a_tampered_factor_falls_back_to_superlu(backend, kind, s, tcom20, monkeypatch):
     """A library's factorization whose solves are wrong (tampered) fails the backward-error check:
     the solver refactors (SuperLU; rslab's LU for its LDL^T, counted), and the solution is the dense one."""
     from morsuite.linalg import backends_ext, backends_rslab
     _need(backend)
     cls = getattr(backends_rslab if kind.startswith("Rslab") else backends_ext, kind)
+    if kind == "RslabLU":  # the TCOM is symmetric: rslab's LU only where its LDL^T does not apply
+        monkeypatch.setattr(backends_rslab, "rslab_ldlt_symbolic", lambda pattern: None)
     honest = cls.solve
     monkeypatch.setattr(cls, "solve", lambda self, b, trans="N": 1.001 * honest(self, b, trans))
     solver = tcom20.new_solver(backend=backend)
@@ -377,16 +379,16 @@ def test_library_backends_pickle_without_their_handles(backend, tcom20):
     assert default_threads("klu") == 1
 
 
-def test_rslab_takes_its_ldlt_at_complex_symmetric_shifts_only():
-    """fem_block (M, D, K symmetric): at a complex shift rslab factors S(s) by its LDL^T (perturbed
-    pivots, refined solves), at a real one by its LU; both solves, plain and transposed, equal the
-    dense ones. With an unsymmetric D the complex shift gets the LU."""
+def test_rslab_takes_its_ldlt_where_the_model_is_symmetric():
+    """fem_block (M, D, K symmetric): at complex and real shifts rslab factors S(s) by its LDL^T
+    (perturbed pivots, refined solves); its solves, plain and transposed, equal the dense ones. With
+    an unsymmetric D it takes its LU."""
     from morsuite.linalg.backends_rslab import RslabLDLT, RslabLU
     _need("rslab")
     fom = ms.models.fem_block(300)
     B = np.vstack([np.asarray(fom.F.todense() if sp.issparse(fom.F) else fom.F), np.zeros((fom.n2, fom.m))])
     solver = fom.new_solver(backend="rslab")
-    for s, cls in ((0.7j, RslabLDLT), (0.05 + 2.0j, RslabLDLT), (0.7, RslabLU)):
+    for s, cls in ((0.7j, RslabLDLT), (0.05 + 2.0j, RslabLDLT), (0.7, RslabLDLT)):
         f = solver.factor(s)
         assert type(f.lu) is cls and solver.stats.refactorizations == 0
         S = _dense(fom, s)

@@ -1,13 +1,13 @@
 r"""rslab's sparse factorizations (MIT, pure Rust; a default dependency): the supernodal LU and, for
-complex-symmetric shifts, the supernodal Bunch-Kaufman LDL^T.
+models with symmetric M, D and K, the supernodal Bunch-Kaufman LDL^T.
 
 ``"rslab"`` (:func:`rslab_factor`, the backend's entry in :class:`~morsuite.linalg.saddle.SaddlePointSolver`)
     rslab's supernodal left-looking LU (``path="lu"``) with threshold partial pivoting: its
     analysis (MC64 matching, the fill-reducing ordering of least fill among AMD, AMF, RCM and
     nested dissection) once per pattern from the pattern's magnitudes; per shift one numeric
-    factorization on one thread (:data:`RSLAB_SETTINGS`). At a complex shift of a model whose M, D
-    and K are symmetric, the LDL^T of :class:`RslabLDLT` instead (half the fill; 1.4-2x faster on
-    fem_block), its LU the first fallback. The fast backend on 3D solids.
+    factorization on one thread (:data:`RSLAB_SETTINGS`). For a model whose M, D and K are
+    symmetric, the LDL^T of :class:`RslabLDLT` instead, at real and complex shifts (half the fill;
+    1.3-1.6x faster on fem_block), its LU the first fallback. The fast backend on 3D solids.
 
 The helpers (the library's import, the pattern's magnitudes, values kept with the pattern) are those
 of :mod:`morsuite.linalg.backends_ext`. Measurements: ``docs/design/backends.md`` (2026-11-27, 2026-11-28).
@@ -54,10 +54,8 @@ class RslabLU:
 
     :math:`P_r^T A_s P_c = LU` with threshold partial pivoting (0.1) on the analysis of
     :func:`rslab_symbolic`; one numeric factorization per shift, real or complex by the values'
-    type, on one thread. ``solve(b, trans)`` as SuperLU's (``"T"``: the plain transpose). rslab's
-    LDL^T path (Bunch-Kaufman, complex symmetric) is not used: on the saddle matrices its pivots
-    stay 1 x 1 and the zero block makes it stop ("numerically rank-deficient") unless pivots are
-    perturbed, and perturbed it was slower than the LU (docs/design/backends.md, 2026-11-27).
+    type, on one thread. ``solve(b, trans)`` as SuperLU's (``"T"``: the plain transpose). Taken
+    where :class:`RslabLDLT` does not apply (M, D or K not symmetric) and as its fallback.
     Raises :class:`~morsuite.errors.SingularShiftError` on a zero pivot (the solver then tries SuperLU).
     """
 
@@ -87,7 +85,7 @@ class RslabLU:
         return X[:, 0] if vec else X
 
 
-#: rslab's LDL^T of a complex-symmetric S(s) (:class:`RslabLDLT`): METIS ordering, static pivot
+#: rslab's LDL^T of a (complex) symmetric S(s) (:class:`RslabLDLT`): METIS ordering, static pivot
 #: perturbation (the zero block stops Bunch-Kaufman otherwise) and refinement steps per solve (2026-11-28)
 RSLAB_LDLT_SETTINGS = {"ordering": "metis", "preconditioner": 1e-10, "refine": 2}
 
@@ -112,18 +110,20 @@ def rslab_ldlt_symbolic(pattern):
 
 
 class RslabLDLT:
-    r"""rslab's supernodal Bunch-Kaufman :math:`LDL^T` (MIT) of a complex-symmetric equilibrated saddle matrix.
+    r"""rslab's supernodal Bunch-Kaufman :math:`LDL^T` (MIT) of a (complex) symmetric equilibrated saddle matrix.
 
     :math:`S(s)` is complex symmetric when M, D and K are symmetric (:math:`A_s = D S D` too, the
     diagonal scaling being symmetric), so its plain transpose is itself: one factor of half the
     fill of the LU serves ``solve`` with and without ``"T"``. The zero block of the constraints
     stops Bunch-Kaufman's 1 x 1 pivots, so pivots below ``preconditioner`` (1e-10, relative) are
-    perturbed and every solve refines ``refine`` (2) times against the matrix itself: the backward
+    perturbed and every solve refines ``refine`` (2) times against the matrix itself (more perturbed
+    pivots than the n2 rows of the constraint block raise: the matrix is then (nearly) singular and a
+    perturbed factor would hide it, so :func:`rslab_factor` takes the LU, which reports it): the backward
     error reaches rounding (measured 4e-17 to 1.2e-16 on tcom(20) and fem_block; with 1e-12 the
     tiny perturbed pivots grew the factor and two steps left 4e-13 to 8e-11 on tcom(20)) and :class:`~morsuite.linalg.saddle_lu.SaddleLU` checks
     it on every solve as for any backend, falling back to rslab's LU. Used by
-    :func:`rslab_factor` for complex shifts, where it is 1.4-2x faster than the LU on fem_block
-    (docs/design/backends.md, 2026-11-28). Raises :class:`~morsuite.errors.SingularShiftError` when
+    :func:`rslab_factor` at every shift of such a model: on fem_block it took 0.61-0.67 of the LU's
+    time at complex shifts and 0.63-0.77 at real ones (docs/design/backends.md, 2026-11-28). Raises :class:`~morsuite.errors.SingularShiftError` when
     the factorization fails.
     """
 
@@ -138,6 +138,12 @@ class RslabLDLT:
         except (RuntimeError, ValueError) as exc:
             raise SingularShiftError(f"rslab LDL^T: the factorization failed ({exc})") from exc
         self.nnz = int(self._f.factor_nnz)
+        #: pivots perturbed; at most n2 is the zero block's share (300 of 363 on fem_block(4000) at every shift)
+        self.perturbed = int(self._f.n_perturbed)
+        n2 = int(pattern["shape"][1])
+        if self.perturbed > n2:  # a singular (1,1) block, e.g. at a pole: the perturbed factor would hide it
+            raise SingularShiftError(f"rslab LDL^T: {self.perturbed} pivots perturbed, more than the n2 = {n2} "
+                                     "of the constraint block: the matrix is (nearly) singular")
 
     def __reduce__(self):
         raise TypeError("an rslab factorization is a handle of this process; it cannot be pickled")
@@ -152,11 +158,14 @@ class RslabLDLT:
 
 
 def rslab_factor(As, pattern):
-    """rslab's factorization of ``As``: :class:`RslabLDLT` for complex values of a symmetric pattern
-    (:func:`rslab_ldlt_symbolic`) whose values are symmetric too, else :class:`RslabLU`. The values'
-    symmetry is checked exactly (the CSR order of the data equals the CSC order), O(nnz)."""
-    if np.iscomplexobj(As.data):
-        ldlt = rslab_ldlt_symbolic(pattern)
-        if ldlt is not None and np.array_equal(As.data[pattern["_csr_perm"]], As.data):
+    """rslab's factorization of ``As``: :class:`RslabLDLT` where M, D and K are symmetric
+    (:func:`rslab_ldlt_symbolic`) and the values of ``As`` are too, at real and complex shifts alike,
+    else :class:`RslabLU`. The values' symmetry is checked exactly (the CSR order of the data equals
+    the CSC order), O(nnz)."""
+    ldlt = rslab_ldlt_symbolic(pattern)
+    if ldlt is not None and np.array_equal(As.data[pattern["_csr_perm"]], As.data):
+        try:
             return RslabLDLT(As, pattern, ldlt)
+        except SingularShiftError:  # more perturbed pivots than the constraint block explains: the LU decides
+            pass
     return RslabLU(As, pattern)
