@@ -86,8 +86,8 @@ class RslabLU:
 
 
 #: rslab's LDL^T of a (complex) symmetric S(s) (:class:`RslabLDLT`): METIS ordering, static pivot
-#: perturbation (the zero block stops Bunch-Kaufman otherwise) and refinement steps per solve (2026-11-28)
-RSLAB_LDLT_SETTINGS = {"ordering": "metis", "preconditioner": 1e-10, "refine": 2}
+#: perturbation (the zero block stops Bunch-Kaufman otherwise), refinement steps per solve and their stop (2026-11-28)
+RSLAB_LDLT_SETTINGS = {"ordering": "metis", "preconditioner": 1e-10, "refine": 2, "target": 1e-15}
 
 
 def rslab_ldlt_symbolic(pattern):
@@ -112,19 +112,24 @@ def rslab_ldlt_symbolic(pattern):
 class RslabLDLT:
     r"""rslab's supernodal Bunch-Kaufman :math:`LDL^T` (MIT) of a (complex) symmetric equilibrated saddle matrix.
 
-    :math:`S(s)` is complex symmetric when M, D and K are symmetric (:math:`A_s = D S D` too, the
-    diagonal scaling being symmetric), so its plain transpose is itself: one factor of half the
-    fill of the LU serves ``solve`` with and without ``"T"``. The zero block of the constraints
-    stops Bunch-Kaufman's 1 x 1 pivots, so pivots below ``preconditioner`` (1e-10, relative) are
-    perturbed and every solve refines ``refine`` (2) times against the matrix itself (more perturbed
-    pivots than the n2 rows of the constraint block raise: the matrix is then (nearly) singular and a
-    perturbed factor would hide it, so :func:`rslab_factor` takes the LU, which reports it): the backward
-    error reaches rounding (measured 4e-17 to 1.2e-16 on tcom(20) and fem_block; with 1e-12 the
-    tiny perturbed pivots grew the factor and two steps left 4e-13 to 8e-11 on tcom(20)) and :class:`~morsuite.linalg.saddle_lu.SaddleLU` checks
-    it on every solve as for any backend, falling back to rslab's LU. Used by
-    :func:`rslab_factor` at every shift of such a model: on fem_block it took 0.61-0.67 of the LU's
-    time at complex shifts and 0.63-0.77 at real ones (docs/design/backends.md, 2026-11-28). Raises :class:`~morsuite.errors.SingularShiftError` when
-    the factorization fails.
+    :math:`S(s)` is complex symmetric when M, D and K are symmetric (real symmetric at a real shift;
+    :math:`A_s = D S D` too, the diagonal scaling being symmetric), so its plain transpose is itself:
+    one factor of half the fill of the LU serves ``solve`` with and without ``"T"``.
+
+    - **Pivots.** The zero block of the constraints stops Bunch-Kaufman's 1 x 1 pivots, so pivots
+      below ``RSLAB_LDLT_SETTINGS["preconditioner"]`` (1e-10, relative) are perturbed. More
+      perturbed pivots than the n2 rows of the constraint block raise
+      :class:`~morsuite.errors.SingularShiftError`: the matrix is then (nearly) singular, a
+      perturbed factor would hide it, and :func:`rslab_factor` takes the LU, which reports it.
+    - **Solves.** Each solve refines against the matrix itself, at most ``refine`` (2) times, until
+      rslab's normwise backward error is below ``target`` (1e-15): one step on fem_block, two on
+      tcom(20), where one left 2e-12. Measured backward errors 4e-17 to 1.2e-16 (with pivots
+      perturbed at 1e-12 instead, the factor grew and two steps left 4e-13 to 8e-11 on tcom(20)).
+      :class:`~morsuite.linalg.saddle_lu.SaddleLU` checks every solve as for any backend and falls
+      back to rslab's LU.
+
+    Cost against the LU (docs/design/backends.md, 2026-11-28): a factorization 0.6-0.9 of its time
+    on fem_block, a solve about twice its (the refinement step).
     """
 
     def __init__(self, As, pattern, symbolic=None):
@@ -151,9 +156,16 @@ class RslabLDLT:
     def solve(self, b, trans: str = "N"):
         """Solve ``A x = b``; ``trans="T"`` is the same solve (A is symmetric); b of shape (N, k) or (N,)."""
         b = np.asarray(b)
-        B = np.asarray(b.reshape(b.shape[0], -1), dtype=self.dtype)
-        refine = RSLAB_LDLT_SETTINGS["refine"]
-        X = np.column_stack([self._f.solve(np.ascontiguousarray(B[:, j]), refine=refine) for j in range(B.shape[1])])
+        B = b.reshape(b.shape[0], -1)
+        if np.iscomplexobj(B) and self.dtype == np.float64:  # a real factor: real and imaginary parts apart
+            B = np.hstack([B.real, B.imag])
+            X = self.solve(B)
+            X = X[:, : X.shape[1] // 2] + 1j * X[:, X.shape[1] // 2:]
+            return X[:, 0] if b.ndim == 1 else X
+        B = np.asarray(B, dtype=self.dtype)
+        st = RSLAB_LDLT_SETTINGS
+        X = np.column_stack([self._f.solve(np.ascontiguousarray(B[:, j]), refine=st["refine"], target=st["target"])
+                             for j in range(B.shape[1])])
         return X[:, 0] if b.ndim == 1 else X
 
 
