@@ -396,6 +396,14 @@ def test_rslab_takes_its_ldlt_where_the_model_is_symmetric():
             ref = np.linalg.solve(S.T if trans else S, B)
             x = f.solve(B, trans=trans, full=True)
             assert np.linalg.norm(x - ref) <= 1e-10 * np.linalg.norm(ref)
+    f = solver.factor(0.7)  # the real factor given a complex right-hand side: real and imaginary parts apart
+    rng = np.random.default_rng(1)
+    Bc = rng.standard_normal(B.shape) + 1j * rng.standard_normal(B.shape)
+    As = solver.matrix(0.7)  # unscaled: the factor is of D S D
+    d = f.dr
+    y = f.lu.solve(d[:, None] * Bc)
+    np.testing.assert_allclose(d[:, None] * y, np.linalg.solve(As.toarray(), Bc), rtol=0,
+                               atol=1e-10 * np.abs(np.linalg.solve(As.toarray(), Bc)).max())
     D = fom.D.tolil()
     D[0, 1] += 1e-3 * abs(D[0, 0]) + 1e-3  # unsymmetric damping: S(s) is not complex symmetric
     other = ms.models.Index3Model(fom.M, D.tocsr(), fom.K, fom.G, fom.F, fom.L, name="fem unsym",
