@@ -133,8 +133,8 @@ def choose(kl: int, ku: int, n2: int, n: int = 0, available: dict | None = None)
       at its cap on KLU's rounding, 7.547 against 7.582; an undamped random model of 32 rows led IRKA
       elsewhere);
     - a wide band (3D solids): PARDISO if installed and ``n >= B["pardiso_min_n"]``, else rslab's
-      supernodal LU if installed and ``n >= B["rslab_min_n"]`` (its LDL^T where M, D and K are
-      symmetric: :func:`~morsuite.linalg.backends_rslab.rslab_factor`), else SuperLU.
+      supernodal LU if installed and ``n >= B["rslab_min_n"]`` (its LDL^T at complex shifts where M, D
+      and K are symmetric: :func:`~morsuite.linalg.backends_rslab.rslab_factor`), else SuperLU.
 
     ``available``: :func:`morsuite.linalg.backends_ext.available` by default. Decided
     from the pattern (and what is installed) alone: the banded LU costs
@@ -156,8 +156,8 @@ def choose(kl: int, ku: int, n2: int, n: int = 0, available: dict | None = None)
     if av.get("pardiso") and n >= B["pardiso_min_n"]:
         return "pardiso", f"{wide}, n = {n} >= {B['pardiso_min_n']}: PARDISO"
     if av.get("rslab") and n >= B["rslab_min_n"]:
-        return "rslab", (f"{wide}, n = {n} >= {B['rslab_min_n']}: rslab's supernodal LU (its LDL^T where M, D, K "
-                         "are symmetric)")
+        return "rslab", (f"{wide}, n = {n} >= {B['rslab_min_n']}: rslab's supernodal LU (its LDL^T at complex shifts "
+                         "where M, D, K are symmetric)")
     return "superlu", f"{wide}, n = {n}: SuperLU"
 
 

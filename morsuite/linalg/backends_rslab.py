@@ -1,13 +1,13 @@
-r"""rslab's sparse factorizations (MIT, pure Rust; a default dependency): the supernodal LU and, for
-models with symmetric M, D and K, the supernodal Bunch-Kaufman LDL^T.
+r"""rslab's sparse factorizations (MIT, pure Rust; a default dependency): the supernodal LU and, at
+complex shifts of models with symmetric M, D and K, the supernodal Bunch-Kaufman LDL^T.
 
 ``"rslab"`` (:func:`rslab_factor`, the backend's entry in :class:`~morsuite.linalg.saddle.SaddlePointSolver`)
     rslab's supernodal left-looking LU (``path="lu"``) with threshold partial pivoting: its
     analysis (MC64 matching, the fill-reducing ordering of least fill among AMD, AMF, RCM and
     nested dissection) once per pattern from the pattern's magnitudes; per shift one numeric
-    factorization on one thread (:data:`RSLAB_SETTINGS`). For a model whose M, D and K are
-    symmetric, the LDL^T of :class:`RslabLDLT` instead, at real and complex shifts (half the fill;
-    1.3-1.6x faster on fem_block), its LU the first fallback. The fast backend on 3D solids.
+    factorization on one thread (:data:`RSLAB_SETTINGS`). At a complex shift of a model whose M, D
+    and K are symmetric, the LDL^T of :class:`RslabLDLT` instead (half the fill; 1.3-1.6x faster on
+    fem_block), its LU the first fallback. The fast backend on 3D solids.
 
 The helpers (the library's import, the pattern's magnitudes, values kept with the pattern) are those
 of :mod:`morsuite.linalg.backends_ext`. Measurements: ``docs/design/backends.md`` (2026-11-27, 2026-11-28).
@@ -128,8 +128,9 @@ class RslabLDLT:
       :class:`~morsuite.linalg.saddle_lu.SaddleLU` checks every solve as for any backend and falls
       back to rslab's LU.
 
-    Cost against the LU (docs/design/backends.md, 2026-11-28): a factorization 0.6-0.9 of its time
-    on fem_block, a solve about twice its (the refinement step).
+    Cost against the LU (docs/design/backends.md, 2026-11-28): a factorization with three solves
+    0.63-0.79 of its time at complex shifts of fem_block, a solve about twice its (the refinement
+    step). :func:`rslab_factor` takes it at complex shifts only. A real matrix is factored real.
     """
 
     def __init__(self, As, pattern, symbolic=None):
@@ -170,14 +171,19 @@ class RslabLDLT:
 
 
 def rslab_factor(As, pattern):
-    """rslab's factorization of ``As``: :class:`RslabLDLT` where M, D and K are symmetric
-    (:func:`rslab_ldlt_symbolic`) and the values of ``As`` are too, at real and complex shifts alike,
-    else :class:`RslabLU`. The values' symmetry is checked exactly (the CSR order of the data equals
-    the CSC order), O(nnz)."""
-    ldlt = rslab_ldlt_symbolic(pattern)
-    if ldlt is not None and np.array_equal(As.data[pattern["_csr_perm"]], As.data):
-        try:
-            return RslabLDLT(As, pattern, ldlt)
-        except SingularShiftError:  # more perturbed pivots than the constraint block explains: the LU decides
-            pass
+    """rslab's factorization of ``As``: :class:`RslabLDLT` at a complex shift where M, D and K are
+    symmetric (:func:`rslab_ldlt_symbolic`) and the values of ``As`` are too, else :class:`RslabLU`.
+    The values' symmetry is checked exactly (the CSR order of the data equals the CSC order), O(nnz).
+
+    Real shifts keep the LU: there the LDL^T's factorization gains less (0.74-0.89 of the LU's time
+    with three solves) and its solves cost about twice the LU's, so a solve-heavy caller lost:
+    modal truncation's shift-invert Lanczos on fem_block(20000) took 20.5 s against 13.0 s
+    (docs/design/backends.md, 2026-11-28)."""
+    if np.iscomplexobj(As.data):
+        ldlt = rslab_ldlt_symbolic(pattern)
+        if ldlt is not None and np.array_equal(As.data[pattern["_csr_perm"]], As.data):
+            try:
+                return RslabLDLT(As, pattern, ldlt)
+            except SingularShiftError:  # more perturbed pivots than the constraint block explains: the LU decides
+                pass
     return RslabLU(As, pattern)
