@@ -1,8 +1,9 @@
 """Benchmark ``rslab-ldlt``: rslab's LDL^T against its LU at the shifts of 3D solids, side by side.
 
-For a model with symmetric M, D and K the ``rslab`` backend factors :math:`S(s)` by rslab's
-Bunch-Kaufman LDL^T (:class:`~morsuite.linalg.backends_rslab.RslabLDLT`, pivots perturbed and solves
-refined), where it used rslab's LU until 2026-11-28. This bench runs both
+At a complex shift of a model with symmetric M, D and K the ``rslab`` backend factors :math:`S(s)`
+by rslab's Bunch-Kaufman LDL^T (:class:`~morsuite.linalg.backends_rslab.RslabLDLT`, pivots perturbed
+and solves refined), where it used rslab's LU until 2026-11-28; at real shifts it keeps the LU. This
+bench runs both, the LDL^T forced at the real shifts,
 through the model's solver (assembly, equilibration, factorization, backward-error check timed;
 the patterns' analyses made before and not timed) at the three band shifts of
 :func:`~morsuite.bench.backends.band_shifts` and at their moduli (real shifts), the two variants alternating with the order swapped
@@ -44,6 +45,20 @@ def _lu_only():
         saddle._LIBRARY_LU["rslab"] = old
 
 
+@contextlib.contextmanager
+def _ldlt_always():
+    """The ``rslab`` backend with its LDL^T at real shifts too (where M, D, K are symmetric), inside the block:
+    the variant that the real-shift rows compare with the LU, which the backend keeps there."""
+    from ..linalg import saddle
+    from ..linalg.backends_rslab import RslabLDLT, rslab_ldlt_symbolic
+    old = saddle._LIBRARY_LU["rslab"]
+    saddle._LIBRARY_LU["rslab"] = lambda As, pattern: RslabLDLT(As, pattern, rslab_ldlt_symbolic(pattern))
+    try:
+        yield
+    finally:
+        saddle._LIBRARY_LU["rslab"] = old
+
+
 def ldlt_against_lu(spec: str, echo=None) -> dict:
     """One model's row: median seconds per shift of LDL^T and LU (factor, solve, transposed solve) and their
     ratio, at the three complex band shifts (``t_ldlt``, ``t_lu``, ``ldlt_over_lu``) and at their moduli,
@@ -54,7 +69,8 @@ def ldlt_against_lu(spec: str, echo=None) -> dict:
     solvers = {"ldlt": fom.new_solver(cache_size=0, backend="rslab"), "lu": fom.new_solver(cache_size=0, backend="rslab")}
     with _lu_only():
         solvers["lu"].factor(shifts[1])  # the analyses: once per pattern, not timed
-    solvers["ldlt"].factor(shifts[1])
+    with _ldlt_always():
+        solvers["ldlt"].factor(shifts[1])
     B = np.vstack([fom.F, np.zeros((fom.n2, fom.m))]).astype(complex)
     C = np.vstack([fom.L.T.toarray() if hasattr(fom.L, "toarray") else fom.L.T, np.zeros((fom.n2, fom.p))]).astype(complex)
     row = {"model": spec, "n1": fom.n1, "n2": fom.n2, "shifts": [complex(s) for s in shifts]}
@@ -65,7 +81,7 @@ def ldlt_against_lu(spec: str, echo=None) -> dict:
         for i, s in enumerate(points):
             A = solvers["lu"].matrix(s)
             for k in (("ldlt", "lu") if i % 2 == 0 else ("lu", "ldlt")):
-                ctx = _lu_only() if k == "lu" else contextlib.nullcontext()
+                ctx = _lu_only() if k == "lu" else _ldlt_always()
                 with ctx:
                     t0 = time.perf_counter()
                     f = solvers[k].factor(s)

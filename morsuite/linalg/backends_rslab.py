@@ -129,7 +129,7 @@ class RslabLDLT:
       back to rslab's LU.
 
     Cost against the LU (docs/design/backends.md, 2026-11-28): a factorization with three solves
-    0.63-0.79 of its time at complex shifts of fem_block, a solve about twice its (the refinement
+    0.61-0.79 of its time at complex shifts of fem_block, a solve about twice its (the refinement
     step). :func:`rslab_factor` takes it at complex shifts only. A real matrix is factored real.
     """
 
@@ -176,7 +176,7 @@ def rslab_factor(As, pattern):
     The values' symmetry is checked exactly (the CSR order of the data equals the CSC order), O(nnz).
 
     Real shifts keep the LU: there the LDL^T's factorization gains less (0.74-0.89 of the LU's time
-    with three solves) and its solves cost about twice the LU's, so a solve-heavy caller lost:
+    with three solves, two runs) and its solves cost about twice the LU's, so a solve-heavy caller lost:
     modal truncation's shift-invert Lanczos on fem_block(20000) took 20.5 s against 13.0 s
     (docs/design/backends.md, 2026-11-28)."""
     if np.iscomplexobj(As.data):
