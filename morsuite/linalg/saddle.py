@@ -56,7 +56,7 @@ from .saddle_lu import SaddleLU, SolverStats, rcond_estimate
 
 __all__ = ["SaddlePointSolver", "SaddleLU", "SolverStats"]
 
-#: the factorization class of each library backend
+#: the factorization (class or factory: rslab chooses its LDL^T or LU) of each library backend
 _LIBRARY_LU = {"klu": KLULU, "rslab": rslab_factor, "pardiso": PardisoLU}
 
 
