@@ -33,26 +33,15 @@ MODELS_QUICK = ("fem_block:n1=1500",)
 
 
 @contextlib.contextmanager
-def _lu_only():
-    """The ``rslab`` backend with its LU at every shift (the rule before 2026-11-28), inside the block."""
+def _rslab_as(kind: str):
+    """The ``rslab`` backend with one factorization at every shift inside the block: ``"lu"`` its LU (the rule
+    before 2026-11-28), ``"ldlt"`` its LDL^T at real shifts too (where M, D, K are symmetric: the variant the
+    real-shift rows compare with the LU, which the backend keeps there)."""
     from ..linalg import saddle
-    from ..linalg.backends_rslab import RslabLU
+    from ..linalg.backends_rslab import RslabLDLT, RslabLU, rslab_ldlt_symbolic
+    make = {"lu": RslabLU, "ldlt": lambda As, pattern: RslabLDLT(As, pattern, rslab_ldlt_symbolic(pattern))}[kind]
     old = saddle._LIBRARY_LU["rslab"]
-    saddle._LIBRARY_LU["rslab"] = RslabLU
-    try:
-        yield
-    finally:
-        saddle._LIBRARY_LU["rslab"] = old
-
-
-@contextlib.contextmanager
-def _ldlt_always():
-    """The ``rslab`` backend with its LDL^T at real shifts too (where M, D, K are symmetric), inside the block:
-    the variant that the real-shift rows compare with the LU, which the backend keeps there."""
-    from ..linalg import saddle
-    from ..linalg.backends_rslab import RslabLDLT, rslab_ldlt_symbolic
-    old = saddle._LIBRARY_LU["rslab"]
-    saddle._LIBRARY_LU["rslab"] = lambda As, pattern: RslabLDLT(As, pattern, rslab_ldlt_symbolic(pattern))
+    saddle._LIBRARY_LU["rslab"] = make
     try:
         yield
     finally:
@@ -67,10 +56,9 @@ def ldlt_against_lu(spec: str, echo=None) -> dict:
     fom = models.parse(spec)
     shifts = band_shifts(fom)
     solvers = {"ldlt": fom.new_solver(cache_size=0, backend="rslab"), "lu": fom.new_solver(cache_size=0, backend="rslab")}
-    with _lu_only():
-        solvers["lu"].factor(shifts[1])  # the analyses: once per pattern, not timed
-    with _ldlt_always():
-        solvers["ldlt"].factor(shifts[1])
+    for k, solver in solvers.items():
+        with _rslab_as(k):
+            solver.factor(shifts[1])  # the analyses: once per pattern, not timed
     B = np.vstack([fom.F, np.zeros((fom.n2, fom.m))]).astype(complex)
     C = np.vstack([fom.L.T.toarray() if hasattr(fom.L, "toarray") else fom.L.T, np.zeros((fom.n2, fom.p))]).astype(complex)
     row = {"model": spec, "n1": fom.n1, "n2": fom.n2, "shifts": [complex(s) for s in shifts]}
@@ -81,8 +69,7 @@ def ldlt_against_lu(spec: str, echo=None) -> dict:
         for i, s in enumerate(points):
             A = solvers["lu"].matrix(s)
             for k in (("ldlt", "lu") if i % 2 == 0 else ("lu", "ldlt")):
-                ctx = _lu_only() if k == "lu" else _ldlt_always()
-                with ctx:
+                with _rslab_as(k):
                     t0 = time.perf_counter()
                     f = solvers[k].factor(s)
                     x = f.solve(fom.F, full=True)

@@ -97,7 +97,7 @@ def rslab_ldlt_symbolic(pattern):
     pattern. Cost: one METIS ordering (0.25 s at fem_block(4000), 1.7 s at 20000)."""
     def make():
         if not _symmetric_blocks(pattern):
-            return None
+            return False  # not None: None is _stored's "lost in pickling", which would check again every shift
         rslab = _rslab()
         data, ind, ptr = _magnitudes(pattern)
         N = ptr.size - 1
@@ -106,7 +106,7 @@ def rslab_ldlt_symbolic(pattern):
         A = sp.csc_matrix((np.asarray(data, dtype=float), ind.copy(), ptr.copy()), shape=(N, N))
         sym = rslab.analyze(A, path="ldlt", ordering=RSLAB_LDLT_SETTINGS["ordering"], threads=1)
         return sym, sel
-    return _stored(pattern, ("rslab-ldlt",), make)
+    return _stored(pattern, ("rslab-ldlt",), make) or None
 
 
 class RslabLDLT:
