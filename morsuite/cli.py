@@ -225,9 +225,10 @@ def _add_run_parser(sub):
         from pathlib import Path
 
         from .studies import build_plan, load_spec, run
-        from .studies.batch import shared_compute, usable_cores
+        from .studies.batch import shared_compute
         from .studies.cache import Cache
         from .studies.memo import SpecMemo
+        from .studies.workers import sigterm_exits, usable_cores
 
         cache = Cache(args.cache or Path(args.out) / ".cache", read=not args.no_cache)
         memo = SpecMemo(cache)  # validated models/methods: a cached study builds no model
@@ -236,17 +237,19 @@ def _add_run_parser(sub):
         if not args.dry_run and jobs > 1 and args.scheduler is None and not args.no_cache:
             # what any of the studies lacks computed once, then each study's report, on pinned workers
             memo.flush()
-            shared_compute(studies, cache, jobs, out=args.out, quiet=args.quiet,
-                           run_kwargs={"out": args.out, "cache_dir": args.cache, "quiet": args.quiet,
-                                       "rerender": args.rerender})
+            with sigterm_exits():  # stopped, the run stops its workers (studies.workers)
+                shared_compute(studies, cache, jobs, out=args.out, quiet=args.quiet,
+                               run_kwargs={"out": args.out, "cache_dir": args.cache, "quiet": args.quiet,
+                                           "rerender": args.rerender})
             return 0
         for study in studies:
             if args.dry_run:
                 print(f"{study.name} ({study.path}): {len(study.scenes)} scenes; would compute")
                 print("  " + "\n  ".join(build_plan(study).describe()))
                 continue
-            run(study, out=args.out, cache_dir=args.cache, use_cache=not args.no_cache, jobs=jobs,
-                scheduler=args.scheduler, quiet=args.quiet, rerender=args.rerender)
+            with sigterm_exits():
+                run(study, out=args.out, cache_dir=args.cache, use_cache=not args.no_cache, jobs=jobs,
+                    scheduler=args.scheduler, quiet=args.quiet, rerender=args.rerender)
         return 0
 
     p = sub.add_parser("run", help="run study specs (TOML): figures, tables, manifest in OUT/NAME/")

@@ -18,9 +18,9 @@ cores) first computes what any of the studies lacks, all at once, with :func:`sh
 - a model's norm units start when its Gramian factors (below) and their own reductions have
   finished (in a study's own graph they wait for all of the model's reductions: there a ``bt``
   reduction pays, and reports, the Gramian factors it computed);
-- the Gramian factors' units start first, then the longest units (their times in the results
-  folder's manifests when a previous run left them, unknown units before known ones), each new unit on the first
-  free worker; a study's own run (figures, tables, page) is a unit too, which starts as
+- the Gramian factors' units start first, then the longest units (their times in the results folder's
+  manifests when a previous run left them, unknown units first), each on the first free worker (stopped, the
+  run stops them: :mod:`~morsuite.studies.workers`); a study's own run (figures, tables, page) is a unit, which starts as
   soon as the units it reads are done; when only study runs are left, it draws its figures on
   ``jobs`` processes (:func:`~morsuite.studies.outputs.realize_many`: nothing timed shares the
   cores then, and the last study's figures are the run's tail).
@@ -40,8 +40,8 @@ they run after the reductions), so that a run pays them once, not once per worke
 The paper's IRKA reads them only to score its shortlist when it does not converge
 (:data:`GRAMIAN_WAITERS`): it waits for the unit when there is one, but does not call for one.
 
-Cost: the units' own; each worker process builds the models it meets (once) and reads a
-model's Gramian factors from the store when a unit needs them (once per worker and model).
+Cost: the units' own; each worker process builds the models it meets (once) and reads a model's
+Gramian factors from the store when a unit needs them (once per worker and model).
 """
 
 from __future__ import annotations
@@ -57,6 +57,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .plan import build_plan
+from .workers import terminate_on_exit, usable_cores, watch_parent
 
 __all__ = ["Shared", "shared_compute", "split_claims", "SPLIT", "usable_cores"]
 
@@ -74,14 +75,6 @@ GRAMIAN_READERS = ("bt", "so-h2", "irka-fo")
 #: for one (at n1 = 20,577 the paper's IRKA stalled before the unit had finished and paid the
 #: factors a second time: 171 LUs, 1,085 s, 2026-11-28)
 GRAMIAN_WAITERS = ("irka", "irka-projected")
-
-
-def usable_cores() -> list:
-    """The cores this process may run on (``os.sched_getaffinity``), sorted."""
-    try:
-        return sorted(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        return list(range(os.cpu_count() or 1))
 
 
 @dataclass
@@ -115,6 +108,7 @@ def _pin(counter, cores, store=None):
         from .gramian_store import GramianStore
         root, write, salt = store
         use_store(GramianStore(Cache(root, write=write), salt=salt))
+    watch_parent()  # a run killed outright takes its workers with it
     with counter.get_lock():
         i = counter.value
         counter.value += 1
@@ -414,7 +408,8 @@ def _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0):
     results, done, running = {}, set(), {}
     pending = dict(units)
     with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_pin,
-                             initargs=(counter, cores, (str(cache.root), cache.write, salt))) as pool:
+                             initargs=(counter, cores, (str(cache.root), cache.write, salt))) as pool, \
+            terminate_on_exit(pool):
         while pending or running:
             # the Gramian factors first (their readers wait for them), then the longest units
             ready = sorted((u for u in pending.values() if u.deps <= done),

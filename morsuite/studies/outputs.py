@@ -44,6 +44,7 @@ from ..report.files import sha256_file
 from ..report.tables import TableData
 from .cache import source_digest
 from .spec import plain
+from .workers import terminate_on_exit, watch_parent
 
 __all__ = ["figure_key", "table_key", "realize", "realize_many", "previous_records", "OUTPUT_KINDS"]
 
@@ -154,7 +155,8 @@ def realize_many(pairs, outdir: Path, formats, previous: dict, rerender: bool = 
     if jobs <= 1 or len(figures) < 2 or "fork" not in multiprocessing.get_all_start_methods():
         return [realize(o, item, outdir, formats, previous, rerender) for o, item in pairs]
     out = [None] * len(pairs)
-    with ProcessPoolExecutor(max_workers=min(jobs, len(figures)), mp_context=multiprocessing.get_context("fork")) as pool:
+    with ProcessPoolExecutor(max_workers=min(jobs, len(figures)), mp_context=multiprocessing.get_context("fork"),
+                             initializer=watch_parent) as pool, terminate_on_exit(pool):
         futures = {k: pool.submit(realize, pairs[k][0], pairs[k][1], outdir, formats,
                                   {pairs[k][0].id: previous[pairs[k][0].id]} if pairs[k][0].id in previous else {},
                                   rerender) for k in figures}
