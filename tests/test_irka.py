@@ -134,6 +134,8 @@ def test_refined_solves_and_gram_schmidt_reach_the_long_double_accuracy():
 
 def test_refinement_operator_in_long_double():
     """S(a) x and S(a)^T x of the refinement, in long double, against scipy's product in double."""
+    from morsuite.linalg.refine import SaddleOperator
+
     fom = ms.models.get("tcom", nc=20)
     red = ms.reducers.make("irka", fom)
     red._setup()
@@ -154,25 +156,81 @@ def test_refinement_operator_in_long_double():
             got = yr.astype(float) + (0 if yi is None else 1j * yi.astype(float))
             assert (yi is None) == (np.imag(a) == 0)
             assert np.max(np.abs(got - ref)) <= 1e-14 * np.max(np.abs(ref))
-            # complex long double arithmetic on the complex entries, summed in the same order: the op
-            # claims its bits, which hold where numpy's complex multiply has no fused multiply-add
-            # (x87 long double); allow a few units of the long double roundoff of each row's terms,
-            # far below the double precision roundoff that a product in double would leave
-            m, d, k, g = red._refiner.cache["parts"]
-            aa = np.clongdouble(a)
-            data = (aa * aa) * m + aa * d + k + g
-            idx, starts, nonempty = red._refiner.cache["structure"][trans]
-            data = data if trans else data[red._refiner.cache["perm"]]
-            xe = x.astype(np.clongdouble)
-            ye = np.zeros(N, dtype=np.clongdouble)
-            ye[nonempty] = np.add.reduceat(data * xe[idx], starts)
+            # the numpy long double path (no numba) gives the same product within its own rounding
+            ld = SaddleOperator(red._solver.pattern, double_double=False).at(a, trans, True)
+            lr, li = ld(x.real.astype(np.longdouble), x.imag.astype(np.longdouble))
             yr, yi = op(x.real.astype(np.longdouble), x.imag.astype(np.longdouble))
-            size = np.zeros(N, dtype=np.longdouble)
-            size[nonempty] = np.add.reduceat(np.abs(data) * np.abs(xe[idx]), starts)
-            bound = 8 * np.finfo(np.longdouble).eps * size
-            assert np.all(np.abs(yr - ye.real) <= bound) and np.all(np.abs(yi - ye.imag) <= bound)
+            assert np.max(np.abs(lr - yr)) <= 64 * np.finfo(np.longdouble).eps * np.max(np.abs(ref))
+            assert np.max(np.abs(li - yi)) <= 64 * np.finfo(np.longdouble).eps * np.max(np.abs(ref))
 
 
+EPS = np.finfo(float).eps
+
+
+def _exact_product(pattern, a, trans, xr, xi):
+    """S(a) x (or S(a)^T x) in exact rational arithmetic on the solver's pattern, and sum |S||x| per row."""
+    from fractions import Fraction as Q
+
+    ar, ai = Q(float(np.real(a))), Q(float(np.imag(a)))
+    a2r, a2i = ar * ar - ai * ai, 2 * ar * ai
+    rows, cols = np.asarray(pattern["_rows"]), np.asarray(pattern["_cols"])
+    n = np.asarray(pattern["_indptr"]).size - 1
+    yr, yi, size = [Q(0)] * n, [Q(0)] * n, [0.0] * n
+    for t in range(rows.size):
+        m, d, k, g = (Q(float(pattern[key][t])) for key in ("_m", "_d", "_k", "_g"))
+        sr, si = a2r * m + ar * d + k + g, a2i * m + ai * d
+        i, j = (cols[t], rows[t]) if trans else (rows[t], cols[t])
+        xrj, xij = xr[j], xi[j]  # exact (Fractions)
+        yr[i] += sr * xrj - si * xij
+        yi[i] += sr * xij + si * xrj
+        size[i] += float(abs(sr) * (abs(xrj) + abs(xij)) + abs(si) * (abs(xrj) + abs(xij)))
+    return yr, yi, np.array(size)
+
+
+@pytest.mark.parametrize("a", [0.3 + 0.7j, 0.05, 1.7 - 0.2j])
+def test_refinement_product_against_exact_rational_arithmetic(a):
+    """The double-double product (dd_kernels) is exact to about 2^-104 of each row's |S||x|: checked
+    against exact rational arithmetic on a small model, in both orientations; numpy's long double
+    path is exact only to about 2^-64 of it (x87), the double-double one far beyond."""
+    from fractions import Fraction as Q
+
+    from morsuite.linalg import kernels
+    from morsuite.linalg.refine import SaddleOperator
+
+    if not kernels.available():
+        pytest.skip("numba is not installed")
+    fom = ms.models.get("tcom", nc=6)
+    solver = fom.new_solver(cache_size=0)
+    solver.factor(0.3j)  # the pattern with its CSR view
+    rng = np.random.default_rng(2)
+    N = fom.n1 + fom.n2
+    # components below double precision: a refined solution in long double
+    xr = rng.standard_normal(N).astype(np.longdouble) * (1 + np.longdouble(2.0) ** -60)
+    xi = rng.standard_normal(N).astype(np.longdouble) / 3
+    for trans in (False, True):
+        er, ei, size = _exact_product(solver.pattern, a, trans, [Q(*v.as_integer_ratio()) for v in xr],
+                                      [Q(*v.as_integer_ratio()) for v in xi])
+        op = SaddleOperator(solver.pattern, double_double=True)
+        yr, yi = op.at(a, trans, True)(xr, xi)
+        err = np.array([float(abs(Q(*u.as_integer_ratio()) - e)) for u, e in zip(yr, er)]
+                       + [float(abs(Q(*u.as_integer_ratio()) - e)) for u, e in zip(yi, ei)])
+        # the result is rounded once to long double (2^-64 of |y|) and carries the sums' 2^-104-level error
+        ly = np.concatenate([np.abs(yr), np.abs(yi)]).astype(float)
+        eps_ld = float(np.finfo(np.longdouble).eps)  # 2^-63 on x87: twice the final rounding
+        assert np.all(err <= eps_ld * ly + 2.0 ** -100 * np.concatenate([size, size])), (trans, err.max())
+        # the residual of an LU solution, where b - S x cancels to about eps |S||x|: rounded once to
+        # double from double-double (a residual from a long double product keeps about 3 digits here)
+        lu = solver.factor(a)
+        b = rng.standard_normal(N) + 1j * rng.standard_normal(N)
+        b[fom.n1:] = 0
+        x = lu.solve(b[: fom.n1], trans=trans, full=True)
+        er, ei, size = _exact_product(solver.pattern, a, trans, [Q(v) for v in x.real], [Q(v) for v in x.imag])
+        r = op.at(a, trans, True).residual(b.real, b.imag, x.real, x.imag)
+        exact = np.array([float(Q(u) - e) for u, e in zip(b.real, er)]) + 1j * np.array(
+            [float(Q(u) - e) for u, e in zip(b.imag, ei)])
+        assert np.abs(exact).max() < 1e-12 * size.max()  # it does cancel
+        assert np.all(np.abs(r.real - exact.real) <= EPS * np.abs(exact.real) + 2.0 ** -100 * size)
+        assert np.all(np.abs(r.imag - exact.imag) <= EPS * np.abs(exact.imag) + 2.0 ** -100 * size)
 @pytest.mark.parametrize("pivot", [True, False])
 def test_gram_schmidt_column_updates_are_bit_identical_to_rank_one_updates(pivot):
     """The column-at-a-time updates of gram_schmidt give the bits of R -= outer(q, c), on localised,
