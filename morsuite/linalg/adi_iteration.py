@@ -32,7 +32,7 @@ norm is taken, so that :math:`W_jW_j^T` is the residual of the projected
 equation, and in the factor once, when it is asked for.
 
 With ``refine`` > 0 each shifted solve is refined that many times with the
-same LU and a residual in ``np.longdouble``
+same LU and a residual beyond double precision
 (:func:`~morsuite.linalg.refine.refine_columns`). An unrefined solve at a
 shift next to a lightly damped or slow pole has a forward error of about
 :math:`\kappa\varepsilon`, and the Gramian inherits it: on tcom(nc = 2000)

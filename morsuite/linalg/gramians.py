@@ -19,7 +19,7 @@ nothing, and the observability factor corrects the ADI truncation of
 floor of every H2 error computed from it.
 
 Accuracy: with ``refine=1`` (the default) each controllability solve is
-refined once with a long-double residual, and the factor carries its
+refined once with an extended-precision residual (:mod:`morsuite.linalg.refine`), and the factor carries its
 estimated forward error (``solve_error``), which :func:`morsuite.linalg.h2.norm_squared`
 puts into the floor of :math:`\|T\|_{\mathcal H_2}^2` (``docs/design/norms.md``).
 

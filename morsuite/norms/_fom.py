@@ -2,8 +2,8 @@ r"""The full model's transfer function at single shifts, to extended precision, 
 
 :math:`T(s)\,b = L x` with :math:`S(s)[x; z] = [Fb; 0]`, one sparse LU of
 :math:`S(s)` per shift (a conjugate shift reuses it), then ``refine`` steps of
-iterative refinement whose residual :math:`[Fb; 0] - S(s)[x; z]` is formed in
-``np.longdouble`` with the same LU, the solution kept in long double and
+iterative refinement whose residual :math:`[Fb; 0] - S(s)[x; z]` is formed beyond
+double (double-double, :mod:`morsuite.linalg.refine`) with the same LU, the solution kept in long double and
 :math:`Lx` summed in long double. Where :math:`T - T_r` is 1e-12 of :math:`T`,
 a response rounded to double has lost all but four digits of the difference
 (its error is :math:`\varepsilon|T|`); refined, the difference keeps

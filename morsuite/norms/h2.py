@@ -50,7 +50,7 @@ For a stable, strictly proper, real :math:`H`,
         reduced model's pole frequencies and at the model's Ritz frequencies
         (the LR-ADI shifts of cached Gramian factors), one sparse LU per node
         (:mod:`morsuite.analysis._quad`). :math:`T(j\omega)` and
-        :math:`T_r(j\omega)` are refined with long-double residuals
+        :math:`T_r(j\omega)` are refined with extended-precision residuals
         (:class:`~morsuite.analysis._fom.FomResponse`,
         :class:`~morsuite.analysis._rom.RomResponse`) and subtracted in long
         double, so the difference is accurate to double precision even where
