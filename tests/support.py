@@ -14,6 +14,9 @@ Import with ``from support import ...`` (pytest puts ``tests/`` on ``sys.path`` 
 
 from __future__ import annotations
 
+import inspect
+import os
+
 import numpy as np
 import scipy.linalg as sla
 
@@ -30,6 +33,50 @@ def rounding_unit(n) -> float:
     for the orthogonality of a reorthogonalized basis), never a fixed 1e-14: the last bits
     differ between BLAS kernels and thread counts."""
     return 10.0 * np.sqrt(n) * EPS
+
+
+def solve_tolerance(A, factor=1.0) -> float:
+    r"""Relative forward-error level of a backward-stable solve with the dense matrix A:
+    ``factor`` :math:`\times` :func:`rounding_unit` (n) :math:`\times \kappa_2(A)`.
+
+    Two backward-stable solves of :math:`A x = b` (a sparse LU and ``np.linalg.solve``, two
+    BLAS kernels, two thread counts) agree to about :math:`n \epsilon \kappa(A)` in
+    :math:`\|x_1 - x_2\| / \|x\|` (the 10 in :func:`rounding_unit` covers the constant of the
+    backward error and the two solves; ``factor`` is for a longer chain of operations).
+    :math:`\kappa_2(A)` from ``np.linalg.cond``: an SVD, small matrices only."""
+    A = np.asarray(A)
+    return factor * rounding_unit(A.shape[0]) * float(np.linalg.cond(A))
+
+
+def backward_error(A, x, b) -> float:
+    r"""Normwise backward error :math:`\|A x - b\|_F / (\|A\|_F \|x\|_F + \|b\|_F)` of an
+    approximate solution x of :math:`A x = b` (any number of columns; A dense or sparse).
+
+    A backward-stable solver makes it a few :func:`rounding_unit` (n) whatever the
+    conditioning of A: compare it with ``rounding_unit(n)``, not with a fixed constant, and
+    not the residual relative to ``b`` alone (which carries :math:`\kappa(A)`)."""
+    x = np.asarray(x)
+    b = np.asarray(b)
+    norm_a = sla.norm(A.toarray()) if hasattr(A, "toarray") else np.linalg.norm(np.asarray(A))
+    r = A @ x - b
+    return float(np.linalg.norm(r) / (norm_a * np.linalg.norm(x) + np.linalg.norm(b)))
+
+
+def assert_rounding(value, bound, what="error") -> None:
+    """Assert ``value <= bound`` for a rounding-level check, with both numbers in the message.
+
+    With the environment variable ``MORSUITE_TOL_LOG`` naming a file, each call appends a
+    line ``test-id:line value bound ratio``: run the suite with it on a new machine, BLAS or
+    thread count to see the margin of every rounding-level check (the comments beside them
+    give the values measured when they were written)."""
+    value, bound = float(value), float(bound)
+    log = os.environ.get("MORSUITE_TOL_LOG")
+    if log:
+        caller = inspect.currentframe().f_back
+        where = f"{os.environ.get('PYTEST_CURRENT_TEST', '?').split(' ')[0]}:{caller.f_lineno}"
+        with open(log, "a") as fh:
+            fh.write(f"{where} {what!r} {value:.3e} {bound:.3e} {value / bound if bound else np.inf:.2e}\n")
+    assert value <= bound, f"{what}: {value:.3e} > rounding-level bound {bound:.3e}"
 
 
 def orthonormality_error(V, M=None) -> tuple[float, float]:
