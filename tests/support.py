@@ -48,6 +48,19 @@ def solve_tolerance(A, factor=1.0) -> float:
     return factor * rounding_unit(A.shape[0]) * float(np.linalg.cond(A))
 
 
+def transfer_tolerance(P, B, C, factor=1.0) -> float:
+    r"""Relative rounding level of a transfer function value :math:`H = C P^{-1} B` computed by a
+    backward-stable solve with the dense matrix P: :func:`solve_tolerance` (P) times
+    :math:`\|C\|_2 \|P^{-1} B\|_F / \|H\|_F`, the amplification by the output map (a first-order
+    realization's velocities grow with the frequency while C reads the positions; outputs that
+    cancel). Compare :math:`\|H_1 - H_2\|_F / \|H_2\|_F` of two realizations with the sum of
+    their levels."""
+    P = np.asarray(P)
+    X = np.linalg.solve(P, np.asarray(B))
+    H = np.asarray(C) @ X
+    return solve_tolerance(P, factor) * np.linalg.norm(C, 2) * np.linalg.norm(X) / np.linalg.norm(H)
+
+
 def condest(A) -> float:
     r"""Estimate of :math:`\kappa_\infty(D_r A)`, :math:`D_r` scaling each row of the sparse square
     matrix A to largest entry 1: the :math:`\kappa` of :func:`solve_tolerance` for a matrix too large
