@@ -14,6 +14,9 @@ Import with ``from support import ...`` (pytest puts ``tests/`` on ``sys.path`` 
 
 from __future__ import annotations
 
+import inspect
+import os
+
 import numpy as np
 import scipy.linalg as sla
 
@@ -30,6 +33,84 @@ def rounding_unit(n) -> float:
     for the orthogonality of a reorthogonalized basis), never a fixed 1e-14: the last bits
     differ between BLAS kernels and thread counts."""
     return 10.0 * np.sqrt(n) * EPS
+
+
+def solve_tolerance(A, factor=1.0) -> float:
+    r"""Relative forward-error level of a backward-stable solve with the dense matrix A:
+    ``factor`` :math:`\times` :func:`rounding_unit` (n) :math:`\times \kappa_2(A)`.
+
+    Two backward-stable solves of :math:`A x = b` (a sparse LU and ``np.linalg.solve``, two
+    BLAS kernels, two thread counts) agree to about :math:`n \epsilon \kappa(A)` in
+    :math:`\|x_1 - x_2\| / \|x\|` (the 10 in :func:`rounding_unit` covers the constant of the
+    backward error and the two solves; ``factor`` is for a longer chain of operations).
+    :math:`\kappa_2(A)` from ``np.linalg.cond``: an SVD, small matrices only."""
+    A = np.asarray(A)
+    return factor * rounding_unit(A.shape[0]) * float(np.linalg.cond(A))
+
+
+def transfer_tolerance(P, B, C, factor=1.0) -> float:
+    r"""Relative rounding level of a transfer function value :math:`H = C P^{-1} B` computed by a
+    backward-stable solve with the dense matrix P: :func:`solve_tolerance` (P) times
+    :math:`\|C\|_2 \|P^{-1} B\|_F / \|H\|_F`, the amplification by the output map (a first-order
+    realization's velocities grow with the frequency while C reads the positions; outputs that
+    cancel). Compare :math:`\|H_1 - H_2\|_F / \|H_2\|_F` of two realizations with the sum of
+    their levels."""
+    P = np.asarray(P)
+    X = np.linalg.solve(P, np.asarray(B))
+    H = np.asarray(C) @ X
+    return solve_tolerance(P, factor) * np.linalg.norm(C, 2) * np.linalg.norm(X) / np.linalg.norm(H)
+
+
+def condest(A) -> float:
+    r"""Estimate of :math:`\kappa_\infty(D_r A)`, :math:`D_r` scaling each row of the sparse square
+    matrix A to largest entry 1: the :math:`\kappa` of :func:`solve_tolerance` for a matrix too large
+    for an SVD.
+
+    It bounds Skeel's condition number :math:`\|\,|A^{-1}|\,|A|\,\|_\infty`, which governs the
+    forward error of an LU with partial pivoting and does not change with the rows' scaling (a
+    first-order realization's rows differ by orders of magnitude; the plain :math:`\kappa(A)`
+    would then be a loose bound). Hager-Higham estimate (``scipy.sparse.linalg.onenormest``)
+    on :math:`(D_r A)^T`; cost: one sparse LU and a few solves."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    A = sp.csr_matrix(A)
+    X = sp.csc_matrix((sp.diags(1.0 / abs(A).max(axis=1).toarray().ravel()) @ A).T)  # kappa_inf(Y) = kappa_1(Y^T)
+    lu = spla.splu(X)
+    inv = spla.LinearOperator(X.shape, matvec=lu.solve, rmatvec=lambda x: lu.solve(x, trans="H"), dtype=X.dtype)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # onenormest's sign vectors of zeros
+        return float(spla.onenormest(X) * spla.onenormest(inv))
+
+
+def backward_error(A, x, b) -> float:
+    r"""Normwise backward error :math:`\|A x - b\|_F / (\|A\|_F \|x\|_F + \|b\|_F)` of an
+    approximate solution x of :math:`A x = b` (any number of columns; A dense or sparse).
+
+    A backward-stable solver makes it a few :func:`rounding_unit` (n) whatever the
+    conditioning of A: compare it with ``rounding_unit(n)``, not with a fixed constant, and
+    not the residual relative to ``b`` alone (which carries :math:`\kappa(A)`)."""
+    x = np.asarray(x)
+    b = np.asarray(b)
+    norm_a = sla.norm(A.toarray()) if hasattr(A, "toarray") else np.linalg.norm(np.asarray(A))
+    r = A @ x - b
+    return float(np.linalg.norm(r) / (norm_a * np.linalg.norm(x) + np.linalg.norm(b)))
+
+
+def assert_rounding(value, bound, what="error") -> None:
+    """Assert ``value <= bound`` for a rounding-level check, with both numbers in the message.
+
+    With the environment variable ``MORSUITE_TOL_LOG`` naming a file, each call appends a
+    line ``test-id:line value bound ratio``: run the suite with it on a new machine, BLAS or
+    thread count to see the margin of every rounding-level check (the comments beside them
+    give the values measured when they were written)."""
+    value, bound = float(value), float(bound)
+    log = os.environ.get("MORSUITE_TOL_LOG")
+    if log:
+        caller = inspect.currentframe().f_back
+        where = f"{os.environ.get('PYTEST_CURRENT_TEST', '?').split(' ')[0]}:{caller.f_lineno}"
+        with open(log, "a") as fh:
+            fh.write(f"{where} {what!r} {value:.3e} {bound:.3e} {value / bound if bound else np.inf:.2e}\n")
+    assert value <= bound, f"{what}: {value:.3e} > rounding-level bound {bound:.3e}"
 
 
 def orthonormality_error(V, M=None) -> tuple[float, float]:

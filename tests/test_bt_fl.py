@@ -16,6 +16,7 @@ from morsuite.linalg.warmup import warm_kernels
 from morsuite.reducers.base import BLAS_THREADS
 from morsuite.utils import blas_threads
 from morsuite.reducers.bt.frequency_limited import band_factors, band_nodes, compress
+from support import assert_rounding, rounding_unit
 
 
 def _dense_band_gramians(fom, band):
@@ -73,12 +74,19 @@ def test_band_factors_match_the_dense_closed_form(dsms20, dense, variable):
     with blas_threads(BLAS_THREADS):  # as inside reduce: tiny solves, where BLAS threads only contend
         c, o = band_factors(dsms20, omega, weights)
     G = dsms20.G
-    assert np.abs(G @ c.position).max() <= 1e-12 * np.abs(c.position).max()  # on the hidden manifold
-    assert np.abs(G @ o.velocity).max() <= 1e-12 * np.abs(o.velocity).max()
+    # on the hidden manifold: the solves' constraint rows, relative to ||G||_inf max|X| (as for lradi's
+    # factors): measured <= 3e-16, bound 1e-13
+    N1 = dsms20.n1 + dsms20.n2
+    for X in (c.position, o.velocity):
+        assert_rounding(np.abs(G @ X).max() / (abs(G).sum(axis=1).max() * np.abs(X).max()), 10 * rounding_unit(N1),
+                        "G X")
     for f in (c, o):  # compression changes the Gramian by compress_tol^2 of its norm at most
         fc = compress(f, 1e-10)
         Z, Zc = np.vstack([f.position, f.velocity]), np.vstack([fc.position, fc.velocity])
-        assert fc.rank < f.rank and _rel(Zc @ Zc.T, Z @ Z.T) <= 1e-14
+        # tol^2 and the rounding of the compression (an orthogonalization and an SVD: 10, as in
+        # orthonormality_error): measured <= 3.9e-15, bound 3e-13 (a fixed 1e-14 was within 3x)
+        assert fc.rank < f.rank
+        assert_rounding(_rel(Zc @ Zc.T, Z @ Z.T), 1e-20 + 10 * rounding_unit(max(Z.shape)), "compressed Gramian")
     Z = np.vstack([N.T @ c.position, N.T @ c.velocity])  # coordinates in the null-space basis N
     Y = np.vstack([N.T @ o.position, N.T @ o.velocity])  # (N^T kills range G^T: the projected position block)
     assert _rel(Z @ Z.T, Pb) <= 1e-8

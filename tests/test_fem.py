@@ -107,6 +107,7 @@ def test_fast_assembly_equals_skfem(dim):
     fast = grid_body(axes, lam, mu, 3.0, 0.5)
     ref = grid_body(axes, lam, mu, 3.0, 0.5, method="skfem")
     for a, b in ((fast.K, ref.K), (fast.M, ref.M)):
+        # sums of at most 2^dim element contributions per entry, whatever the mesh (A): measured <= 4e-16
         assert abs(a - b).max() <= 1e-13 * abs(b).max()
         assert (a != a.T).nnz == 0 and np.all(a.data != 0)  # symmetric bit for bit, no stored zeros
     # symmetric, M positive definite, K with exactly 2D: 3 / 3D: 6 rigid-body modes

@@ -27,7 +27,7 @@ def store(tmp_path):
 
 def _close(a, b):
     scale = max(np.abs(a).max(initial=0.0), np.finfo(float).tiny)
-    np.testing.assert_allclose(a, b, rtol=0, atol=1e-13 * scale)
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-13 * scale)  # stored arrays, the same projection: measured equal
 
 
 def test_round_trip_gives_the_factors_back():
@@ -59,7 +59,7 @@ def test_store_serves_a_second_model_object_and_keys_by_matrices(store):
     assert not second.computed and second.lu_count == first.lu_count
     assert gramians.cached_gramian_factors(fom) is not None  # kept in the model's cache too
     ref = h2_norm(ms.models.dsms(200))
-    assert abs(h2_norm(fom) - ref) <= 1e-13 * ref
+    assert abs(h2_norm(fom) - ref) <= 1e-13 * ref  # from the same factors: measured equal
     assert gramians.gramian_factors(ms.models.dsms(201)).computed
     assert GramianStore(store.cache, salt="other").load(ms.models.dsms(200), first.options) is None
     assert store.key(fom, {**first.options, "shifts": np.array([-1.0 + 0j])}) is None

@@ -17,6 +17,7 @@ from morsuite.reducers.h2.gradient import ModalTarget
 from morsuite.reducers.h2.orthonormal import (modal_tm_values, realization_tm_values, tm_realization,
                                             tm_rho)
 from morsuite.reducers.h2.poles import Coordinates, ModalValues, optimal_residues
+from support import solve_tolerance
 
 CLUSTER = np.array([-0.03 + 0.011j, -0.03 * (1 + 1e-7) + 0.011j * (1 + 1e-7), -0.5 + 0j])
 
@@ -42,7 +43,9 @@ def test_inner_products_against_quadrature():
     # the same T as a real realization
     Ar = np.array([[-0.3, -0.8, 0.0], [0.8, -0.3, 0.0], [0.0, 0.0, -1.5]])
     br, cr = np.array([1.0, 0.0, 1.0]), np.array([0.8, 0.4, 1.1])
-    np.testing.assert_allclose(realization_tm_values(A, beta, Ar, br, cr), v, rtol=1e-12, atol=1e-12)
+    # solves with A (kappa 13): measured 1.4e-15 entrywise relative, bound 7e-14
+    tol = solve_tolerance(A)
+    np.testing.assert_allclose(realization_tm_values(A, beta, Ar, br, cr), v, rtol=tol, atol=tol * np.abs(v).max())
     n = A.shape[0]
     for k in range(n):
         def integrand(w, part):

@@ -77,7 +77,7 @@ def assert_same(a, b, realization=None):
     assert np.array_equal(a.F, b.F) and np.array_equal(a.L, b.L)
     for i, s in enumerate(POINTS):
         Ta, Tb = a.transfer(s), b.transfer(s)
-        assert np.linalg.norm(Ta - Tb) <= 1e-13 * np.linalg.norm(Ta)
+        assert np.linalg.norm(Ta - Tb) <= 1e-13 * np.linalg.norm(Ta)  # equal matrices (above): the same solves
         if realization is not None:
             assert np.linalg.norm(Tb - realization[i]) <= 1e-11 * np.linalg.norm(realization[i])
 

@@ -247,6 +247,7 @@ def test_blended_relaxation_keeps_fixed_points_and_ignores_direction_phase():
     assert np.allclose(np.linalg.norm(x[1], axis=1), 1.0)
     # conjugate pairs stay pairs
     k = np.abs(x[0].imag) > COMPLEX_TOL
+    # the same formula on conjugate inputs: measured exact conjugates
     assert_sets_close(x[0][k], np.conj(x[0][k]), rtol=1e-12, what="the shifts and their conjugates")
 
 

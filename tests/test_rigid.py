@@ -16,7 +16,7 @@ import scipy.linalg as sla
 import morsuite as ms
 from morsuite.errors import InputError, ModelError
 from morsuite.models.rigid import flexible_part, rigid_block, rigid_body_modes, split
-from support import orthonormality_error
+from support import assert_rounding, orthonormality_error, rounding_unit
 
 METHODS = {"modal": {}, "krylov": {}, "irka": {}, "irka-projected": {}, "irka-fo": {}, "bt": {},
            "bt-fl": {"nodes": 24}, "so-h2": {"maxit": 100}}
@@ -87,7 +87,9 @@ def test_detection_matches_the_dense_null_space(chain, block):
         Phi = rigid.shapes
         err, tol = orthonormality_error(Phi, model.M)
         assert err <= tol, (err, tol)
-        assert np.linalg.norm(model.G @ Phi) <= 1e-12 * np.linalg.norm(Phi) if model.n2 else True
+        if model.n2:  # the solves' constraint rows (as for the ADI factors): measured 0, bound 10 rounding_unit(N)
+            assert_rounding(np.linalg.norm(model.G @ Phi) / (abs(model.G).sum(axis=1).max() * np.linalg.norm(Phi)),
+                            10 * rounding_unit(model.n1 + model.n2), "G Phi")
         assert np.isclose(rigid.lowest_flexible, np.sqrt(lam[k]), rtol=1e-8)
         assert rigid_body_modes(model) is rigid  # cached
         assert f"{k} rigid-body mode" in rigid.line(model.name)
@@ -187,7 +189,8 @@ def test_coupled_damping_is_refused():
     with pytest.raises(ModelError, match="couples"):
         ms.reducers.make("bt", model)
     even = ms.models.dsms(g=40, kappa=0, kappa_end=0, delta_end=5.0)  # uniform grounding dampers: D 1 = 0.05 M 1
-    assert rigid_body_modes(even).coupling < 1e-12
+    # no coupling: the rounding of its solve and sums over n1 terms (measured 3e-17, bound 1.4e-13)
+    assert_rounding(rigid_body_modes(even).coupling, 10 * rounding_unit(even.n1), "coupling")
     assert np.allclose(rigid_body_modes(even).damping, 0.05 * np.eye(1))
 
 

@@ -9,7 +9,7 @@ import pytest
 import morsuite as ms
 from morsuite.linalg.dense import dense_bt, orth, shift_distance, UnstableError
 from morsuite.rom import FirstOrderROM, SecondOrderROM, load_rom
-from support import assert_sets_close, orthonormality_error
+from support import assert_rounding, assert_sets_close, orthonormality_error, transfer_tolerance
 
 
 def _random_so(r=5, m=2, p=3, seed=0):
@@ -25,15 +25,24 @@ def _random_so(r=5, m=2, p=3, seed=0):
 def test_second_order_transfer_matches_dense_and_control():
     rom = _random_so()
     s = 0.3 + 1.1j
-    ref = rom.L @ np.linalg.solve(s * s * rom.M + s * rom.D + rom.K, rom.F)
-    assert np.allclose(rom.transfer(s), ref, rtol=1e-13, atol=0)
+    P = s * s * rom.M + s * rom.D + rom.K
+    ref = rom.L @ np.linalg.solve(P, rom.F)
+    # measured 0, bound 2e-14
+    assert_rounding(np.linalg.norm(rom.transfer(s) - ref) / np.linalg.norm(ref), transfer_tolerance(P, rom.F, rom.L),
+                    "transfer")
     sys_ = rom.to_control()
     omega = np.logspace(-1, 1, 25)
     H = rom.freqresp(omega)
     Hc = np.stack([np.atleast_2d(sys_(1j * w)) for w in omega])
     assert np.max(np.abs(H - Hc)) <= 1e-10 * np.max(np.abs(H))
     fo = rom.to_first_order()
-    assert np.allclose(fo.freqresp(omega), H, rtol=1e-12, atol=0)
+    # two solves per frequency, with the first-order pencil and the second-order one: measured at most
+    # 0.012 of the bound (1.4e-14 against 1.2e-12 at w = 8.3, where the velocities are 8 times the positions)
+    Hf = fo.freqresp(omega)
+    for k, w in enumerate(omega):
+        tol = (transfer_tolerance(1j * w * fo.E - fo.A, fo.B, fo.C)
+               + transfer_tolerance(-w * w * rom.M + 1j * w * rom.D + rom.K, rom.F, rom.L))
+        assert_rounding(np.linalg.norm(Hf[k] - H[k]) / np.linalg.norm(H[k]), tol, f"first-order realization at {w}")
     assert fo.states == rom.states == 2 * rom.order
 
 

@@ -57,7 +57,7 @@ def test_chirp_instantaneous_frequency(method):
 def test_multisine():
     t = signals.time_grid(10.0, 0.01)
     u = signals.multisine(t, omegas=[1.0, 2.0], amplitudes=[1.0, 0.5], phases="zero")
-    np.testing.assert_allclose(u[:, 0], np.sin(t) + 0.5 * np.sin(2 * t), atol=1e-14)
+    np.testing.assert_allclose(u[:, 0], np.sin(t) + 0.5 * np.sin(2 * t), atol=1e-14)  # the same formula: measured 0
     w = np.arange(1, 21) * 0.1
     t = signals.time_grid(200.0, 0.01)
     crest = {ph: np.max(np.abs(signals.multisine(t, omegas=w, phases=ph))) for ph in ("zero", "schroeder")}
@@ -85,7 +85,8 @@ def test_read_csv_resamples_nonuniform_times(tmp_path):
     t, u = signals.read_csv(p)
     assert signals.check_time_grid(t)[1] == pytest.approx(0.1)  # the median spacing
     assert t[-1] == pytest.approx(1.0)
-    np.testing.assert_allclose(u[:, 0], 2 * t + 1, atol=1e-12)  # linear data survive linear interpolation
+    # linear data survive linear interpolation (values <= 3 written exactly by repr: A)
+    np.testing.assert_allclose(u[:, 0], 2 * t + 1, atol=1e-12)
     t, _ = signals.read_csv(p, step=0.25)
     np.testing.assert_allclose(t, [0.0, 0.25, 0.5, 0.75, 1.0])
     t, _ = signals.read_csv(p, step=0.3)  # the grid stops at the last multiple of the step

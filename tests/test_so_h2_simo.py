@@ -23,6 +23,7 @@ from morsuite.reducers.h2.gradient import ModalTarget, second_order_realization
 from morsuite.reducers.h2.simo import (SimoCoordinates, SimoModalValues, simo_evaluate, simo_optimal_residues,
                                        simo_second_order_of)
 from morsuite.reducers.h2.starts import standard_realization
+from support import assert_rounding, transfer_tolerance
 from test_norms import error_ss, hidden_ss, lyap_h2
 
 GTOL = 1e-4
@@ -89,10 +90,12 @@ def test_second_order_realization_reproduces_the_pole_residue_model(start3):
     K, D, F, L = simo_second_order_of(co, x)
     A2, B2, C2 = second_order_realization(K, D, F, L)
     assert K.shape == (3, 3) and L.shape == (3, 3)
-    for w in np.geomspace(1e-3, 10.0, 40):
-        H = C @ np.linalg.solve(1j * w * np.eye(A.shape[0]) - A, B)
-        H2 = C2 @ np.linalg.solve(1j * w * np.eye(A2.shape[0]) - A2, B2)
-        assert np.abs(H2 - H).max() <= 1e-12 * np.abs(H).max()
+    for w in np.geomspace(1e-3, 10.0, 40):  # measured <= 4.3e-16, bound 1e-13 there
+        P, P2 = 1j * w * np.eye(A.shape[0]) - A, 1j * w * np.eye(A2.shape[0]) - A2
+        H = C @ np.linalg.solve(P, B)
+        H2 = C2 @ np.linalg.solve(P2, B2)
+        assert_rounding(np.linalg.norm(H2 - H) / np.linalg.norm(H),
+                        transfer_tolerance(P, B, C) + transfer_tolerance(P2, B2, C2), f"realizations at {w}")
 
 
 def dense_rho(fom, rom):
