@@ -162,8 +162,9 @@ GUARD_OPTIONS = {
     "shortlist": Option(5, "int", "stable iterates kept (with their models) for the final choice "
                         "without convergence (safeguard on)", low=1),
     "shortlist_score": Option("h2", "choice", "how the shortlisted iterates are ranked without convergence: "
-                              "their exact H2 error (irka_score.ExactH2Score: about r sparse LUs per "
-                              "shortlisted iterate, no Gramian factor) or their convergence measure (no cost); "
+                              "their exact H2 error (irka.score.ExactH2Score: the model's Gramian factors once "
+                              "per model, shared with bt and the norms, then about r sparse LUs per shortlisted "
+                              "iterate) or their convergence measure (no cost); "
                               "a reducer's iterate_score, when set, takes precedence",
                               choices=("h2", "measure")),
 }
