@@ -6,8 +6,8 @@ Iterative refinement (:mod:`morsuite.linalg.refine`) needs :math:`S(a)x` for a s
 :math:`\varepsilon` keeps none of its digits. numpy's ``np.longdouble`` (x87, 64-bit significand)
 gives :math:`2^{-64}` per operation at about 70 ns per entry on the TCOM at :math:`n_1 = 10^6`
 (3e6 entries: 0.24 s for the entries of :math:`S(a)` at a new shift, 0.19-0.54 s per product;
-measured 2026-11-28, ``docs/design/irka.md``), which made refinement three quarters of a refined
-shift's cost there. Here each number is an unevaluated sum ``hi + lo`` of two doubles
+a script, 2026-11-28, load 2), which made refinement three quarters of a refined shift's cost
+there (``docs/design/irka.md``, with ``morsuite bench refine-dd``). Here each number is an unevaluated sum ``hi + lo`` of two doubles
 (double-double, about :math:`2^{-104}` per operation): products by the exact ``TwoProd``
 (:math:`p = ab`, :math:`e = \mathrm{fma}(a, b, -p)`; LLVM's ``llvm.fma`` intrinsic, a correctly
 rounded fused multiply-add in hardware or, on a CPU without one, in libm), sums by Knuth's
@@ -21,7 +21,7 @@ imaginary parts apart. :func:`product` sums :math:`\sum_q S_q x_{j(q)}` per row 
 
 Cost: :func:`entries` about 30 flops per entry, :func:`product` about 90 per complex entry; on the
 TCOM at :math:`n_1 = 10^6` 0.04-0.05 s and 0.08-0.12 s (against 0.24 s and 0.19-0.54 s in long
-double, same run, load 2). Accuracy: each row's sum carries an error of a few
+double, the same script). Accuracy: each row's sum carries an error of a few
 :math:`2^{-104} \sum_q |S_q||x_{j(q)}|` (tested against exact rational arithmetic), far below long
 double's :math:`2^{-64}` per operation. Entries beyond :math:`10^{300}` in magnitude are not
 supported (``TwoSum``'s intermediate sums would overflow); saddle matrices of mechanical models are
