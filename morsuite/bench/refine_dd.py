@@ -5,14 +5,14 @@ since 2026-11-28 in double-double by compiled kernels (:mod:`morsuite.linalg.dd_
 numpy's ``np.longdouble``. This bench runs both through :func:`~morsuite.linalg.refine.refine_columns`
 at the three band shifts of :func:`~morsuite.bench.backends.band_shifts`, the two variants alternating
 with the order swapped from shift to shift, one thread, the LU made before and not timed: per shift a
-fresh :class:`~morsuite.linalg.refine.SaddleOperator` (the entries of :math:`S(a)` at the new shift),
-one refinement step of the solve with :math:`[F b; 0]` and one of the transposed solve with
-:math:`[L^T c; 0]` (b, c the first input and output directions), which is what a refined IRKA shift
-pays beyond its LU and its two solves. Reported per model: median seconds of each variant, their ratio
+fresh :class:`~morsuite.linalg.refine.SaddleOperator` (its pattern structure, which IRKA's persistent
+operator makes once, and the entries of :math:`S(a)` at the new shift), one refinement step of the
+solve with :math:`[F b; 0]` and one of the transposed solve with :math:`[L^T c; 0]` (b, c all ones),
+about what a refined IRKA shift pays beyond its LU and its two solves. Reported per model: median seconds of each variant, their ratio
 measured in the same run, and the largest difference of the two refined solutions relative to the
 solution (both are more accurate than double; the difference is the long double residual's error,
 which the double-double one does not have). Models: the TCOM at :math:`n_1 = 10^6` (where IRKA
-refines every iteration's solves) and fem_block(4000), a 3D pattern (quick: tcom(2000),
+at r = 20 refines the solves of most iterations) and fem_block(4000), a 3D pattern (quick: tcom(2000),
 fem_block(1000), not judged). Quoted in ``docs/design/irka.md`` (2026-11-28, seventh session).
 """
 

@@ -153,7 +153,6 @@ class SaddleOperator:
         apply.residual = residual
         return apply
 
-
     def _at_dd(self, a, trans):
         """:meth:`at` in double-double (:mod:`~morsuite.linalg.dd_kernels`): the same contract."""
         cache, P = self.cache, self.pattern
