@@ -72,7 +72,8 @@ class IRKA(IRKABase):
                               "the forward error of a solve matters only through an ill-conditioned basis",
                               choices=("ill-conditioned", "always")),
         "refine_precision": Option("extended", "choice", "precision of the refinement residual: extended "
-                                   "(np.longdouble; equals working where longdouble is double) or working",
+                                   "(double-double, linalg.dd_kernels, where numba imports; else np.longdouble, "
+                                   "which equals working where longdouble is double) or working",
                                    choices=("extended", "working")),
         "kernel_projection": Option(True, "bool", "project the orthonormalised bases back onto null(G) "
                                     "(rounding in the orthonormalisation moves directions of singular value "
