@@ -120,24 +120,28 @@ def _magnitudes(pattern):
 
 
 # -- helpers of the libraries; KLU (nbklu) ---------------------------------------------------------------
+#: a :class:`_Local`'s value after unpickling: made again on first use
+_LOST = object()
+
+
 class _Local:
     """A value kept with the pattern but not pickled (the libraries' handles are not picklable; a Dask
-    worker's copy of the pattern recomputes it)."""
+    worker's copy of the pattern recomputes it). Any value may be kept, None included."""
 
-    def __init__(self, value=None):
+    def __init__(self, value):
         self.value = value
 
     def __getstate__(self):
         return {}
 
     def __setstate__(self, state):
-        self.value = None
+        self.value = _LOST
 
 
 def _stored(pattern, key, make):
     """``pattern[key]``'s value, made by ``make()`` once per pattern (and process) under the lock."""
     with _LOCK:
-        if key not in pattern or pattern[key].value is None:
+        if key not in pattern or pattern[key].value is _LOST:
             pattern[key] = _Local(make())
     return pattern[key].value
 

@@ -97,7 +97,7 @@ def rslab_ldlt_symbolic(pattern):
     pattern. Cost: one METIS ordering (0.25 s at fem_block(4000), 1.7 s at 20000)."""
     def make():
         if not _symmetric_blocks(pattern):
-            return False  # not None: None is _stored's "lost in pickling", which would check again every shift
+            return None  # kept: not checked again at the next shift
         rslab = _rslab()
         data, ind, ptr = _magnitudes(pattern)
         N = ptr.size - 1
@@ -106,7 +106,7 @@ def rslab_ldlt_symbolic(pattern):
         A = sp.csc_matrix((np.asarray(data, dtype=float), ind.copy(), ptr.copy()), shape=(N, N))
         sym = rslab.analyze(A, path="ldlt", ordering=RSLAB_LDLT_SETTINGS["ordering"], threads=1)
         return sym, sel
-    return _stored(pattern, ("rslab-ldlt",), make) or None
+    return _stored(pattern, ("rslab-ldlt",), make)
 
 
 class RslabLDLT:
@@ -130,7 +130,8 @@ class RslabLDLT:
 
     Cost against the LU (docs/design/backends.md, 2026-11-28): a factorization with three solves
     0.61-0.79 of its time at complex shifts of fem_block, a solve about twice its (the refinement
-    step). :func:`rslab_factor` takes it at complex shifts only. A real matrix is factored real.
+    step). :func:`rslab_factor` takes it at complex shifts only. A real matrix is factored real
+    (:class:`~morsuite.linalg.saddle_lu.SaddleLU` solves a complex right-hand side as two real ones).
     """
 
     def __init__(self, As, pattern, symbolic=None):
@@ -157,13 +158,7 @@ class RslabLDLT:
     def solve(self, b, trans: str = "N"):
         """Solve ``A x = b``; ``trans="T"`` is the same solve (A is symmetric); b of shape (N, k) or (N,)."""
         b = np.asarray(b)
-        B = b.reshape(b.shape[0], -1)
-        if np.iscomplexobj(B) and self.dtype == np.float64:  # a real factor: real and imaginary parts apart
-            B = np.hstack([B.real, B.imag])
-            X = self.solve(B)
-            X = X[:, : X.shape[1] // 2] + 1j * X[:, X.shape[1] // 2:]
-            return X[:, 0] if b.ndim == 1 else X
-        B = np.asarray(B, dtype=self.dtype)
+        B = np.asarray(b.reshape(b.shape[0], -1), dtype=self.dtype)  # SaddleLU splits complex b of a real factor
         st = RSLAB_LDLT_SETTINGS
         X = np.column_stack([self._f.solve(np.ascontiguousarray(B[:, j]), refine=st["refine"], target=st["target"])
                              for j in range(B.shape[1])])
