@@ -222,3 +222,22 @@ def dense_modes(fom):
     Z = sla.null_space(fom.G.toarray()) if fom.n2 else np.eye(fom.n1)
     lam, Y = sla.eigh(Z.T @ (fom.K @ Z), Z.T @ (fom.M @ Z))
     return np.sign(lam) * np.sqrt(np.abs(lam)), Z @ Y
+
+
+def dense_reduced(fom):
+    """(M, D, K, F, L) of the dense system on ker G: Z from scipy.linalg.null_space (small models only)."""
+    from morsuite.utils import blas_threads
+
+    with blas_threads(1):  # small dense work: threads only add synchronisation on a loaded machine
+        Z = sla.null_space(fom.G.toarray())
+        return tuple(Z.T @ (X.toarray() @ Z) for X in (fom.M, fom.D, fom.K)) + (Z.T @ fom.F, fom.L @ Z)
+
+
+def moments(M, D, K, F, L, s0, k):
+    """T^(j)(s0)/j!, j < k, of the dense second-order system (Taylor recurrence, dense LU)."""
+    lu = sla.lu_factor(s0 * s0 * M + s0 * D + K)
+    A1 = 2 * s0 * M + D
+    X = [sla.lu_solve(lu, F.astype(complex))]
+    for j in range(1, k):
+        X.append(-sla.lu_solve(lu, A1 @ X[-1] + (M @ X[-2] if j >= 2 else 0)))
+    return [L @ x for x in X]

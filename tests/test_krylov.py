@@ -9,13 +9,13 @@ import warnings
 
 import numpy as np
 import pytest
-import scipy.linalg as sla
 
 import morsuite as ms
 from morsuite.reducers.base import as_complex
 from morsuite.stress.refused_inputs import _pole_model
 from morsuite.utils import blas_threads
-from support import assert_rounding, orthonormality_error, rounding_unit, transfer_tolerance
+from support import (assert_rounding, dense_reduced, moments, orthonormality_error, rounding_unit,
+                     transfer_tolerance)
 
 TOL = 1e-8  # relative error of each matched moment
 
@@ -27,23 +27,6 @@ def _models():
 
 
 MODELS = _models()
-
-
-def dense_reduced(fom):
-    """(M, D, K, F, L) of the dense system on ker G: Z from scipy.linalg.null_space."""
-    with blas_threads(1):  # small dense work: threads only add synchronisation on a loaded machine
-        Z = sla.null_space(fom.G.toarray())
-        return tuple(Z.T @ (X.toarray() @ Z) for X in (fom.M, fom.D, fom.K)) + (Z.T @ fom.F, fom.L @ Z)
-
-
-def moments(M, D, K, F, L, s0, k):
-    """T^(j)(s0)/j!, j < k, of the dense second-order system (Taylor recurrence, dense LU)."""
-    lu = sla.lu_factor(s0 * s0 * M + s0 * D + K)
-    A1 = 2 * s0 * M + D
-    X = [sla.lu_solve(lu, F.astype(complex))]
-    for j in range(1, k):
-        X.append(-sla.lu_solve(lu, A1 @ X[-1] + (M @ X[-2] if j >= 2 else 0)))
-    return [L @ x for x in X]
 
 
 def moment_errors(ref, rom, s0, k, b=None, c=None):

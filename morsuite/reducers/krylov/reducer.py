@@ -144,7 +144,8 @@ class _Side:
         return sum(s.solves for s in self.soars)
 
 
-def _symmetric(X) -> bool:
+def is_symmetric(X) -> bool:
+    """Whether the sparse matrix X equals its transpose to 1e-14 of its largest entry."""
     X = sp.csr_matrix(X)
     diff = X - X.T
     return diff.nnz == 0 or abs(diff).max() <= 1e-14 * max(abs(X).max(), np.finfo(float).tiny)
@@ -239,7 +240,7 @@ class Krylov(Reducer):
                 raise SingularShiftError(f"The 'points' parameter of Krylov: points[{k}] = {s} is (numerically) "
                                          f"a pole of the model; choose another expansion point ({exc})") from exc
             lus.append((s, lu))
-        symmetric = all(_symmetric(X) for X in (fom.M, fom.D, fom.K))
+        symmetric = all(is_symmetric(X) for X in (fom.M, fom.D, fom.K))
         project = KernelProjector(fom.G) if fom.n2 else None
         sides = {}
         for side in ("right",) + (("left",) if o["sided"] == "two" else ()):
@@ -289,7 +290,7 @@ class Krylov(Reducer):
         stable = bool(rom.is_stable())
         extra = {}
         if one:
-            extra["definite"] = _definiteness(Mr, Dr, Kr)
+            extra["definite"] = definiteness(Mr, Dr, Kr)
         if not stable:
             lam = rom.poles()
             extra["unstable_poles"] = int(np.sum(lam.real >= 0))
@@ -345,7 +346,7 @@ class Krylov(Reducer):
         return float(max(np.linalg.norm(G @ B) for B in bases) / (ng * np.sqrt(bases[0].shape[1])))
 
 
-def _definiteness(Mr, Dr, Kr) -> dict:
+def definiteness(Mr, Dr, Kr) -> dict:
     """Whether M_r, K_r are symmetric positive definite and D_r positive semidefinite (to rounding)."""
     out = {}
     for name, X, strict in (("M_spd", Mr, True), ("K_spd", Kr, True), ("D_psd", Dr, False)):
