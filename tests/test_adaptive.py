@@ -244,3 +244,25 @@ def test_local_maxima_by_decreasing_value():
 def test_bad_options_are_refused(models, opts, word):
     with pytest.raises(ms.errors.OptionError, match=word):
         ms.reducers.make("adaptive", models["dsms"], **opts)
+
+
+# -- compress: the greedy's model as a surrogate, reduced by an H2 method without LUs of the full model ---------
+def test_compressed_to_r_states_matches_irka_fo_on_the_full_model(models):
+    fom = models["tcom"]
+    ref = dense_reduced(fom)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        full = ms.reducers.make("irka-fo", fom).reduce(6)
+        res = ms.reducers.make("adaptive", fom, compress="irka-fo").reduce(6)
+    info = res.info
+    assert res.rom.kind == "first-order" and res.rom.states == 6 and info["status"] == "converged"
+    c = info["compress"]
+    assert c["surrogate_estimate_max"] <= 0.1 * c["surrogate_gap_max"]  # the surrogate is 10x closer to T
+    h2_full = ms.analysis.h2_error(fom, full.rom)
+    h2 = ms.analysis.h2_error(fom, res.rom)
+    assert h2 <= 2 * h2_full, (h2, h2_full)
+    # the returned model's estimate against its true band error (dense reference on the estimate's grid)
+    grid = np.asarray(info["estimate_grid"])
+    H = dense_curve(ref, 1j * np.concatenate([grid, np.geomspace(*fom.band, 200)]))
+    true = sigma_max(H[:grid.size] - res.rom.freqresp(grid)) / sigma_max(H[grid.size:]).max()
+    assert 0.1 <= info["estimate_max"] / true.max() <= 10

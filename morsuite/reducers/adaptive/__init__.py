@@ -28,15 +28,24 @@ meets ``tol`` (relative to the band peak of :math:`\sigma_{\max}(T)`; with ``val
 once that many true samples at the estimate's next peaks are within ``tol`` too: a sample above
 it becomes a point, its LU reused), or when ``max_lus`` LUs are spent.
 
+**Compression** (``compress``, "bt" or "irka-fo"): ``reduce(r)`` then returns r first-order states:
+the named reducer applied to the greedy's model as a surrogate (an Index3Model of its matrices, no
+LU of the full model), the surrogate's tolerance tightened (from ``tol``, or 1e-4) until its
+estimate is at most a tenth of the distance between it and the compressed model. The estimate
+of the returned model is the surrogate's plus that distance (``info["compress"]``). The route to
+an H2-optimal model at a few LUs of the full model: on tcom(2000) and dsms(1000) it gives
+irka-fo's H2 errors at a tenth of irka-fo's LUs (``docs/design/adaptive.md``).
+
 **Honesty.** The estimate is :math:`\sigma_{\max}(T_U - T_V)`, not a bound: it relies on U being much
 better than V. ``info["validated"]`` holds, for the returned model, the true error at every
 validation sample beside the estimate there, ``info["history"]`` the true error of each model at
 the point chosen next; ``docs/design/adaptive.md`` records how far estimate and truth are apart on
 the test models.
 
-Options (:attr:`Adaptive.OPTIONS`): ``tol`` (None), ``max_lus`` (40), ``levels`` (4),
-``enrich_levels`` (2), ``validate`` (0), ``grid`` (400), ``band`` (the model's), ``start``
-("auto": the real point :math:`\sqrt{\omega_1\omega_2}`), ``orth_tol``, ``reorth``.
+Options (:attr:`Adaptive.OPTIONS`): ``tol`` (None), ``max_lus`` (40), ``levels`` (6),
+``enrich_levels`` (2), ``validate`` (0), ``grid`` (400), ``peak_grid`` (200), ``band`` (the model's),
+``start`` ("auto": the real point :math:`\sqrt{\omega_1\omega_2}`), ``compress`` (None), ``orth_tol``,
+``reorth``.
 
 Cost: one sparse LU per point (complex, except a real start) and per validation sample, released
 before the next (memory: one LU at a time); per point ``(levels + enrich_levels)`` block solves per

@@ -152,6 +152,7 @@ class BandEstimate:
 
     @property
     def max(self) -> float:
+        """The estimated band error: the largest value of ``estimate``."""
         return float(self.estimate.max())
 
     def at(self, omega) -> float:

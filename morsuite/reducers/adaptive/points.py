@@ -2,9 +2,10 @@ r"""One expansion point of the adaptive reducer: one sparse LU, moments in both 
 
 At a point :math:`s_0` (complex :math:`j\omega`, or real), with the one LU of
 :math:`S(s_0) = [[s_0^2M + s_0D + K,\ G^T], [G,\ 0]]`, the second-order Arnoldi process
-(:class:`~morsuite.reducers.krylov.soar.SOAR`) runs twice: from the inputs :math:`F` (the right solves)
-and from the outputs :math:`L^T` (the transposed solves, same LU). ``levels + extra`` levels of each are
-made, level by level alternating the two sides; the first ``levels`` levels are the point's *primary*
+(:class:`~morsuite.reducers.krylov.soar.SOAR`) runs from the inputs :math:`F` (the right solves)
+and from the outputs :math:`L^T` (the transposed solves, same LU); for a symmetric model, whose
+:math:`S(s_0)^T = S(s_0)`, as one block recurrence started at :math:`[F, L^T]` (the same spaces
+level by level, block solves). ``levels + extra`` levels of each are made, level by level; the first ``levels`` levels are the point's *primary*
 columns (they enter the reduced model), the last ``extra`` its *enrichment* (they enter only the richer
 space of the error estimate, :mod:`.estimate`). The first right solve also gives the full model's
 transfer function at the point, :math:`T(s_0) = LX_0`: a true sample the reducer keeps (it validates the
@@ -42,8 +43,8 @@ class PointData:
     T : ndarray (p, m)
         The full model's :math:`T(s_0)` from the first right solve (the LU's solution).
     levels : dict
-        Levels made per side (``right``, ``left``) among the primary columns (a side whose
-        Krylov space is exhausted stops early).
+        Levels made per side among the primary columns (``right`` and ``left``, or ``both`` for a
+        symmetric model's block recurrence; a side whose Krylov space is exhausted stops early).
     lu_seconds, solve_seconds : float
         Time of the LU (with its assembly) and of the levels.
     solves : int
@@ -66,7 +67,7 @@ class PointData:
 
 
 def make_point(fom, solver, s, levels: int, extra: int, *, transposed, orth_tol: float, reorth: int,
-               lu=None) -> PointData:
+               lu=None, symmetric: bool = False) -> PointData:
     r"""Factor :math:`S(s)` (or take ``lu``), run SOAR from :math:`F` and from :math:`L^T`, release the LU.
 
     Parameters
@@ -83,6 +84,10 @@ def make_point(fom, solver, s, levels: int, extra: int, *, transposed, orth_tol:
         SOAR's deflation tolerance and Gram-Schmidt passes.
     lu : SaddleLU, optional
         A factorization of :math:`S(s)` already made (a validation sample that becomes a point).
+    symmetric : bool
+        M, D, K symmetric: :math:`S(s)^T = S(s)`, so the left recurrence is the right one started at
+        :math:`L^T`, and one block SOAR started at :math:`[F, L^T]` spans both sides level by level with
+        block solves of m + p columns (fewer, larger triangular solves).
 
     Returns
     -------
@@ -105,9 +110,13 @@ def make_point(fom, solver, s, levels: int, extra: int, *, transposed, orth_tol:
         return lu.solve(rhs, trans=True)
 
     Mt, Dt, Kt = transposed
-    sides = {"right": SOAR(right, (2 * s) * fom.M + fom.D, fom.M, fom.K, fom.D, s, fom.F, orth_tol, reorth),
-             "left": SOAR(left, (2 * s) * Mt + Dt, Mt, Kt, Dt, s, fom.L.T, orth_tol, reorth)}
-    made = {"right": 0, "left": 0}
+    A1 = (2 * s) * fom.M + fom.D
+    if symmetric:
+        sides = {"both": SOAR(right, A1, fom.M, fom.K, fom.D, s, np.hstack([fom.F, fom.L.T]), orth_tol, reorth)}
+    else:
+        sides = {"right": SOAR(right, A1, fom.M, fom.K, fom.D, s, fom.F, orth_tol, reorth),
+                 "left": SOAR(left, (2 * s) * Mt + Dt, Mt, Kt, Dt, s, fom.L.T, orth_tol, reorth)}
+    made = {name: 0 for name in sides}
     for level in range(levels + extra):
         for name, soar in sides.items():
             if soar.exhausted:
@@ -118,7 +127,7 @@ def make_point(fom, solver, s, levels: int, extra: int, *, transposed, orth_tol:
                 made[name] += 1  # a level whose columns deflated is in the span: its moment is matched too
             else:
                 out.enrichment.append(block)
-    X0 = captured["X0"]
+    X0 = captured["X0"][:, :fom.m]
     out.T = fom.L @ X0.real + 1j * (fom.L @ X0.imag) if np.iscomplexobj(X0) else fom.L @ X0
     out.levels = made
     out.solves = sum(so.solves for so in sides.values())

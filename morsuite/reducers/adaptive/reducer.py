@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 
 import numpy as np
 
@@ -26,6 +27,11 @@ MIN_GAP = 1e-3
 #: an estimate at or below this (relative to the band peak) is rounding: the model is exact on the band
 #: (its basis holds every direction of T that the band sees), and no point can improve it
 EXACT = 1e-11
+#: ``compress``: the surrogate's first tolerance without ``tol``, how much closer to T than the compressed model it
+#: must come (its estimate at most this times their distance), and the rounds of tightening
+SURROGATE_TOL = 1e-4
+SURROGATE_RATIO = 0.1
+SURROGATE_ROUNDS = 6
 #: a point where S(s) is singular (at a pole) moves off the axis by this fraction of |s|
 OFF_AXIS = 1e-3
 
@@ -46,7 +52,7 @@ class Adaptive(Reducer):
                       "relative to the band peak of sigma_max(T); None: grow to r columns",
                       low=0, high=1, open_low=True, open_high=True, nullable=True),
         "max_lus": Option(40, "int", "budget of sparse LUs (expansion points and validation samples)", low=1),
-        "levels": Option(4, "int", "moments per point and side (F and L^T) in the reduced model", low=1),
+        "levels": Option(6, "int", "moments per point and side (F and L^T) in the reduced model", low=1),
         "enrich_levels": Option(2, "int", "further moments per point and side in the richer model of the estimate",
                                 low=1),
         "validate": Option(0, "int", "once the estimate meets tol: true samples (one LU each) at the estimate's "
@@ -58,6 +64,10 @@ class Adaptive(Reducer):
         "band": Option(None, "array", "band (w1, w2) in rad/s (default: the model's band)", nullable=True),
         "start": Option("auto", "any", "first point: 'auto' (real, the band's geometric mean), 'center' (j times "
                         "it) or a number in the closed right half-plane"),
+        "compress": Option(None, "choice", "return r first-order states: this reducer applied to the greedy's model "
+                           "(a surrogate, grown until 10 times closer to T than the result; no LU of the full "
+                           "model); None: the greedy's second-order model", choices=(None, "bt", "irka-fo"),
+                           nullable=True),
         "orth_tol": Option(1e-10, "float", "deflation tolerance of SOAR and of the basis", low=0, high=1,
                            open_low=True, open_high=True),
         "reorth": Option(2, "int", "Gram-Schmidt passes per column", low=1, high=3),
@@ -123,12 +133,12 @@ class Adaptive(Reducer):
         t0 = time.perf_counter()
         try:
             pt = make_point(self.fom, st["solver"], s, o["levels"], o["enrich_levels"], transposed=st["transposed"],
-                            orth_tol=o["orth_tol"], reorth=o["reorth"], lu=lu)
+                            orth_tol=o["orth_tol"], reorth=o["reorth"], lu=lu, symmetric=st["symmetric"])
         except SingularShiftError:  # s is a pole of the model (an undamped mode on the axis): step off it
             s = complex(OFF_AXIS * abs(s), s.imag) if s.imag else complex(s.real * (1 + OFF_AXIS))
             self.warn(f"adaptive: S(s) is singular at the point s = {s:.6g}; moved to {s:.6g}")
             pt = make_point(self.fom, st["solver"], s, o["levels"], o["enrich_levels"], transposed=st["transposed"],
-                            orth_tol=o["orth_tol"], reorth=o["reorth"])
+                            orth_tol=o["orth_tol"], reorth=o["reorth"], symmetric=st["symmetric"])
             lu = None
         if lu is None:
             st["lus"] += 1
@@ -236,11 +246,10 @@ class Adaptive(Reducer):
         return None
 
     # -- the greedy -------------------------------------------------------------------------------------
-    def _grow(self, r):
+    def _grow(self, r, tol):
         """Add points until the basis has r columns (tol None) or the estimate meets tol (validated if asked),
         or the budget ends. Returns (status, estimate, rom matrices, V_r, order)."""
         st, o = self._state, self.options
-        tol = o["tol"]
         if not st["points"]:
             self._add_point(self._start(), kind="start")
         while True:
@@ -310,11 +319,22 @@ class Adaptive(Reducer):
         st = self._state or self._init_state()
         lus0, sec0 = st["lus"], st["seconds"]
         t0 = time.perf_counter()
-        status, est, rom_m, Vr, order = self._grow(r)
-        t1 = time.perf_counter()
         fom, o = self.fom, self.options
-        rom = SecondOrderROM(*rom_m, basis=Vr)
-        if order < r and o["tol"] is None:
+        if o["compress"]:  # the surrogate: tightened until it is 10 times closer to T than the compressed model
+            tol = o["tol"] if o["tol"] is not None else SURROGATE_TOL
+            for _ in range(SURROGATE_ROUNDS):
+                status, est, rom_m, Vr, order = self._grow(fom.order, tol)
+                rom = SecondOrderROM(*rom_m, basis=Vr)
+                packed = self._compress_once(rom, est, r)
+                gap = float(packed[1].max())
+                if status != "converged" or est.max <= SURROGATE_RATIO * gap or tol <= EXACT:
+                    break
+                tol = max(0.5 * SURROGATE_RATIO * gap, EXACT)
+        else:
+            status, est, rom_m, Vr, order = self._grow(r, o["tol"])
+            rom = SecondOrderROM(*rom_m, basis=Vr)
+        t1 = time.perf_counter()
+        if order < r and o["tol"] is None and not o["compress"]:
             why = (f"the estimate is at rounding ({est.max:.1e} <= {EXACT:g}): the model is exact on the band"
                    if est.max <= EXACT else "every peak of the estimate is sampled")
             self.warn(f"adaptive: the basis stopped at {order} columns ({why}); r capped from {r} to {order}",
@@ -352,7 +372,63 @@ class Adaptive(Reducer):
         }
         if st["symmetric"]:
             info["definite"] = definiteness(*rom_m[:3])
+        if o["compress"]:
+            return self._compressed(packed, est, info, tol)
         return rom, info
+
+    def _compress_once(self, surrogate, est, r):
+        r"""(reduction, gap): the surrogate reduced to r first-order states with ``compress``, and the distance
+        :math:`\sigma_{\max}(T_V - T_c)/\text{peak}` on the estimate's grid."""
+        import scipy.sparse as sp
+
+        from ...models.index3 import Index3Model
+        from ..base import get_class
+
+        o = self.options
+        k = surrogate.order
+        model = Index3Model(sp.csr_matrix(surrogate.M), sp.csr_matrix(surrogate.D), sp.csr_matrix(surrogate.K),
+                            sp.csr_matrix((0, k)), surrogate.F, surrogate.L, band=self._band(),
+                            name=f"adaptive surrogate of {self.fom.name} (order {k})", check_constraints=False)
+        if r > 2 * k:
+            raise OptionError(f"r = {r} first-order states exceed the 2 x {k} states of the surrogate the tolerance "
+                              f"gave; ask for at most {2 * k} or a smaller tol")
+        with warnings.catch_warnings():  # the compression's warnings are the surrogate's, said in info
+            warnings.simplefilter("ignore")
+            res = get_class(o["compress"])(model).reduce(r)
+        s = 1j * est.grid
+        return res, sigma_max(est.rom(s) - res.rom.transfer_many(s)) / est.peak
+
+    def _compressed(self, packed, est, info, tol):
+        r"""The compressed model and its ``info``: its estimate is the surrogate's plus the exact distance between
+        the two reduced models on the estimate's grid, :math:`\Delta(\omega) + \sigma_{\max}(T_V - T_c)(j\omega)/
+        \text{peak}` (the triangle inequality with the estimated term). The compression's sparse LUs are of the
+        surrogate, not of the full model: ``info["compress"]["lu_count"]``, not in ``lu_count``."""
+        res, gap = packed
+        o = self.options
+        k = int(est.rom.M.shape[0])
+        curve = est.estimate + gap
+        converged = info["converged"] and res.info["converged"]
+        rows = []  # the validation samples, for the model returned
+        for x in self._state["samples"]:
+            if x["point"]:
+                continue
+            w = np.array([1j * x["omega"]])
+            Tc = res.rom.transfer_many(w)
+            rows.append({"omega": x["omega"],
+                         "true_rel_error": float(sigma_max(x["T"][None] - Tc)[0] / est.peak),
+                         "estimate": est.at(x["omega"]) + float(sigma_max(est.rom(w) - Tc)[0] / est.peak)})
+        info.update({
+            "estimate": curve, "estimate_max": float(curve.max()), "stable": bool(res.rom.is_stable()),
+            "status": info["status"] if not info["converged"] or converged else res.info["status"],
+            "converged": converged, "validated": rows, "samples_at_points": [],
+            "compress": {"method": o["compress"], "states": int(res.rom.states), "surrogate_order": int(k),
+                         "surrogate_estimate_max": float(est.max), "surrogate_gap_max": float(gap.max()),
+                         "surrogate_tol": tol,
+                         "lu_count": int(res.info.get("lu_count", 0)), "status": res.info["status"],
+                         "time_s": float(res.info["time_s"])},
+        })
+        info.pop("definite", None)
+        return res.rom, info
 
     def _lus_needed(self, order):
         """LUs the greedy had made when its basis first held ``order`` columns (at least the start's)."""
