@@ -35,10 +35,12 @@ def models():
     return {k: f() for k, f in MODELS.items()}
 
 
-def _reduce(fom, r, **opts):
+def _reduce(fom, r, method="adaptive", **opts):
+    """(reducer, reduction) of ``method`` at order r, its convergence and rank warnings silenced."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ms.errors.ConvergenceWarning)
-        red = ms.reducers.make("adaptive", fom, **opts)
+        warnings.simplefilter("ignore", ms.errors.RankWarning)
+        red = ms.reducers.make(method, fom, **opts)
         return red, red.reduce(r)
 
 

@@ -5,7 +5,6 @@ pole cluster and refused input."""
 
 from __future__ import annotations
 
-import warnings
 
 import numpy as np
 import pytest
@@ -17,6 +16,7 @@ from morsuite.reducers.base import as_complex
 from morsuite.reducers.dominant.qdpa import band_distance
 from morsuite.utils import blas_threads
 from support import dense_reduced
+from test_adaptive import _reduce as reduce_with
 from test_adaptive import dense_curve, dense_transfer
 
 MODELS = {"tcom": lambda: ms.models.tcom(nc=40), "fem_block": lambda: ms.models.fem_block(300)}
@@ -28,11 +28,7 @@ def models():
 
 
 def _reduce(fom, r, **opts):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ms.errors.ConvergenceWarning)
-        warnings.simplefilter("ignore", ms.errors.RankWarning)
-        red = ms.reducers.make("dominant", fom, **opts)
-        return red, red.reduce(r)
+    return reduce_with(fom, r, "dominant", **opts)
 
 
 def dense_poles(ref):

@@ -33,7 +33,7 @@ import scipy.linalg as sla
 
 from ...linalg.dense import sigma_max
 
-__all__ = ["ReducedResponse", "BandEstimate", "band_estimate", "local_maxima"]
+__all__ = ["ReducedResponse", "BandEstimate", "band_estimate", "band_option", "local_maxima"]
 
 #: the pole-residue values must agree with direct solves to this, relative to the largest response
 #: at the check frequencies, or every frequency is solved directly
@@ -179,6 +179,25 @@ def band_estimate(rom: ReducedResponse, rich: ReducedResponse, band, n: int, n_p
     on_peak = np.isin(grid, peaks) if n_peak else np.ones(grid.size, dtype=bool)
     peak = max(float(sigma_max(TU[on_peak]).max()), np.finfo(float).tiny)
     return BandEstimate(grid, sigma_max(TU - TV) / peak, peak, rom, rich)
+
+
+def band_option(value, owner: str):
+    """The ``band`` option of a reducer checked: None, or a float array (w1, w2) with 0 < w1 < w2.
+
+    Raises
+    ------
+    OptionError
+        Naming ``band`` and ``owner``. Cost: none.
+    """
+    from ...errors import OptionError
+
+    if value is None:
+        return None
+    arr = np.ravel(value).astype(float)
+    if arr.size != 2 or not (0 < arr[0] < arr[1]):
+        raise OptionError(f"The 'band' parameter of {owner} must be (w1, w2) with 0 < w1 < w2. "
+                          f"Got {np.ravel(value).tolist()!r} instead.")
+    return arr
 
 
 def local_maxima(values) -> np.ndarray:

@@ -17,7 +17,7 @@ from ...rom import SecondOrderROM
 from ..base import Option, Reducer
 from ..krylov.reducer import definiteness, is_symmetric
 from ..krylov.soar import KernelProjector, RealBasis
-from .estimate import ReducedResponse, band_estimate, local_maxima
+from .estimate import ReducedResponse, band_estimate, band_option, local_maxima
 from .points import make_point
 
 __all__ = ["Adaptive"]
@@ -79,13 +79,7 @@ class Adaptive(Reducer):
 
     def _check_options(self):
         o = self.options
-        b = o["band"]
-        if b is not None:
-            arr = np.ravel(b).astype(float)
-            if arr.size != 2 or not (0 < arr[0] < arr[1]):
-                raise OptionError(f"The 'band' parameter of Adaptive must be (w1, w2) with 0 < w1 < w2. "
-                                  f"Got {b.tolist()!r} instead.")
-            self.options["band"] = arr
+        self.options["band"] = band_option(o["band"], "Adaptive")
         start = o["start"]
         if isinstance(start, str):
             if start not in ("auto", "center"):

@@ -12,7 +12,7 @@ import numpy as np
 
 from ...errors import ConvergenceWarning, OptionError, RankWarning
 from ...rom import SecondOrderROM
-from ..adaptive.estimate import ReducedResponse, band_estimate
+from ..adaptive.estimate import ReducedResponse, band_estimate, band_option
 from ..base import Option, Reducer
 from ..krylov.reducer import definiteness, is_symmetric
 from ..krylov.soar import RealBasis
@@ -55,13 +55,7 @@ class Dominant(Reducer):
         self._qd = None
 
     def _check_options(self):
-        b = self.options["band"]
-        if b is not None:
-            arr = np.ravel(b).astype(float)
-            if arr.size != 2 or not (0 < arr[0] < arr[1]):
-                raise OptionError(f"The 'band' parameter of Dominant must be (w1, w2) with 0 < w1 < w2. "
-                                  f"Got {b.tolist()!r} instead.")
-            self.options["band"] = arr
+        self.options["band"] = band_option(self.options["band"], "Dominant")
         fom = self.fom
         if not all(is_symmetric(X) for X in (fom.M, fom.D, fom.K)):
             raise OptionError("Dominant needs symmetric M, D and K (its residues use the right eigenvectors as "
