@@ -77,6 +77,9 @@ def _run(plan: dict, echo=None) -> dict:
                "time_s": wall, "lu_seconds": float(sum(h.get("lu_seconds", 0.0) for h in hist)),
                "solve_seconds": float(sum(h.get("solve_seconds", 0.0) for h in hist)),
                "solves": info["solves"], "estimate_max": info["estimate_max"],
+               "time_breakdown": info["time_breakdown"],
+               "validation_lu_seconds": float(sum(h.get("lu_seconds", 0.0) for h in hist
+                                                  if h["kind"] == "validation")),
                "points": [complex(p) for p in as_complex(info["points"])],
                "validated": info["validated"],
                "validated_max": max((v["true_rel_error"] for v in info["validated"]), default=None),

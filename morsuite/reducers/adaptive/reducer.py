@@ -153,16 +153,18 @@ class Adaptive(Reducer):
         return pt
 
     def _sample(self, omega):
-        """One true sample T(j omega) (one LU); returns (T, lu) with the LU kept for a promotion."""
+        """One true sample T(j omega) (one LU); returns (T, lu, (LU seconds, solve seconds)), the LU kept for a
+        promotion to a point."""
         st = self._state
         t0 = time.perf_counter()
         lu = st["solver"].factor(1j * omega)
+        t1 = time.perf_counter()
         X = lu.solve(self.fom.F)
         T = self.fom.L @ X.real + 1j * (self.fom.L @ X.imag)
         st["lus"] += 1
         st["seconds"] += time.perf_counter() - t0
         st["samples"].append({"omega": float(omega), "T": T, "point": False})
-        return T, lu
+        return T, lu, (t1 - t0, time.perf_counter() - t1)
 
     # -- projections ----------------------------------------------------------------------------------
     def _products(self):
@@ -293,11 +295,12 @@ class Adaptive(Reducer):
             w = self._next_frequency(est)
             if w is None:
                 return "passed"
-            T, lu = self._sample(w)
+            T, lu, (lu_s, solve_s) = self._sample(w)
             err = float(sigma_max((T - est.rom(np.array([1j * w]))[0])[None])[0]) / est.peak
             st["log"].append({"kind": "validation", "point": complex(0, w), "omega": w, "true_rel_error": err,
                               "estimate_at": est.at(w), "r_before": order, "lus": st["lus"],
-                              "columns": st["basis"].cols, "seconds": st["seconds"]})
+                              "columns": st["basis"].cols, "seconds": st["seconds"], "lu_seconds": lu_s,
+                              "solve_seconds": solve_s, "solves": self.fom.m})
             if err > tol:
                 st["samples"].pop()  # it becomes a point: its sample is kept as the point's
                 self._add_point(1j * w, lu=lu, kind="validation-failed",
