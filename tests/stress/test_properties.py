@@ -104,7 +104,7 @@ def test_generator_in_catalog_and_namespace():
 # -- reducers: finite ROM or documented error, consistent info, Hermite conditions -----
 #: options that keep an example well under a second (bt-fl: a fixed 16-node rule over the band)
 _FAST = {"irka": {"maxit": 30}, "irka-projected": {"maxit": 30}, "bt": {"maxiter": 150}, "modal": {},
-         "krylov": {}, "bt-fl": {"nodes": 16}}
+         "krylov": {}, "bt-fl": {"nodes": 16}, "adaptive": {"max_lus": 8}, "dominant": {"max_lus": 8}}
 
 
 @pytest.mark.parametrize("method", list(_FAST))
