@@ -204,6 +204,32 @@ class Reducer:
     def _check_options(self):
         """Hook: cross-option checks."""
 
+    # -- what the reducer says of itself and its route to a tolerance (analysis.tolerance) --------
+    def states_per_order(self) -> int:
+        """First-order states per unit of ``r``: 2 for a second-order reduced model (r x r matrices,
+        2r states; the default), 1 for a first-order one (r states). Cost: none."""
+        return 2
+
+    def order_guess(self, tol: float, *, measure: str, scale: float) -> int | None:
+        """Hook: a first guess of the order ``r`` whose error meets ``tol`` (relative; ``scale`` the
+        absolute norm it is relative to, ``measure`` one of "band", "h2", "hinf"), from what this
+        reducer has already computed (e.g. Hankel singular values), or None (default: no guess).
+        A guess only steers :class:`~morsuite.analysis.tolerance.ToleranceSearch`; every order it
+        returns is verified. Cost: none (no LU)."""
+        return None
+
+    def continue_from(self, rom) -> bool:
+        """Hook: start the next :meth:`reduce` from ``rom``, an earlier result of this reducer at a
+        smaller or larger order (continuation in r: its poles and residue directions as the next
+        interpolation data); True when the reducer uses it (default False: nothing to continue).
+        Cost: none here; the next reduction's."""
+        return False
+
+    def _continued_record(self):
+        """Hook: what ``info["continued_from"]`` says of the last call's start (``{"order", "states"}`` of the
+        model it continued from), None for a fresh start (the default)."""
+        return None
+
     def get_params(self) -> dict:
         """Options as plain data (arrays as lists), as recorded in ``info``."""
         return {k: to_plain(v) for k, v in self.options.items()}
@@ -277,6 +303,7 @@ class Reducer:
         base["blas_threads"] = BLAS_THREADS
         if self.saddle_lu and hasattr(self.fom, "lu_analysis"):  # the sparse LU backend of the model's solvers
             base["lu_backend"] = self.fom.lu_analysis()
+        base["continued_from"] = self._continued_record()
         base["warnings"] = list(self._warnings)
         base["options"] = self.get_params()
         return Reduction(rom=rom, info=to_plain(base))

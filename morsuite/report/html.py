@@ -348,6 +348,7 @@ def render_study(page: dict) -> str:
     import markupsafe
 
     tables = [{**t, "view": table_view(t["columns"], t["rows"])} for t in page["tables"]]
+    reach = [{**t, "view": table_view(t["columns"], t["rows"])} for t in page.get("tolerance") or []]
     boards = []  # per table: its open scoreboards and its folded ones, in page order
     for b in page.get("scoreboards") or []:
         if not boards or boards[-1]["table"] != b["table"]:
@@ -358,7 +359,7 @@ def render_study(page: dict) -> str:
     if poles is not None:
         poles["svg"] = markupsafe.Markup(poles["svg"])  # built here from numbers and escaped labels only
     return _environment().get_template("study.html.j2").render(
-        page=page, tables=tables, boards=boards, marks=MARKS, modes=modes_view(modes), poles=poles,
+        page=page, tables=tables, reach=reach, boards=boards, marks=MARKS, modes=modes_view(modes), poles=poles,
         modes_note=modes.get("note") or "", glance=modes_glance(modes))
 
 

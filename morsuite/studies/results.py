@@ -66,7 +66,7 @@ class Results:
     """Read access to a run's artifacts by the study's aliases (what scenes see)."""
 
     def __init__(self, study, plan, foms, reductions, metrics, norms=None, norm_errors=None, sims=None,
-                 sim_errors=None, modes=None):
+                 sim_errors=None, modes=None, tolerances=None):
         self.study, self.plan = study, plan
         #: the study's modes and poles as the page shows them (``{"rows", "poles", "note"}``, see
         #: docs/design/reports.md "Modes and poles"), or None: no modes section on the page
@@ -76,6 +76,11 @@ class Results:
         self._foms, self._red, self._met = foms, reductions, metrics
         self._norms, self._nerr = norms or {}, norm_errors or {}
         self._sims, self._serr = sims or {}, sim_errors or {}
+        self._tol = tolerances or {}
+
+    def tolerance(self, scene, method):
+        """The tolerance search entry of ``method`` in tolerance scene ``scene`` (names), or None."""
+        return self._tol.get(self.plan.tolerance_of.get((scene, method)))
 
     def fom(self, model, grid):
         """The full-order response entry of ``model`` on ``grid`` (aliases), or None."""

@@ -65,6 +65,7 @@ from ..report.tables import TableData
 from .kinds import AXES, COMMON_KEYS, KINDS, MAX_POINTS, MEASURES, TIMES, Kind, needs, orders_text, output_names
 from .norm_options import NORM_MEASURES
 from .time_figures import time_figures
+from .tolerance_scene import build_tolerance
 
 __all__ = ["KINDS", "COMMON_KEYS", "Kind", "TableData", "needs", "build", "output_names", "MEASURES", "AXES",
            "TIMES", "MAX_POINTS", "order_groups"]
@@ -428,7 +429,7 @@ def _time_scene(scene, study, res):
 _BUILDERS = {"sigma": _freq_scene, "error": _freq_scene, "compare": _freq_scene,
              "error_vs_r": _against_r_scene, "time_vs_r": _against_r_scene, "pareto": _pareto_scene,
              "convergence": _convergence_scene, "hsv": _hsv_scene, "table": _table_scene, "time": _time_scene,
-             "modes": _modes_scene}
+             "modes": _modes_scene, "tolerance": build_tolerance}
 
 
 def build(scene, study, res) -> list:

@@ -259,6 +259,21 @@ class IRKAFO(SurrogatePhase, IRKA):
             self._bt = make("bt", self.fom)
         return self._bt
 
+    def states_per_order(self) -> int:
+        """1: r counts the first-order reduced model's states."""
+        return 1
+
+    def order_guess(self, tol: float, *, measure: str, scale: float) -> int | None:
+        """The start's BT guess (:meth:`~morsuite.reducers.bt.balanced.SquareRootBT.order_guess`) once its
+        Gramian factors exist; None before (no LU here)."""
+        return None if self._bt is None else self._bt.order_guess(tol, measure=measure, scale=scale)
+
+    def continue_from(self, rom) -> bool:
+        """No continuation: the start at every order is the BT model of that order from the cached Gramian
+        factors (r-independent work, paid once), which measured the better start (the earlier model's poles
+        completed by BT's cycled where BT's converged: ``docs/design/tolerance.md``). Returns False."""
+        return False
+
     def _initial(self, r):
         o = self.options
         self._start = {"init": o["init"]}
