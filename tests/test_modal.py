@@ -177,8 +177,9 @@ def test_partial_convergence_of_the_modes_is_a_status(monkeypatch):
 
     with monkeypatch.context() as mp:
         mp.setattr(eigen.spla, "eigsh", eigsh)
-        with pytest.warns(ConvergenceWarning, match="converged 3 of 7 modes"):
+        with pytest.warns(ConvergenceWarning) as said:
             res = ms.reducers.make("modal", fom).reduce(8)
+    assert any("converged 3 of 7 modes" in str(w.message) for w in said)
     info = res.info
     assert info["status"] == "partial" and info["converged"] is False and info["modes"] == 3
     assert res.rom.order == 4 and info["r"] == 4  # 3 modes and the static column

@@ -81,9 +81,9 @@ RTOL = 1e-10
 #: largest relative damping coupling between rigid and flexible modes that deflation accepts
 #: (rounding gives 1e-16 and below; dsms(200) with its end dampers doubled, 6e-6)
 COUPLING_TOL = 1e-10
-#: D_Phi counts as zero (``damped`` False) below DAMPING_UNIT * sqrt(n1) * eps * max(|Phi|^T |D| |Phi|), the
-#: rounding of the product (with D Phi = 0 exactly, the shapes' errors enter squared): dsms(40, free=True)
-#: gives 4e-33 against a level of 3e-15
+#: D_Phi counts as zero (``damped`` False) below DAMPING_UNIT * sqrt(n1) * eps * ``max(abs(Phi).T @ abs(D) @
+#: abs(Phi))``, the rounding of the product (with D Phi = 0 exactly, the shapes' errors enter squared):
+#: dsms(40, free=True) gives 4e-33 against a level of 3e-15
 DAMPING_UNIT = 10.0
 #: the detection shift is -SHIFT * rho
 SHIFT = 1e-6
