@@ -22,10 +22,10 @@ from typing import Any, Callable, ClassVar
 
 import numpy as np
 
-from ..errors import InputError, OptionError
+from ..errors import ConvergenceWarning, InputError, OptionError
 from ..linalg.warmup import warm_kernels
 from ..utils import blas_threads, to_plain
-from .outcome import check_outcome, complete_outcome
+from .outcome import CONVERGED_STATUSES, check_outcome, complete_outcome
 
 __all__ = ["Option", "Reducer", "Reduction", "make", "available", "register", "get_class", "as_complex"]
 
@@ -269,7 +269,11 @@ class Reducer:
         order r + k (N + 2k states for a first-order model), ``info["r_flexible"]``,
         ``info["rigid_modes"]`` (their count and detection record: its LU is the model's,
         paid once and not in ``lu_count``), ``stable`` of the flexible part (the rigid poles at
-        0 are kept by design), and ``rom.flexible`` the flexible part's reduced model.
+        0 are kept by design), and ``rom.flexible`` the flexible part's reduced model. A model whose
+        rigid-body detection failed or is incomplete is reduced as detected, with a warning,
+        ``info["rigid_modes"]`` (the detection's ``status`` and ``reason``) and, where the method
+        said ``converged`` or ``direct``, status ``detection-failed`` (the method's own in
+        ``method_status``; :mod:`morsuite.reducers.outcome`).
         """
         r = self._validate_r(r)
         self._warnings = []
@@ -291,11 +295,19 @@ class Reducer:
             info.setdefault("stable", bool(rom.is_stable()))
             rom = with_rigid(self.model, rom)
             rigid = {"rigid_modes": self._rigid.summary(), "r_flexible": int(rom.flexible.order)}
+        detection = self._rigid.info.get("status", "ok")
+        if detection != "ok":  # the detection failed or is incomplete: said, recorded, never converged
+            rigid.setdefault("rigid_modes", self._rigid.summary())
+            self.warn(f"{self.name}: rigid-body detection on {self.model.name} {detection}: "
+                      f"{self._rigid.info.get('reason')}", ConvergenceWarning)
         base = {"method": self.name, "model": self.model.name, "r_requested": r,
                 "r": int(rom.order), "kind": rom.kind, "states": int(rom.states),
                 "time_s": elapsed, **rigid}
         base.update(info)
         complete_outcome(base)  # status <-> converged, lu_count, lu_count_shared (reducers.outcome)
+        if detection != "ok" and base["status"] in CONVERGED_STATUSES:
+            base.update(method_status=base["status"], status="detection-failed", converged=False,
+                        status_reason=f"rigid-body detection {detection}: {self._rigid.info.get('reason')}")
         check_outcome(base, self.name)
         base.setdefault("iterations", 0)
         if "stable" not in base:

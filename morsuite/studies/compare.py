@@ -353,12 +353,14 @@ def verdict_row(r: dict) -> str:
 
 
 def _table_note(result, name) -> str:
+    """The table's verdict (its note, :func:`morsuite.studies.scenes._verdict`: ranked at equal states and
+    above the floors only, ties at the rounding level said as ties), as its Markdown file holds it."""
     md = result.outdir / f"{name}.md"
     try:
         lines = md.read_text().splitlines()
     except OSError:
         return ""
-    return next((ln for ln in lines if "Smallest error" in ln), "")
+    return next((ln for ln in lines if ln.strip() and not ln.startswith(("#", "|"))), "")
 
 
 def rigid_line(model: str) -> str | None:

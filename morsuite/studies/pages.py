@@ -113,8 +113,9 @@ def _cache_counts(artifacts) -> dict:
 
 #: the summary columns a scoreboard row carries (what :func:`morsuite.report.html.scoreboard_view` reads)
 _BOARD_COLUMNS = ("method", "r_requested", "r", "states", "status", "converged", "stable", "max_abs_error",
-                  "h2_error", "h2_trusted", "hinf_error", "hinf_certified", "max_output_error", "time_standalone_s",
-                  "time_s", "lu_count_standalone", "lu_count", "worse_than_zero")
+                  "max_rel_error", "h2_error", "h2_rel_error", "h2_trusted", "hinf_error", "hinf_rel_error",
+                  "hinf_certified", "max_output_error", "max_output_rel_error", "time_standalone_s", "time_s",
+                  "lu_count_standalone", "lu_count", "worse_than_zero")
 #: a table with more sizes than this shows only its largest size's scoreboard open, the others folded
 _OPEN_SIZES = 3
 #: scene kinds whose figure is a study's key figure (its thumbnail on the results folder's page), in preference

@@ -39,7 +39,7 @@ TIME_NOTE = ("time_s is the reducer's own timing of reduce(r) (info['time_s']); 
              "them), lu_count_standalone the LUs of reducing to this r alone.")
 STATUS_NOTE = ("converged is True only when the method's own optimality or fixed-point test passed on the full "
                "model; reducer_status says how the run ended (converged, direct, cap, cycle, stalled, "
-               "uncertified, skipped, stopped: morsuite.reducers.outcome.STATUS). worse_than_zero names the "
+               "uncertified, skipped, partial, detection-failed, stopped: morsuite.reducers.outcome.STATUS). worse_than_zero names the "
                "norms (band, h2, hinf, max_output, l2_output) in which the error is at or above the full "
                "model's own norm, the error of the zero model T_r = 0.")
 BAND_NOTE = ("max_abs_error and max_rel_error are band quantities: the maximum of sigma_max(T - T_r) (over "
