@@ -166,10 +166,16 @@ def cmd_info(args) -> int:
 
 
 def cmd_list(args) -> int:
-    """``morsuite list``: print the catalog models and the registered reducers; returns 0."""
+    """``morsuite list``: print the catalog models, the registered reducers and the methods of
+    ``morsuite compare`` (reducers and their variants; ``*``: compared by default); returns 0."""
     from . import models, reducers
     print("models:   " + ", ".join(models.available()))
     print("reducers: " + ", ".join(reducers.available()))
+    print("methods (morsuite compare; * compared by default):")
+    for name, m in reducers.methods().items():
+        opts = ", ".join(f"{k}={v!r}" for k, v in m.options.items())
+        print(f"  {'*' if m.default else ' '} {name:<16}{m.reducer + (f'({opts})' if opts else ''):<20}"
+              f"{m.states_per_order} states/order  {m.label}")
     return 0
 
 
@@ -305,7 +311,7 @@ def _add_compare_parser(sub):
             return 1
         return 0
 
-    from .studies.compare import DEFAULT_METHODS, INPUTS, METHODS
+    from .studies.compare import INPUTS
     p = sub.add_parser("compare", help="compare reducers on one model at equal first-order states: a study, "
                                        "its HTML report and the verdict")
     p.add_argument("model", help=MODEL_HELP)
@@ -325,7 +331,8 @@ def _add_compare_parser(sub):
     p.add_argument("--jobs", type=int, metavar="N",
                    help="worker processes, each pinned to a core (default: the usable cores, at most 2)")
     p.add_argument("--methods", nargs="+", metavar="NAME",
-                   help=f"default: {' '.join(DEFAULT_METHODS)}; valid: {', '.join(METHODS)}")
+                   help="reducers or their variants (default: those marked * by `morsuite list`, which lists "
+                        "every valid name)")
     p.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
                    help="frequency band in rad/s (default: the model's; a model file: from its eigenfrequencies)")
     p.add_argument("--input", metavar="|".join(INPUTS) + "|FILE.csv",
@@ -362,7 +369,7 @@ def build_parser():
     p = sub.add_parser("info", help="summary of a model")
     p.add_argument("model", help=MODEL_HELP)
     p.set_defaults(func=cmd_info)
-    p = sub.add_parser("list", help="available models and reducers")
+    p = sub.add_parser("list", help="available models, reducers and the methods of compare")
     p.set_defaults(func=cmd_list)
     p = sub.add_parser("reduce", help="reduce one model, print errors and timing")
     p.add_argument("--model", required=True, help=MODEL_HELP)

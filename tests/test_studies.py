@@ -530,7 +530,7 @@ def test_repository_specs_validate(path):
 def fake_bt(monkeypatch):
     """A stand-in "bt" with BT's conventions: r-independent work done once per instance
     (reported as setup_cost/setup_reused), Hankel singular values and an error bound."""
-    from morsuite.reducers import base
+    from morsuite.reducers import base, registry
     from morsuite.reducers.irka.second_order import IRKA
 
     class FakeBT(IRKA):
@@ -555,7 +555,7 @@ def fake_bt(monkeypatch):
                         lu_count=info["lu_count"] + (0 if reused else 5))  # "the Gramians' 5 LUs"
             return rom, info
 
-    monkeypatch.setitem(base._REGISTRY, "fake-bt", FakeBT)
+    monkeypatch.setitem(registry._REGISTRY, "fake-bt", FakeBT)
     return FakeBT
 
 

@@ -8,6 +8,11 @@ Directives (each renders reStructuredText; the page is re-read on every build):
     (:class:`morsuite.reducers.base.Option`). The same table is appended to
     each reducer class's docstring in the API reference, and the raw
     ``OPTIONS`` attribute is left out there.
+``.. morsuite-reducer-table::``
+    One row per registered reducer, from its description
+    (:class:`morsuite.reducers.Description`): the reduced model (and the named
+    variants), what it targets, its cost in sparse LUs, what to use it for, the
+    options users set, its family folder and design page.
 ``.. morsuite-spec-keys::``
     The keys of a study spec (TOML), from the key tables of
     :mod:`morsuite.studies.spec` and the scene kinds of
@@ -172,6 +177,34 @@ def reducer_options_rst(name: str | None = None) -> list[str]:
                   f"``ms.reducers.make({n!r}, fom, **options)``.", ""]
         lines += options_table(cls.OPTIONS)
     return lines
+
+
+def reducer_table_rows() -> list[list[str]]:
+    """Rows (method, reduced model, targets, cost, use it for, options) of every registered reducer,
+    read from its :class:`morsuite.reducers.Description`, in the registry's order."""
+    from morsuite import reducers
+
+    rows = []
+    for name, m in reducers.methods().items():
+        if m.name != m.reducer:
+            continue
+        d = m.description
+        variants = [v for v in reducers.methods().values() if v.reducer == name and v.name != name]
+        model = _rst_cell(f"{m.result.replace('-', ' ')}, "
+                          + ("r states" if m.states_per_order == 1 else "order r (2r states)"))
+        if variants:
+            model += "; " + ", ".join(f"``{v.name}``" for v in variants) + " (" + \
+                ", ".join(sorted({v.result.replace("-", " ") for v in variants})) + ")"
+        page = f":doc:`{d.page}`" if d.page else ""
+        rows.append([f"``{name}`` (``reducers/{d.family}/``{'; ' + page if page else ''})", model,
+                     _rst_cell(d.targets), _rst_cell(d.cost), _rst_cell(d.use_for),
+                     ", ".join(f"``{o}``" for o in d.options) or "\\-"])
+    return rows
+
+
+def reducer_table_rst() -> list[str]:
+    return list_table(["method", "reduced model", "what it targets", "cost in sparse LUs", "use it for",
+                       "options users set"], reducer_table_rows(), "14 18 18 16 18 16")
 
 
 def _is_option_table(obj) -> bool:
@@ -353,6 +386,7 @@ def _directive(fn):
 def setup(app):
     app.setup_extension("morsuite_api")
     app.add_directive("morsuite-reducer-options", _directive(reducer_options_rst))
+    app.add_directive("morsuite-reducer-table", _directive(reducer_table_rst))
     app.add_directive("morsuite-spec-keys", _directive(spec_keys_rst))
     app.add_directive("morsuite-cli", _directive(cli_rst))
     app.add_directive("morsuite-refused-table", _directive(refused_rst))

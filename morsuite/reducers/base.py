@@ -1,4 +1,4 @@
-"""The reducer interface: one base class, a declared option table, a registry.
+"""The reducer interface: one base class and a declared option table (the registry: :mod:`.registry`).
 
 A reducer is bound to one full-order model. Its constructor only validates and
 stores options; ``reduce(r)`` returns a :class:`Reduction` (the reduced model and
@@ -18,7 +18,7 @@ import time
 import warnings
 from dataclasses import dataclass, field
 from numbers import Integral, Real
-from typing import Any, Callable, ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -27,7 +27,7 @@ from ..linalg.warmup import warm_kernels
 from ..utils import blas_threads, to_plain
 from .outcome import CONVERGED_STATUSES, check_outcome, complete_outcome
 
-__all__ = ["Option", "Reducer", "Reduction", "make", "available", "register", "get_class", "as_complex"]
+__all__ = ["Option", "Reducer", "Reduction", "as_complex"]
 
 
 #: BLAS threads used inside ``reduce`` (recorded in ``info["blas_threads"]``).
@@ -162,7 +162,10 @@ class Reduction:
 class Reducer:
     """Base class: shared ``reduce`` (validation, timing, info), method hooks.
 
-    Subclasses set ``name``, ``OPTIONS`` and implement ``_reduce(r) -> (rom, info)``.
+    Subclasses set ``name``, ``OPTIONS``, ``DESCRIPTION`` (a
+    :class:`~morsuite.reducers.registry.Description`: a class that declares ``name`` and
+    ``DESCRIPTION`` in its own body is registered by presence) and implement
+    ``_reduce(r) -> (rom, info)``. Guide: ``docs/design/adding_a_reducer.md``.
     """
 
     name: ClassVar[str] = "base"
@@ -205,10 +208,18 @@ class Reducer:
         """Hook: cross-option checks."""
 
     # -- what the reducer says of itself and its route to a tolerance (analysis.tolerance) --------
+    @classmethod
+    def states_for(cls, options: dict) -> int:
+        """First-order states per unit of ``r`` with ``options`` (every declared option, validated): 2 for
+        a second-order reduced model (r x r matrices, 2r states), 1 for a first-order one (r states), as
+        ``DESCRIPTION.result`` says (default 2); a reducer whose result depends on an option
+        (``result="by-option"``: bt's ``form``) overrides this. Cost: none."""
+        desc = getattr(cls, "DESCRIPTION", None)
+        return 1 if getattr(desc, "result", None) == "first-order" else 2
+
     def states_per_order(self) -> int:
-        """First-order states per unit of ``r``: 2 for a second-order reduced model (r x r matrices,
-        2r states; the default), 1 for a first-order one (r states). Cost: none."""
-        return 2
+        """First-order states per unit of ``r`` of this reducer: :meth:`states_for` of its options. Cost: none."""
+        return self.states_for(self.options)
 
     def order_guess(self, tol: float, *, measure: str, scale: float) -> int | None:
         """Hook: a first guess of the order ``r`` whose error meets ``tol`` (relative; ``scale`` the
@@ -333,55 +344,3 @@ def as_complex(value) -> np.ndarray:
             return [conv(v) for v in x]
         return complex(x)
     return np.asarray(conv(value), dtype=complex)
-
-
-# -- registry -------------------------------------------------------------
-_REGISTRY: dict[str, Callable] = {}
-_ENTRY_POINTS_LOADED = False
-
-
-def register(name: str, cls):
-    """Register a reducer class under ``name`` (third parties: entry-point group
-    ``morsuite.reducers``)."""
-    _REGISTRY[name] = cls
-    return cls
-
-
-def _load_entry_points():
-    global _ENTRY_POINTS_LOADED
-    if _ENTRY_POINTS_LOADED:
-        return
-    _ENTRY_POINTS_LOADED = True
-    from importlib.metadata import entry_points
-
-    for ep in entry_points(group="morsuite.reducers"):
-        if ep.name not in _REGISTRY:
-            try:
-                _REGISTRY[ep.name] = ep.load()
-            except Exception as exc:  # a broken plug-in must not break the suite
-                warnings.warn(f"reducer entry point {ep.name!r} failed to load: {exc}")
-
-
-def available() -> list[str]:
-    """Names of the registered reducers."""
-    _load_entry_points()
-    return sorted(_REGISTRY)
-
-
-def get_class(name: str):
-    """The reducer class registered as ``name`` (also from ``morsuite.reducers`` entry points).
-
-    Raises
-    ------
-    OptionError
-        If no reducer has that name; the message lists the available ones.
-    """
-    _load_entry_points()
-    if name not in _REGISTRY:
-        raise OptionError(f"unknown reducer {name!r}; available: {', '.join(available())}")
-    return _REGISTRY[name]
-
-
-def make(name: str, fom, **options) -> Reducer:
-    """Construct reducer ``name`` bound to ``fom`` with ``options``."""
-    return get_class(name)(fom, **options)

@@ -31,14 +31,14 @@ cache, and the first study (in command-line order) that reads an artifact comput
 records it as computed, the later ones as reused, as in a sequential run. Failures are not
 cached; they are handed to the studies from memory, so that no study computes them again.
 
-A model's LR-ADI Gramian factors, which the ``bt``, ``so-h2`` and ``irka-fo`` reductions and
-the H2 norms read, are a unit of their own (:func:`~morsuite.studies.gramian_store.compute_factors`)
+A model's LR-ADI Gramian factors, which the ``bt``, ``so-h2`` and ``irka-fo`` reductions (their
+descriptions say so: :func:`gramian_use`) and the H2 norms read, are a unit of their own (:func:`~morsuite.studies.gramian_store.compute_factors`)
 that starts first; the units that read them wait for it and load them from the artifact cache
 (:class:`~morsuite.studies.gramian_store.GramianStore`, set in every worker; the model's Hinf norms
 wait for it too, and their start grid uses the factors' shifts, as in a study's own graph, where
 they run after the reductions), so that a run pays them once, not once per worker (at n1 = 20,577 they are 204 LUs and 26 minutes).
 The paper's IRKA reads them only to score its shortlist when it does not converge
-(:data:`GRAMIAN_WAITERS`): it waits for the unit when there is one, but does not call for one.
+(:func:`gramian_use` "waits"): it waits for the unit when there is one, but does not call for one.
 
 Cost: the units' own; each worker process builds the models it meets (once) and reads a model's
 Gramian factors from the store when a unit needs them (once per worker and model).
@@ -68,14 +68,15 @@ SPLIT = {"irka": 1, "irka-projected": 3}
 
 RUN_BY = "processes (shared)"
 
-#: Reducers that read the model's LR-ADI Gramian factors: they and the model's norm units (which read
-#: them too) start after the model's Gramian factors' unit (module docstring).
-GRAMIAN_READERS = ("bt", "so-h2", "irka-fo")
-#: Reducers that read the factors only when they do not converge (the exact H2 score of IRKA's
-#: shortlist): they wait for the model's Gramian factors' unit when there is one, but do not call
-#: for one (at n1 = 20,577 the paper's IRKA stalled before the unit had finished and paid the
-#: factors a second time: 171 LUs, 1,085 s, 2026-11-28)
-GRAMIAN_WAITERS = ("irka", "irka-projected")
+def gramian_use(reducer: str):
+    """How ``reducer`` uses the model's LR-ADI Gramian factors, as its description says
+    (``Description.gramians``): "reads" (bt, so-h2, irka-fo: they and the model's norm units start after
+    the model's Gramian factors' unit), "waits" (the paper's IRKA and irka-projected read the factors only
+    to score their shortlist when they do not converge: they wait for the unit when there is one, but do
+    not call for one; at n1 = 20,577 the paper's IRKA stalled before the unit had finished and paid the
+    factors a second time: 171 LUs, 1,085 s, 2026-11-28), or None (an unknown reducer too)."""
+    from .. import reducers
+    return reducers.describe(reducer).gramians if reducer in reducers.available() else None
 
 
 @dataclass
@@ -144,7 +145,7 @@ class _Unit:
     rom_from: list = field(default_factory=list)   # (reduce unit ids or None, {r: key}) whose entries it needs
     keys: dict = field(default_factory=dict)       # r -> key (group units) or {None: key}
     label: str = ""
-    gramians: bool = False    # reads the model's Gramian factors (GRAMIAN_READERS, the H2 norms)
+    gramians: bool = False    # reads the model's Gramian factors (gramian_use "reads", the H2 norms)
 
 
 def _units(plans, cache, prev):
@@ -190,7 +191,7 @@ def _units(plans, cache, prev):
                        cache_root, RUN_BY), "reduction", g.model.model_id,
                       float("inf") if len(known) < len(part) else sum(known), keys={r: keys[r] for r in part},
                       label=f"{g.method.reducer} {g.model.name} r = {part}",
-                      gramians=g.method.reducer in GRAMIAN_READERS))
+                      gramians=gramian_use(g.method.reducer) == "reads"))
             for r in part:
                 reduce_unit[(gid, r)] = uid
     for plan in plans:
@@ -228,7 +229,7 @@ def _units(plans, cache, prev):
                       prev.get(("tolerance", t.key), float("inf")), keys={None: t.key},
                       label=f"tolerance {t.method.reducer} {t.model.name} ({t.settings['error']} "
                             f"{', '.join(f'{x:g}' for x in t.settings['tol'])})",
-                      gramians=t.method.reducer in GRAMIAN_READERS or t.settings["error"] == "h2",
+                      gramians=gramian_use(t.method.reducer) == "reads" or t.settings["error"] == "h2",
                       deps={f"fom-{fkey}"} if fkey and f"fom-{fkey}" in units else set()))
     # a model's error norms wait for their reductions
     for u in units.values():
@@ -241,7 +242,7 @@ def _units(plans, cache, prev):
         uid = "gramians-" + model
         for u in units.values():
             if u.model == model and (u.gramians or u.kind in ("model_norm", "norm_error")
-                                     or (u.kind == "reduction" and u.args[1] in GRAMIAN_WAITERS)):
+                                     or (u.kind == "reduction" and gramian_use(u.args[1]) == "waits")):
                 u.deps.add(uid)
         add(_Unit(uid, "morsuite.studies.gramian_store:compute_factors", (source, RUN_BY), "gramians",
                   model, float("inf"), keys={None: uid}, label=f"Gramian factors {model}"))

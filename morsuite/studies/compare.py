@@ -12,11 +12,13 @@ is written when an argument is wrong: the error names it), writes it as TOML int
 study's output folder (``OUT/NAME/NAME.toml``: edit it and ``morsuite run`` it again),
 runs it with the cache, and returns the run and the verdict lines that the command prints.
 
-The default methods are the five of the ``*_five_*`` scenes of ``studies/sweep.toml``:
-the paper's IRKA (``irka``, second-order), ``irka-fo`` (first-order tangential IRKA),
-``so-h2`` (second-order H2 descent), second-order BT at the velocity-velocity level
-(``bt-vv``) and first-order BT (``bt``). ``irka-projected`` (dense, n1 x n1) and the other
-BT levels (``bt-pp``, ``bt-pv``, ``bt-vp``, ``bt-fv``) can be asked for.
+The methods are read from the reducers' registry (:func:`morsuite.reducers.methods`: every
+registered reducer and its named variants, with label and states per order): the defaults
+are those whose description says so (the paper's IRKA, ``irka-fo``, ``so-h2``, second-order
+BT at the velocity-velocity level ``bt-vv``, first-order ``bt``, ``modal``, ``krylov``);
+``irka-projected`` (dense, n1 x n1), the other BT levels (``bt-pp``, ``bt-pv``, ``bt-vp``,
+``bt-fv``), ``bt-fl`` and any reducer added later can be asked for. A reducer that takes a
+band (``Description.band_option``) is given the comparison's band.
 """
 
 from __future__ import annotations
@@ -32,32 +34,35 @@ from ..utils import atomic_write_text
 from .checks import suggest
 from .tol_options import TOL_MEASURES
 
-__all__ = ["METHODS", "DEFAULT_METHODS", "INPUTS", "compare_spec", "compare", "to_toml", "verdict_lines", "verdict_row",
+__all__ = ["all_methods", "default_methods", "INPUTS", "compare_spec", "compare", "to_toml", "verdict_lines", "verdict_row",
            "rigid_line"]
 
-#: method name -> (reducer, options, first-order states per order, label)
-METHODS = {
-    "irka": ("irka", {}, 2, "IRKA (paper, second-order)"),
-    "irka-fo": ("irka-fo", {}, 1, "irka-fo (first-order IRKA)"),
-    "so-h2": ("so-h2", {}, 2, "so-h2 (second-order H2 descent)"),
-    "bt": ("bt", {}, 1, "BT, first-order"),
-    "irka-projected": ("irka-projected", {}, 2, "IRKA, Pi-projected (dense)"),
-    **{f"bt-{lvl}": ("bt", {"form": lvl}, 2, f"BT ({lvl}, second-order)") for lvl in ("pp", "pv", "vp", "vv", "fv")},
-    "bt-fl": ("bt-fl", {"limited": "controllability"}, 1, "BT, frequency-limited to the band (one-sided: stable)"),
-    "modal": ("modal", {}, 2, "modal truncation + static correction"),
-    "krylov": ("krylov", {}, 2, "Krylov moment matching (SOAR)"),
-}
-#: the H2/BT family and the engineering baselines (modal truncation, Krylov moment matching: one LU each)
-DEFAULT_METHODS = ("irka", "irka-fo", "so-h2", "bt-vv", "bt", "modal", "krylov")
 #: the H-infinity searches' ``skip_factor`` (:func:`morsuite.analysis.hinf_error`) in a comparison
 SKIP_FACTOR = 0.5
 #: the inputs of ``--input`` besides a CSV file (columns t, u1..um)
 INPUTS = ("step", "impulse", "chirp")
 
 
-def _options(method: str, band) -> dict:
-    """The method's options in a comparison on ``band``: frequency-limited BT limited to it."""
-    return {**METHODS[method][1], **({"band": list(band)} if method == "bt-fl" else {})}
+def all_methods() -> dict:
+    """The methods a comparison offers, by name: every registered reducer and every variant
+    (:func:`morsuite.reducers.methods`, each a :class:`~morsuite.reducers.Method`: reducer, options,
+    label, first-order states per order). Cost: the registry's discovery on first use."""
+    from .. import reducers
+    return reducers.methods()
+
+
+def default_methods() -> tuple:
+    """The methods compared when none are named: those whose reducer's description says so
+    (:attr:`Description.default <morsuite.reducers.Description>`; today the paper's IRKA, irka-fo,
+    so-h2, bt-vv, bt, modal and krylov), in the registry's order."""
+    return tuple(name for name, m in all_methods().items() if m.default)
+
+
+def _options(method, band) -> dict:
+    """The method's options in a comparison on ``band``: its variant's, and the band for a reducer
+    that takes one (``Description.band_option``: frequency-limited BT)."""
+    opt = method.description.band_option
+    return {**method.options, **({opt: list(band)} if opt else {})}
 
 
 def _alias(name: str) -> str:
@@ -89,7 +94,8 @@ def compare_spec(model: str, states=None, methods=None, band=None, input=None, n
         compared: its order is r = N / 2); at most 2 (n1 - n2), and N / 2 <= n1 - n2 for
         second-order methods.
     methods : sequence of str, optional
-        Names from :data:`METHODS`; default :data:`DEFAULT_METHODS`.
+        Names from :func:`all_methods` (registered reducers and their variants); default
+        :func:`default_methods`.
     band : (float, float), optional
         Frequency band (rad/s) of the error figures and band errors; default the catalog
         model's band, or for a model file a decade beyond its undamped eigenfrequency range
@@ -115,10 +121,11 @@ def compare_spec(model: str, states=None, methods=None, band=None, input=None, n
     """
     from .. import models
 
-    methods = list(DEFAULT_METHODS if not methods else methods)
+    offered = all_methods()
+    methods = list(default_methods() if not methods else methods)
     for m in methods:
-        if m not in METHODS:
-            raise InputError(f"--methods: unknown method {m!r}{suggest(m, METHODS)}; valid: {', '.join(METHODS)}")
+        if m not in offered:
+            raise InputError(f"--methods: unknown method {m!r}{suggest(m, offered)}; valid: {', '.join(offered)}")
     if len(set(methods)) != len(methods):
         raise InputError(f"--methods: a method is named twice in {methods}")
     if not states and not tol:
@@ -137,7 +144,7 @@ def compare_spec(model: str, states=None, methods=None, band=None, input=None, n
     except (InputError, OSError, ValueError) as exc:
         raise InputError(f"MODEL {str(model)!r} cannot be read: {exc}") from exc
     states = sorted(set(int(n) for n in (states or [])))
-    second = [m for m in methods if METHODS[m][2] == 2]
+    second = [m for m in methods if offered[m].states_per_order == 2]
     for n in states:
         if n < (2 if second else 1):
             raise InputError(f"--states: {n} is too small (at least {2 if second else 1})")
@@ -175,17 +182,18 @@ def compare_spec(model: str, states=None, methods=None, band=None, input=None, n
             # whose surrogate may (screen)
             "norm_options": {"hinf": {"band_grid": [band[0], band[1], 200], "skip_factor": SKIP_FACTOR,
                                       "screen": True}},
-            "methods": {_alias(m): {"reducer": METHODS[m][0], **({"options": _options(m, band)} if _options(m, band)
-                                                              else {}),
-                                    "label": METHODS[m][3]} for m in methods},
+            "methods": {_alias(m): {"reducer": offered[m].reducer,
+                                    **({"options": _options(offered[m], band)} if _options(offered[m], band) else {}),
+                                    "label": offered[m].label} for m in methods},
             "scenes": []}
 
     def orders(ns):
         """``r`` of the scene and ``r_by_method`` for the methods whose order counts otherwise."""
         base = 2 if second else 1
         rs = [n // base for n in ns]
-        other = {_alias(m): ([n // METHODS[m][2] for n in ns] if len(ns) > 1 else ns[0] // METHODS[m][2])
-                 for m in methods if METHODS[m][2] != base}
+        spo = {m: offered[m].states_per_order for m in methods}
+        other = {_alias(m): ([n // spo[m] for n in ns] if len(ns) > 1 else ns[0] // spo[m])
+                 for m in methods if spo[m] != base}
         return (rs if len(rs) > 1 else rs[0]), other
 
     aliases = [_alias(m) for m in methods]

@@ -107,7 +107,8 @@ import scipy.linalg as sla
 from ...errors import ConvergenceWarning, InputError, OptionError, RankWarning, StabilityWarning
 from ...linalg.gramians import ADI_DEFAULTS, gramian_factors
 from ...rom import FirstOrderROM, SecondOrderROM
-from ..base import Option, Reducer, register
+from ..base import Option, Reducer
+from ..registry import Description, Variant
 
 __all__ = ["BT", "FORMS", "SquareRootBT", "level_products"]
 
@@ -147,9 +148,10 @@ class SquareRootBT(Reducer):
         order = self.fom.order
         return 2 * order if self.options["form"] == "first-order" else order
 
-    def states_per_order(self) -> int:
+    @classmethod
+    def states_for(cls, options: dict) -> int:
         """1 for ``form="first-order"`` (r counts states), else 2 (a second-order model of order r)."""
-        return 1 if self.options["form"] == "first-order" else 2
+        return 1 if options["form"] == "first-order" else 2
 
     def order_guess(self, tol: float, *, measure: str, scale: float) -> int | None:
         r"""The smallest order whose first discarded Hankel singular value is at most ``tol * scale``:
@@ -312,6 +314,13 @@ class BT(SquareRootBT):
     """
 
     name = "bt"
+    DESCRIPTION = Description(
+        label="BT, first-order", result="by-option",
+        targets="Hankel singular values; Hinf bound (first order)", cost="LR-ADI: one per ADI shift, once per model",
+        use_for="a reliable default, every r at once", options=("form", "tol", "maxiter", "hsv_tol"),
+        variants=tuple(Variant(f"bt-{lvl}", {"form": lvl}, f"BT ({lvl}, second-order)", order)
+                       for lvl, order in (("vv", 40), ("pp", 90), ("pv", 91), ("vp", 92), ("fv", 93))),
+        default=True, default_variants=("bt-vv",), gramians="reads", stress={"maxiter": 150}, page="reducers", order=50)
 
     OPTIONS = {
         "form": Option("first-order", "choice", "first-order square-root BT (stable, error bound) or a "
@@ -477,5 +486,3 @@ def _orthonormal(X):
     Q, _ = np.linalg.qr(X)
     return Q
 
-
-register("bt", BT)

@@ -102,7 +102,8 @@ import scipy.linalg as sla
 from ...errors import ConvergenceWarning, InputError
 from ...utils import band_pair
 from ...linalg.gramians import gramian_factors
-from ..base import Option, register
+from ..base import Option
+from ..registry import Description
 from .balanced import FORMS, SquareRootBT, level_products
 from ..irka.shift_solves import default_threads, map_threads
 
@@ -245,6 +246,11 @@ class BTFL(SquareRootBT):
     """
 
     name = "bt-fl"
+    DESCRIPTION = Description(
+        label="BT, frequency-limited to the band (one-sided: stable)", result="by-option",
+        targets="Hankel singular values of the band-limited Gramians", cost="one per quadrature node (32 to 1024)",
+        use_for="a band that matters more than the rest of the axis", options=("band", "form", "nodes", "limited"),
+        band_option="band", stress={"max_nodes": 256}, page="bt_fl", order=95)
 
     OPTIONS = {
         "band": Option(None, "any", "frequency band (w1, w2) in rad/s, 0 <= w1 < w2 < inf, whose error is "
@@ -396,5 +402,3 @@ class BTFL(SquareRootBT):
         }
         return rom, info
 
-
-register("bt-fl", BTFL)

@@ -74,7 +74,8 @@ from .gradient import FullTarget, gauss_newton_diagonal, h2_objective, h2_value
 from .stationarity import full_stationarity
 from .lbfgs import Evaluation, lbfgs_descent
 from ...utils import blas_threads
-from ..base import Option, Reducer, register
+from ..base import Option, Reducer
+from ..registry import Description
 from ..h2_decision import decision_h2
 from .params import PARAMETRISATIONS
 from .siso import pole_phase
@@ -100,6 +101,11 @@ class SOH2(Reducer):
     :class:`~morsuite.rom.SecondOrderROM` of order r (2r states) with :math:`\\hat M = I`."""
 
     name = "so-h2"
+    DESCRIPTION = Description(
+        label="so-h2 (second-order H2 descent)", result="second-order",
+        targets="minimum H2 error among second-order models", cost="Gramians, then tens to hundreds",
+        use_for="second-order structure with the smallest H2 error",
+        options=("start", "descent", "gtol", "maxit", "starts"), default=True, gramians="reads", page="so_h2", order=30)
 
     OPTIONS = {
         "start": Option("best", "choice", "start model: the best by exact H2 error of the candidates, or one "
@@ -463,5 +469,3 @@ class SOH2(Reducer):
                       f"{o['gtol']:g} against the full model (H2 error {e:.4e}, start {start} {e0:.4e})",
                       ConvergenceWarning)
         return rom, info
-
-register("so-h2", SOH2)

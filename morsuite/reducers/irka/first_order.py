@@ -99,7 +99,8 @@ import numpy as np
 from ...errors import ConvergenceWarning, InputError, SingularShiftError
 from ...linalg.h2 import modal_form, norm_squared, pole_residue_squared
 from ...rom import FirstOrderROM
-from ..base import Option, make, register
+from ..base import Option
+from ..registry import Description, make
 from ..h2_decision import decision_h2
 from .second_order import IRKA
 from .first_order_surrogate import SurrogatePhase
@@ -119,6 +120,11 @@ class IRKAFO(SurrogatePhase, IRKA):
     """
 
     name = "irka-fo"
+    DESCRIPTION = Description(
+        label="irka-fo (first-order IRKA)", result="first-order", targets="H2-optimality conditions",
+        cost="Gramians, then 10 to 60", use_for="the smallest H2 error per state",
+        options=("tol", "maxit", "init", "strategy", "track_h2"), default=True, gramians="reads", page="irka_fo",
+        order=20)
 
     OPTIONS = {
         **IRKA.OPTIONS,
@@ -258,10 +264,6 @@ class IRKAFO(SurrogatePhase, IRKA):
         if self._bt is None:
             self._bt = make("bt", self.fom)
         return self._bt
-
-    def states_per_order(self) -> int:
-        """1: r counts the first-order reduced model's states."""
-        return 1
 
     def order_guess(self, tol: float, *, measure: str, scale: float) -> int | None:
         """The start's BT guess (:meth:`~morsuite.reducers.bt.balanced.SquareRootBT.order_guess`) once its
@@ -479,5 +481,3 @@ def _rel(x, y) -> float:
     x, y = np.atleast_1d(x), np.atleast_1d(y)
     return float(np.linalg.norm(x - y) / max(np.linalg.norm(x), np.finfo(float).tiny))
 
-
-register("irka-fo", IRKAFO)

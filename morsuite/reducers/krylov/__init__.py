@@ -80,10 +80,7 @@ moments spanned, matched and their measured errors), ``lu_count`` (LUs paid by t
 ``deflated``. Design note and measurements: ``docs/design/krylov.md``.
 """
 
-from ..base import register
 from .reducer import Krylov, expansion_points
 from .soar import SOAR, RealBasis
 
 __all__ = ["Krylov", "SOAR", "RealBasis", "expansion_points"]
-
-register("krylov", Krylov)

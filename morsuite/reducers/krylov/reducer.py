@@ -16,6 +16,7 @@ import scipy.sparse.linalg as spla
 from ...errors import AccuracyWarning, OptionError, RankWarning, SingularShiftError, StabilityWarning
 from ...rom import SecondOrderROM
 from ..base import Option, Reducer
+from ..registry import Description
 from .soar import SOAR, KernelProjector, RealBasis
 
 __all__ = ["Krylov", "expansion_points"]
@@ -163,6 +164,11 @@ class Krylov(Reducer):
     """
 
     name = "krylov"
+    DESCRIPTION = Description(
+        label="Krylov moment matching (SOAR)", result="second-order",
+        targets="moments of T at one or a few expansion points", cost="one per expansion point (a conjugate pair one)",
+        use_for="the engineering baseline at one LU, accurate near its points",
+        options=("points", "npoints", "sided", "directions"), default=True, stress={}, page="krylov", order=70)
 
     OPTIONS = {
         "points": Option("auto", "any", "expansion points: 'auto' (one real point, the band's geometric mean), "

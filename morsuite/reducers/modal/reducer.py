@@ -61,7 +61,8 @@ import scipy.linalg as sla
 from ...errors import ConvergenceWarning, InputError, RankWarning, SingularShiftError
 from ...linalg.eigen import constrained_modes
 from ...rom import SecondOrderROM
-from ..base import Option, Reducer, register
+from ..base import Option, Reducer
+from ..registry import Description
 from .selection import band_order, dominance, dominance_order, lowest_order
 
 __all__ = ["Modal", "SELECTIONS"]
@@ -73,6 +74,11 @@ class Modal(Reducer):
     """Constrained modal truncation (module docstring); r is the second-order order (2r states)."""
 
     name = "modal"
+    DESCRIPTION = Description(
+        label="modal truncation + static correction", result="second-order",
+        targets="the undamped modes (lowest, in a band, dominant), T(0)",
+        cost="one (two with a shift != 0 and the static correction)", use_for="the engineering baseline at one LU",
+        options=("selection", "band", "sigma", "static_correction"), default=True, stress={}, page="modal", order=60)
 
     OPTIONS = {
         "selection": Option("lowest", "choice", "which modes: the lowest, those in the band (then its nearest), "
@@ -272,5 +278,3 @@ def _static_block(fom, Phi, X0, tol):
         X = X @ C
     return X
 
-
-register("modal", Modal)
