@@ -21,7 +21,7 @@ import pytest
 
 import morsuite as ms
 from morsuite.errors import InputError, OptionError, RankWarning
-from morsuite.reducers.outcome import standalone_lu_count
+from morsuite.reducers.outcome import standalone_lu_count, standalone_time
 from support import assert_rounding, rounding_unit, transfer_tolerance
 
 
@@ -87,6 +87,12 @@ def test_band_response_memo_serves_the_samples():
     assert shared.info["lu_count"] == 0 and shared.info["samples_from_memo"] == 200
     assert fresh.info["lu_count"] == 200 and fresh.info["samples_from_memo"] == 0
     assert standalone_lu_count(shared.info) == standalone_lu_count(fresh.info) == 200
+    # the samples' time, paid by the band response, is still counted: the memo keeps each one's seconds
+    kept = fom.cache[("fom_response_seconds", 1)]
+    assert shared.info["setup_cost_unknown"] == []
+    assert shared.info["setup_cost"]["samples"] == pytest.approx(sum(kept[complex(1j * w)] for w in omega), rel=1e-12)
+    paid = shared.info["setup_paid"]["samples"]  # reading them from the memo
+    assert standalone_time(shared.info) >= shared.info["time_s"] + shared.info["setup_cost"]["samples"] - paid
     for a, b in zip((shared.rom.E, shared.rom.A, shared.rom.B, shared.rom.C),
                     (fresh.rom.E, fresh.rom.A, fresh.rom.B, fresh.rom.C)):
         assert np.array_equal(a, b)  # the same samples (the memo keeps what a fresh solve computes)

@@ -14,9 +14,12 @@ a response rounded to double has lost all but four digits of the difference
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from ..linalg.refine import SaddleOperator, refine_columns, refined_unit
+from ..linalg.warmup import warm_kernels
 
 __all__ = ["FomResponse", "refined_unit"]
 
@@ -40,7 +43,8 @@ class FomResponse:
         the derivative at one shift, share one LU).
     memo : bool
         Keep :math:`T(s)` (the whole matrix, with its unit and whether it was refined; and
-        :math:`T'(s)` for :meth:`transfer_and_derivative`) per exact shift in ``fom.cache``, at most :data:`MEMO_SIZE` shifts, and serve :meth:`transfer`
+        :math:`T'(s)` for :meth:`transfer_and_derivative`, with the seconds it took) per exact shift in
+        ``fom.cache``, at most :data:`MEMO_SIZE` shifts, and serve :meth:`transfer`
         from it (default False): the H2 quadrature's nodes recur across the reduced models of one
         model, as do the H-infinity search's start grids (``docs/design/norms.md``, 2026-11-26
         third session). Each call returns what a
@@ -62,6 +66,9 @@ class FomResponse:
         on = memo and cache is not None
         self._memo = cache.setdefault(("fom_response", self.refine), {}) if on else None
         self._memo_d = cache.setdefault(("fom_response_derivative", self.refine), {}) if on else None
+        # the seconds each kept sample of :meth:`sample` took (its LU, solves and refinement), so that a user of
+        # samples another computation paid can still state their cost
+        self._seconds = cache.setdefault(("fom_response_seconds", self.refine), {}) if on else None
         self.solver = fom.new_solver(cache_size=cache_size)
         self._op = None  # the long-double S(s) x on the solver's pattern, made on the first refinement
         self.last_unit = refined_unit(0.0, self.refine)
@@ -176,11 +183,17 @@ class FomResponse:
         hit = self._recall(self._memo_d, s, need)
         if hit is not None:
             return hit
+        warm_kernels()  # a sample's seconds are its LU and solves, not the process's first compile of the kernels
+        t0 = time.perf_counter()
         lu, x = self._first(s, fom.F)
         T0, T = self._values(s, lu, fom.F, x, need)
         X = x[: fom.n1]
         Y = lu.solve(fom.L.T.astype(complex), trans=True)
         dT = -(Y.T @ ((2 * s) * (fom.M @ X) + fom.D @ X))
         self._keep(self._memo_d, s, T0, T, dT)
+        if self._seconds is not None:
+            if len(self._seconds) >= MEMO_SIZE:
+                self._seconds.clear()
+            self._seconds[complex(s)] = time.perf_counter() - t0
         self._last = (T0, T, self.last_unit, dT)
         return (T0 if T is None else T), dT

@@ -15,11 +15,6 @@ from .pencil import conjugate_points, loewner_pencil, project, real_form, trunca
 
 __all__ = ["Loewner", "sample_frequencies"]
 
-#: the model's cache entry holding the seconds per sample that a loewner reducer measured (for the
-#: standalone time of a later reducer whose samples another computation paid)
-SAMPLE_SECONDS = "loewner_sample_seconds"
-
-
 def sample_frequencies(band, samples: int) -> np.ndarray:
     """``samples`` log-spaced frequencies on ``band`` (rad/s): the formula of a study's grid
     (:meth:`morsuite.studies.spec.GridEntry.frequencies`), so the same floats, the same memo keys."""
@@ -126,15 +121,14 @@ class Loewner(Reducer):
         t2 = time.perf_counter()
         Y, s_row, X, s_col = truncation_bases(L, Ls)
         t3 = time.perf_counter()
-        cache = self.fom.cache
-        if lus == omega.size:  # every sample paid here: its cost per sample, for later reducers on this model
-            cache[SAMPLE_SECONDS] = (t1 - t0) / omega.size
-        per = cache.get(SAMPLE_SECONDS)
+        # what the samples cost whoever paid them: the memo keeps each one's seconds (None if one is missing)
+        kept = self.fom.cache.get(("fom_response_seconds", 1), {})
+        seconds = [kept.get(complex(1j * w)) for w in omega]
+        unpaid = None if any(x is None for x in seconds) else float(sum(seconds))
         self._data = {"omega": omega, "H": H, "lus": lus, "pencil": (L, Ls, V, W), "imag": imag,
                       "bases": (Y, X), "sv": (s_row, s_col),
                       "paid": {"samples": t1 - t0, "pencil": t2 - t1, "svd": t3 - t2},
-                      "cost": {"samples": (t1 - t0) if lus == omega.size else
-                               (None if per is None else per * omega.size),
+                      "cost": {"samples": (t1 - t0) if lus == omega.size else unpaid,
                                "pencil": t2 - t1, "svd": t3 - t2}}
         return self._data
 
