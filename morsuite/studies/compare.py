@@ -32,6 +32,7 @@ from ..errors import InputError
 from ..modelfiles import is_model_path
 from ..utils import atomic_write_text
 from .checks import suggest
+from .task_common import model_of
 from .tol_options import TOL_MEASURES
 
 __all__ = ["all_methods", "default_methods", "INPUTS", "compare_spec", "compare", "to_toml", "verdict_lines", "verdict_row",
@@ -71,6 +72,13 @@ def _alias(name: str) -> str:
 
 def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_.") or "model"
+
+
+def _source(model) -> str:
+    """The model's source as the study names it: a catalog spec as given, a file by its absolute path
+    (the key of :func:`~morsuite.studies.task_common.model_of`, so that every step builds it once)."""
+    source = str(model)
+    return str(Path(source).expanduser().resolve()) if is_model_path(source) else source
 
 
 def _file_band(fom) -> tuple:
@@ -117,10 +125,9 @@ def compare_spec(model: str, states=None, methods=None, band=None, input=None, n
         Naming the argument at fault: ``MODEL`` unreadable, ``--states`` out of range or odd,
         ``--methods`` unknown, ``--band`` not 0 < lo < hi, ``--input`` unknown or missing.
 
-    Cost: building the model once (and, for a file without ``band``, one sparse LU of K).
+    Cost: building the model (once per process: :func:`~morsuite.studies.task_common.model_of`, which
+    the study's validation and its tasks share) and, for a file without ``band``, one sparse LU of K.
     """
-    from .. import models
-
     offered = all_methods()
     methods = list(default_methods() if not methods else methods)
     for m in methods:
@@ -140,7 +147,7 @@ def compare_spec(model: str, states=None, methods=None, band=None, input=None, n
         if v is not None and not (v > 0):
             raise InputError(f"{flag}: expected a positive number; got {v}")
     try:
-        fom = models.parse(str(model))
+        fom = model_of(_source(model))
     except (InputError, OSError, ValueError) as exc:
         raise InputError(f"MODEL {str(model)!r} cannot be read: {exc}") from exc
     states = sorted(set(int(n) for n in (states or [])))
@@ -164,9 +171,7 @@ def compare_spec(model: str, states=None, methods=None, band=None, input=None, n
         band = [float(b) for b in _file_band(fom)]
     else:
         band = [float(b) for b in fom.band]
-    source = str(model)
-    if is_model_path(source):  # absolute here; relative to the TOML file when written (to_toml)
-        source = str(Path(source).expanduser().resolve())
+    source = _source(model)  # a file: absolute here; relative to the TOML file when written (to_toml)
     name = name or _slug("compare_" + fom.name.replace("(", "_").replace(")", "").replace("=", ""))
 
     asked = ([f"the smallest model within {', '.join(f'{t:g}' for t in tols)} ({error} error)"] if tols else []) + \
@@ -374,13 +379,13 @@ def _table_note(result, name) -> str:
 def rigid_line(model: str) -> str | None:
     """The one line saying that ``model`` (a spec or file) has rigid-body modes and how the
     comparison treats them (:mod:`morsuite.models.rigid`), or None if it has none (or cannot be
-    read: :func:`compare` then says why). Cost: building the model and its detection (one
-    sparse LU unless K is positive definite by diagonal dominance)."""
-    from .. import models
+    read: :func:`compare` then says why). Cost: building the model (shared with the comparison:
+    :func:`~morsuite.studies.task_common.model_of`) and its detection, kept on the model for the
+    reducers (one sparse LU unless K is positive definite by diagonal dominance)."""
     from ..models.rigid import rigid_body_modes
 
     try:
-        fom = models.parse(str(model))
+        fom = model_of(_source(model))
     except (InputError, OSError, ValueError):
         return None
     rigid = rigid_body_modes(fom)
@@ -407,7 +412,9 @@ def compare(model, states=None, methods=None, band=None, input=None, out="result
     from .cache import Cache
     from .memo import SpecMemo
     from .runner import run
-    from .spec import load_spec, study_from_dict
+    import tomllib
+
+    from .spec import study_from_dict
 
     spec = compare_spec(model, states, methods, band, input, name, **tolerance)
     study_from_dict(spec, source="morsuite compare")      # every check before anything is written
@@ -417,11 +424,14 @@ def compare(model, states=None, methods=None, band=None, input=None, out="result
     old = path.read_text() if path.is_file() else None
     created = [d for d in (folder, out) if not d.exists()]  # the study folder first: it is inside out
     folder.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(path, to_toml(spec, relative_to=folder))
+    text = to_toml(spec, relative_to=folder)
+    atomic_write_text(path, text)
     try:
         cache = Cache(out / ".cache")
         memo = SpecMemo(cache)
-        study = load_spec(path, memo=memo)
+        # the study as its file reads (paths relative to it), from the text written: no second read, and
+        # its model is the one built above (model_of), not a new one
+        study = study_from_dict(tomllib.loads(text), path=path, memo=memo)
         shared = None
         if jobs > 1:
             from .batch import shared_compute, split_claims

@@ -233,8 +233,10 @@ def _model_entry(ctx, alias, spec, root, memo=None):
             ctx.fail(where, f"unknown model {name!r}{_suggest(name, catalog.available())}; catalog models: "
                             f"{', '.join(catalog.available())} (or a path: .mat, .npz, a Matrix Market set)")
         model_id = "catalog:" + catalog.canonical(spec)
+    from .task_common import model_of
+
     try:
-        fom = catalog.parse(source)
+        fom = model_of(source)  # built once per process: the tasks and a second validation reuse it
     except InputError as exc:
         ctx.fail(where, f"model {spec!r} cannot be built: {exc}")
     entry = ModelEntry(alias=alias, spec=spec, source=source, model_id=model_id, name=fom.name,
