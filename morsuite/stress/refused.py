@@ -5,7 +5,9 @@ needs_data)``: ``call(tmp, data)`` must raise ``error`` (a subclass of
 :class:`~morsuite.errors.MorsuiteError`) with a message matching the regex
 ``match``; ``tmp`` is a scratch directory and ``data`` the directory holding
 :data:`DATA_FILE` (the M.E.S.S. DSMS file with g = 600), used only by the rows
-with ``needs_data``. tests/stress/test_refused_inputs.py runs one test per row;
+with ``needs_data``. Besides the rows written here, two per registered reducer of the
+package are read from the registry (an unknown option; ``reduce(r)`` above its largest
+order). tests/stress/test_refused_inputs.py runs one test per row;
 :func:`markdown_table` runs every row and prints the table (the one in the
 documentation's design note on refused inputs) with the actual messages::
 
@@ -384,8 +386,30 @@ _ROWS = [
 ]
 
 
+def _registry_rows() -> list:
+    """Two rows per reducer of the package, read from the registry (a reducer added later is covered with
+    nothing edited here): an unknown option, refused with the list of valid ones, and ``reduce(r)`` one
+    above the reducer's largest order. Cost: constructing each reducer on dsms(20) (no LU)."""
+    rows = []
+    for name in ms.reducers.available():
+        cls = ms.reducers.get_class(name)
+        if not cls.__module__.startswith("morsuite."):
+            continue  # plugins are not this table's
+        rows.append((f"registry-{name}-option", "option", f"{name}(nope=1): an unknown option",
+                     lambda t, d, n=name: ms.reducers.make(n, _small(), nope=1), OptionError,
+                     rf"{cls.__name__} got unknown option\(s\) 'nope'; valid options: "))
+        rows.append((f"registry-{name}-order", "argument", f"{name} reduce(r) one above its largest order",
+                     lambda t, d, n=name: _above_order(ms.reducers.make(n, _small())), InputError,
+                     r"r = \d+ exceeds"))
+    return rows
+
+
+def _above_order(red):
+    return red.reduce(red.max_order() + 1)
+
+
 _NEEDS_DATA = frozenset({"mat-G", "mat-sign", "mat-sign-option"})
-CASES = [Refusal(*row, needs_data=row[0] in _NEEDS_DATA) for row in _ROWS]
+CASES = [Refusal(*row, needs_data=row[0] in _NEEDS_DATA) for row in _ROWS + _registry_rows()]
 
 
 def table_rows(data_dir=None):
