@@ -31,8 +31,12 @@ def _reduced(args):
     for item in args.option or []:
         key, eq, val = item.partition("=")
         if not eq:
-            raise SystemExit(f"--option expects KEY=VALUE, got {item!r}")
-        opts[key] = _option_value(val)
+            raise SystemExit(f"--option expects KEY=VALUE or GROUP.KEY=VALUE, got {item!r}")
+        group, dot, sub = key.partition(".")
+        if dot:  # an advanced option in its group (morsuite.reducers.options)
+            opts.setdefault(group, {})[sub] = _option_value(val)
+        else:
+            opts[key] = _option_value(val)
     with warnings.catch_warnings():
         if args.json:
             warnings.simplefilter("ignore")  # they are recorded in info["warnings"]
@@ -185,7 +189,8 @@ def _add_simulate_parser(sub):
     p.add_argument("--model", required=True, help="catalog spec (dsms:g=6000) or .mat/.npz path")
     p.add_argument("--method", required=True, help="reducer name (see `morsuite list`)")
     p.add_argument("--r", required=True, type=int, help="reduced order")
-    p.add_argument("--option", action="append", metavar="KEY=VALUE", help="reducer option (repeatable)")
+    p.add_argument("--option", action="append", metavar="KEY=VALUE",
+                   help="reducer option, GROUP.KEY=VALUE for an advanced one (repeatable)")
     p.add_argument("--input", default="step", metavar="SPEC",
                    help="step (default), impulse, chirp:omega0=0.01,omega1=1, multisine:omegas=0.1;0.5, csv:PATH")
     p.add_argument("--horizon", type=float, metavar="T", help="simulated time in s (default 2 pi / band low end)")
@@ -376,7 +381,8 @@ def build_parser():
     p.add_argument("--method", required=True, help="reducer name (see `morsuite list`)")
     p.add_argument("--r", required=True, type=int, help="reduced order")
     p.add_argument("--omega", type=_omega_arg, help="frequency grid LO:HI:N (rad/s, log-spaced)")
-    p.add_argument("--option", action="append", metavar="KEY=VALUE", help="reducer option (repeatable)")
+    p.add_argument("--option", action="append", metavar="KEY=VALUE",
+                   help="reducer option, GROUP.KEY=VALUE for an advanced one (repeatable)")
     p.add_argument("--no-norms", action="store_true",
                    help="skip the H2 and Hinf errors (printed as null); they cost the model's Gramian "
                         "factors once and up to a few hundred sparse LUs")

@@ -159,8 +159,24 @@ def option_rows(options: dict) -> list[list[str]]:
     return rows
 
 
-def options_table(options: dict) -> list[str]:
-    return list_table(["option", "default", "admissible", "description"], option_rows(options), "14 10 20 56")
+def options_table(options: dict, groups: dict | None = None) -> list[str]:
+    """The top-level options' table, then one table per group of advanced options
+    (:class:`morsuite.reducers.options.Group`): each option by its name in the group, with the name it is
+    recorded under (and may be given as) where that differs."""
+    groups = groups or {}
+    grouped = {m for g in groups.values() for m in g.members}
+    top = {k: v for k, v in options.items() if k not in grouped}
+    lines = list_table(["option", "default", "admissible", "description"], option_rows(top), "14 10 20 56")
+    for name, grp in groups.items():
+        doc = _rst_cell(grp.doc[:1].upper() + grp.doc[1:])
+        lines += [f".. rubric:: Advanced: ``{name}``", "", f"{doc}. Given as ``{name}={{...}}``; recorded (and "
+                  "accepted) under the names in brackets.", ""]
+        rows = option_rows({m: options[m] for m in grp.members})
+        for row, m in zip(rows, grp.members):
+            short = grp.short(m)
+            row[0] = f"``{short}``" + (f" (``{m}``)" if short != m else "")
+        lines += list_table(["option", "default", "admissible", "description"], rows, "14 10 20 56")
+    return lines
 
 
 def reducer_options_rst(name: str | None = None) -> list[str]:
@@ -175,7 +191,7 @@ def reducer_options_rst(name: str | None = None) -> list[str]:
             lines += [title, "-" * len(title), ""]
         lines += [f"Class :class:`{cls.__module__}.{cls.__qualname__}`; "
                   f"``ms.reducers.make({n!r}, fom, **options)``.", ""]
-        lines += options_table(cls.OPTIONS)
+        lines += options_table(cls.OPTIONS, getattr(cls, "GROUPS", {}))
     return lines
 
 
@@ -224,7 +240,8 @@ def _append_options(app, what, name, obj, options, lines):
         table = obj if what == "data" and name.endswith(".OPTIONS") else None
     if table is None or not _is_option_table(table) or (what == "class" and "OPTIONS" not in vars(obj)):
         return
-    lines += ["", ".. rubric:: Options", ""] + options_table(table)
+    groups = getattr(obj, "GROUPS", {}) if what in ("class", "exception") else {}
+    lines += ["", ".. rubric:: Options", ""] + options_table(table, groups)
 
 
 def _skip_options(app, what, name, obj, skip, options):

@@ -5,134 +5,34 @@ stores options; ``reduce(r)`` returns a :class:`Reduction` (the reduced model an
 a plain-data ``info`` record). Work that does not depend on r (Gramian factors,
 converged shifts) may be kept on the reducer and reused by later calls.
 
-Options are declared once per class in ``OPTIONS`` (name -> :class:`Option`);
-defaults come from there, every value is validated against it with one message
-format, unknown names are refused with the list of valid ones, and the full set
-is copied into ``info["options"]``.
+Options are declared once per class in ``OPTIONS`` (name -> :class:`Option`), the
+advanced ones gathered in named ``GROUPS`` (:mod:`.options`); defaults come from there,
+every value is validated against it with one message format, unknown names are refused
+with the list of valid ones, and the full set is copied into ``info["options"]`` under
+the options' own (flat) names.
 """
 
 from __future__ import annotations
 
-import math
 import time
 import warnings
 from dataclasses import dataclass, field
-from numbers import Integral, Real
+from numbers import Integral
 from typing import Any, ClassVar
 
 import numpy as np
 
-from ..errors import ConvergenceWarning, InputError, OptionError
+from ..errors import ConvergenceWarning, InputError
 from ..linalg.warmup import warm_kernels
 from ..utils import blas_threads, to_plain
+from .options import Group, Option, expand_options
 from .outcome import CONVERGED_STATUSES, check_outcome, complete_outcome
 
-__all__ = ["Option", "Reducer", "Reduction", "as_complex"]
+__all__ = ["Option", "Group", "Reducer", "Reduction", "as_complex"]
 
 
 #: BLAS threads used inside ``reduce`` (recorded in ``info["blas_threads"]``).
 BLAS_THREADS = 1
-
-@dataclass(frozen=True)
-class Option:
-    """One declared option: default, constraint and a one-line description.
-
-    ``kind`` is one of "int", "float", "bool", "choice", "array", "any".
-    ``low``/``high`` bound numbers (``open_low``/``open_high`` make them strict);
-    ``choices`` lists the admissible values of a "choice"; ``nullable`` admits None.
-    """
-
-    default: Any
-    kind: str
-    doc: str = ""
-    low: float | None = None
-    high: float | None = None
-    open_low: bool = False
-    open_high: bool = False
-    choices: tuple = ()
-    nullable: bool = False
-
-    def describe(self) -> str:
-        """The admissible values in words, as error messages and option tables show them.
-
-        For example ``"a float in (0, 1)"``, ``"an int in [1, inf)"`` or
-        ``"one of 'auto', 'bt', 'residue'"``.
-        """
-        if self.kind == "choice":
-            return "one of " + ", ".join(repr(c) for c in self.choices)
-        if self.kind in ("int", "float"):
-            lo = "-inf" if self.low is None else f"{self.low:g}"
-            hi = "inf" if self.high is None else f"{self.high:g}"
-            lb = "(" if self.open_low or self.low is None else "["
-            rb = ")" if self.open_high or self.high is None else "]"
-            return f"{'an int' if self.kind == 'int' else 'a float'} in {lb}{lo}, {hi}{rb}"
-        return {"bool": "a bool", "array": "an array of numbers", "any": "a value"}[self.kind]
-
-    def validate(self, owner: str, name: str, value):
-        """Check ``value`` against this option's constraint and return it normalised.
-
-        Parameters
-        ----------
-        owner : str
-            The reducer's class name, for the message.
-        name : str
-            The option's name, for the message.
-        value
-            The value given.
-
-        Returns
-        -------
-        value
-            The value as the reducer uses it: ``bool``, ``int`` or ``float`` for those kinds
-            (NumPy scalars converted), an ndarray for ``"array"``, the value itself
-            otherwise; None if ``nullable``.
-
-        Raises
-        ------
-        OptionError
-            If the value is outside the constraint, in the form
-            ``The 'tol' parameter of IRKA must be a float in (0, 1). Got -1 instead.``
-            A bool is never accepted as a number; non-finite numbers and arrays with
-            non-finite or non-numeric entries are refused.
-        """
-        def fail():
-            raise OptionError(f"The {name!r} parameter of {owner} must be {self.describe()}"
-                              f"{' or None' if self.nullable else ''}. Got {value!r} instead.")
-        if value is None:
-            if self.nullable:
-                return None
-            fail()
-        if self.kind == "bool":
-            if not isinstance(value, (bool, np.bool_)):
-                fail()
-            return bool(value)
-        if self.kind == "choice":
-            if value not in self.choices:
-                fail()
-            return value
-        if self.kind in ("int", "float"):
-            if isinstance(value, (bool, np.bool_)):
-                fail()
-            if self.kind == "int" and not isinstance(value, Integral):
-                fail()
-            if not isinstance(value, Real) or not math.isfinite(float(value)):
-                fail()
-            v = int(value) if self.kind == "int" else float(value)
-            if self.low is not None and (v < self.low or (self.open_low and v == self.low)):
-                fail()
-            if self.high is not None and (v > self.high or (self.open_high and v == self.high)):
-                fail()
-            return v
-        if self.kind == "array":
-            try:
-                arr = np.asarray(value)
-            except Exception:
-                fail()
-            if arr.dtype == object or not np.issubdtype(arr.dtype, np.number) or not np.all(np.isfinite(arr)):
-                fail()
-            return arr
-        return value
-
 
 @dataclass
 class Reduction:
@@ -170,6 +70,9 @@ class Reducer:
 
     name: ClassVar[str] = "base"
     OPTIONS: ClassVar[dict[str, Option]] = {}
+    #: named groups of advanced options (:class:`~morsuite.reducers.options.Group`): every option not in a
+    #: group is a top-level one
+    GROUPS: ClassVar[dict[str, Group]] = {}
 
     def __init__(self, fom, **options):
         from ..models.index3 import Index3Model
@@ -177,13 +80,10 @@ class Reducer:
         if not isinstance(fom, Index3Model):
             raise InputError(f"fom must be an Index3Model; got {type(fom).__name__}")
         self.fom = fom
-        unknown = sorted(set(options) - set(self.OPTIONS))
-        if unknown:
-            raise OptionError(f"{type(self).__name__} got unknown option(s) {', '.join(map(repr, unknown))}; "
-                              f"valid options: {', '.join(sorted(self.OPTIONS))}")
+        flat, given_as = expand_options(type(self).__name__, self.OPTIONS, self.GROUPS, options)
         self.options = {}
         for key, opt in self.OPTIONS.items():
-            self.options[key] = opt.validate(type(self).__name__, key, options.get(key, opt.default))
+            self.options[key] = opt.validate(type(self).__name__, given_as.get(key, key), flat.get(key, opt.default))
         self._deflate_rigid()
         self._check_options()
         self._warnings: list[str] = []

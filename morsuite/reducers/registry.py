@@ -282,10 +282,13 @@ def _defaults(cls) -> dict:
 
 
 def _full_options(cls, options: dict, where: str) -> dict:
-    unknown = sorted(set(options) - set(cls.OPTIONS))
-    if unknown:
-        raise OptionError(f"{where} sets unknown option(s) {', '.join(map(repr, unknown))} of {cls.__name__}")
-    return {k: opt.validate(cls.__name__, k, options.get(k, opt.default)) for k, opt in cls.OPTIONS.items()}
+    from .options import expand_options
+
+    try:
+        flat, _ = expand_options(cls.__name__, cls.OPTIONS, getattr(cls, "GROUPS", {}), options)
+    except OptionError as exc:
+        raise OptionError(f"{where}: {exc}") from exc
+    return {k: opt.validate(cls.__name__, k, flat.get(k, opt.default)) for k, opt in cls.OPTIONS.items()}
 
 
 def methods() -> dict[str, Method]:

@@ -274,14 +274,20 @@ def _method_entry(ctx, alias, table, memo=None):
         ctx.fail(f"{where}.reducer", f"unknown reducer {name!r}{_suggest(name, avail)}; registered reducers: "
                                      f"{', '.join(avail)}")
     cls = reducers.get_class(name)
-    ctx.keys(f"{where}.options", opts, tuple(cls.OPTIONS))
+    groups = getattr(cls, "GROUPS", {})
+    ctx.keys(f"{where}.options", opts, tuple(cls.OPTIONS) + tuple(groups))
     full = {}
     from ..errors import OptionError
+    from ..reducers.options import expand_options
+    try:  # a group's table ([methods.ALIAS.options.GROUP]) to the options' own names, as they are recorded
+        flat, given_as = expand_options(cls.__name__, cls.OPTIONS, groups, opts)
+    except OptionError as exc:
+        ctx.fail(f"{where}.options", str(exc))
     for key, opt in cls.OPTIONS.items():
         try:
-            full[key] = opt.validate(cls.__name__, key, opts.get(key, opt.default))
+            full[key] = opt.validate(cls.__name__, given_as.get(key, key), flat.get(key, opt.default))
         except OptionError as exc:
-            ctx.fail(f"{where}.options.{key}", str(exc))
+            ctx.fail(f"{where}.options.{given_as.get(key, key)}", str(exc))
     full = plain(full)
     if memo is not None:
         memo.store("method", material, {"full_options": list(full.items())}, getattr(cls, "__module__", ""))

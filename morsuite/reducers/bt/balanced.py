@@ -107,7 +107,8 @@ import scipy.linalg as sla
 from ...errors import ConvergenceWarning, InputError, OptionError, RankWarning, StabilityWarning
 from ...linalg.gramians import ADI_DEFAULTS, gramian_factors
 from ...rom import FirstOrderROM, SecondOrderROM
-from ..base import Option, Reducer
+from ..base import Group, Option, Reducer
+from ..cost import cost_record
 from ..registry import Description, Variant
 
 __all__ = ["BT", "FORMS", "SquareRootBT", "level_products"]
@@ -370,6 +371,9 @@ class BT(SquareRootBT):
         "hsv_tol": Option(1e-13, "float", "singular values below hsv_tol times the largest are never kept "
                           "(caps r)", low=0, high=1, open_high=True),
     }
+    GROUPS = {"adi": Group("LR-ADI of the Gramian factors: shifts, refinement, the kept LUs",
+                           ("shifts", "num_shifts", "selection", "refine", "shift_reuse", "lu_pool_mib",
+                            "pool_full_reuse"))}
 
     #: compress_tol=None: the LR-ADI factors are compressed at COMPRESS_AUTO_TOL from COMPRESS_MIN_N1
     #: positions on (on tcom(3334), n1 = 1e4: 313 and 325 columns of 1294 and 1336 kept, the reduced
@@ -443,21 +447,19 @@ class BT(SquareRootBT):
             "residual_history": {"controllability": c.residuals, "observability": ob.residuals},
             "adi": {"controllability": c.summary(history=False), "observability": ob.summary(history=False)},
             "factor_ranks": {"controllability": c.rank, "observability": ob.rank},
-            "lu_count": c.lu_count if adi_fresh else 0,
-            "lu_count_shared": c.lu_count,  # the Gramian factors' LR-ADI, whoever paid it
             "lu_reused": c.lu_reused,  # LR-ADI steps served by a kept LU (shift_reuse)
             **extra,
-            "time_breakdown": {"adi": times["adi"] if adi_fresh else 0.0,
-                               "lu": st_c["factor"] if adi_fresh else 0.0,
-                               "solves": (c.times["solve"] + ob.times["solve"]) if adi_fresh else 0.0,
-                               "shifts": st_c["shifts"] if adi_fresh else 0.0,
-                               "compress": (c.times["compress"] + ob.times["compress"]) if adi_fresh else 0.0,
-                               "products": times["products"] if fresh else 0.0,
-                               "svd": tt["svd"], "projection": tt["projection"]},
-            # r-independent work paid once per reducer (studies add it back for 'standalone' times)
-            "setup_reused": not adi_fresh,
-            "setup_cost": {"adi": times["adi"], "products": times["products"],
-                           "svd": tt["svd_setup"]},
+            # the Gramian factors' LR-ADI (whoever paid it), their products and the SVDs: r-independent work
+            # paid once per reducer or model (studies add it back for 'standalone' times)
+            **cost_record(lus_shared=c.lu_count, lus_paid=c.lu_count if adi_fresh else 0,
+                          setup_cost={"adi": times["adi"], "products": times["products"], "svd": tt["svd_setup"]},
+                          paid={"adi": times["adi"] if adi_fresh else 0.0,
+                                "products": times["products"] if fresh else 0.0, "svd": tt["svd"]},
+                          breakdown={"lu": st_c["factor"] if adi_fresh else 0.0,
+                                     "solves": (c.times["solve"] + ob.times["solve"]) if adi_fresh else 0.0,
+                                     "shifts": st_c["shifts"] if adi_fresh else 0.0,
+                                     "compress": (c.times["compress"] + ob.times["compress"]) if adi_fresh else 0.0,
+                                     "projection": tt["projection"]}),
         }
         return rom, info
 

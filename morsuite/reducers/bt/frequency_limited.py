@@ -102,7 +102,8 @@ import scipy.linalg as sla
 from ...errors import ConvergenceWarning, InputError
 from ...utils import band_pair
 from ...linalg.gramians import gramian_factors
-from ..base import Option
+from ..base import Group, Option
+from ..cost import cost_record
 from ..registry import Description
 from .balanced import FORMS, SquareRootBT, level_products
 from ..irka.shift_solves import default_threads, map_threads
@@ -279,6 +280,9 @@ class BTFL(SquareRootBT):
                           "Enns' one-sided weighting: first-order models stable), or both (the two-sided FL-BT "
                           "of the literature: no stability guarantee)", choices=("controllability", "both")),
     }
+    GROUPS = {"quadrature": Group("the Gauss-Legendre rule of the band Gramians, its doubling test and the factors' "
+                                  "compression", ("nodes_start", "max_nodes", "quad_tol", "quad_hsv", "variable",
+                                                  "compress_tol"))}
 
     def __init__(self, fom, **options):
         super().__init__(fom, **options)
@@ -392,13 +396,14 @@ class BTFL(SquareRootBT):
             "status": "direct" if g["quad_converged"] and adi_ok else "cap",
             "iterations": len(g["levels"]), "nodes": g["nodes"], "nodes_evaluated": nodes_evaluated,
             "omega": g["omega"], "quad_levels": g["levels"], "quad_change": g["change"], "quad_tol": o["quad_tol"],
-            "lu_count": g["lu_count"] if fresh else 0, "lu_count_shared": g["lu_count"],
             "solver_threads": g["threads"],
             "factor_ranks": {"controllability": g["c"].rank, "observability": g["o"].rank},
             "factor_columns": g["columns"], **extra,
-            "time_breakdown": {**paid, "svd": tt["svd"], "projection": tt["projection"]},
-            "setup_reused": not fresh,
-            "setup_cost": {"quadrature": times["quadrature"], "svd": tt["svd_setup"]},
+            # the band Gramians (their nodes' LUs) and the SVDs: r-independent, paid on the first call
+            **cost_record(lus_shared=g["lu_count"], lus_paid=g["lu_count"] if fresh else 0,
+                          setup_cost={"quadrature": times["quadrature"], "svd": tt["svd_setup"]},
+                          paid={"quadrature": paid.pop("quadrature"), "svd": tt["svd"]},
+                          breakdown={**paid, "projection": tt["projection"]}),
         }
         return rom, info
 

@@ -74,7 +74,7 @@ from .gradient import FullTarget, gauss_newton_diagonal, h2_objective, h2_value
 from .stationarity import full_stationarity
 from .lbfgs import Evaluation, lbfgs_descent
 from ...utils import blas_threads
-from ..base import Option, Reducer
+from ..base import Group, Option, Reducer
 from ..registry import Description
 from ..h2_decision import decision_h2
 from .params import PARAMETRISATIONS
@@ -166,6 +166,17 @@ class SOH2(Reducer):
                             choices=("residual", "gain")),
         "refine": Option(ADI_DEFAULTS["refine"], "int", "long-double refinement steps of each shifted LR-ADI "
                          "solve (as bt)", low=0),
+    }
+    GROUPS = {
+        "varpro": Group("the variable-projection Newton descent (descent='varpro')",
+                        ("newton_maxit", "simo_maxit", "chord_maxit", "cluster_rounds", "cluster_polish")),
+        "surrogate": Group("the surrogate model the descent runs against",
+                           ("surrogate_tol", "surrogate_states", "refinements"), prefix="surrogate_"),
+        "full_model": Group("the iterations against the full model after the surrogate phase",
+                            ("full_maxit", "full_backtracks"), prefix="full_"),
+        "lbfgs": Group("the L-BFGS descent (descent='lbfgs') and its stopping rule",
+                       ("rtol", "window", "memory", "precondition", "precond_every")),
+        "adi": Group("LR-ADI of the Gramian factors (as bt's)", ADI_OPTIONS),
     }
 
     def __init__(self, fom, **options):

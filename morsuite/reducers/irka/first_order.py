@@ -99,7 +99,7 @@ import numpy as np
 from ...errors import ConvergenceWarning, InputError, SingularShiftError
 from ...linalg.h2 import modal_form, norm_squared, pole_residue_squared
 from ...rom import FirstOrderROM
-from ..base import Option
+from ..base import Group, Option
 from ..registry import Description, make
 from ..h2_decision import decision_h2
 from .second_order import IRKA
@@ -170,6 +170,14 @@ class IRKAFO(SurrogatePhase, IRKA):
                                   "which a converged iterate counts as converged", low=0, high=1,
                                   open_low=True, open_high=True),
     }
+    GROUPS = {**IRKA.GROUPS,
+              "surrogate": Group("the dense first-order BT surrogate iterated against first (strategy='surrogate')",
+                                 ("surrogate_states", "surrogate_tol", "surrogate_max_states", "surrogate_maxit",
+                                  "surrogate_stall", "surrogate_plain", "surrogate_relaxation"), prefix="surrogate_"),
+              "newton": Group("Newton's method on the fixed-point map against the surrogate",
+                              ("newton_switch", "newton_starts", "newton_maxit", "newton_early"), prefix="newton_"),
+              "certificate": Group("the interpolation certificate of a converged iterate on the full model",
+                                   ("refine_certificate", "certificate_tol"))}
 
     def __init__(self, fom, **options):
         super().__init__(fom, **options)

@@ -100,6 +100,10 @@ class IRKA(IRKABase):
                            choices=("threads", "dask")),
     }
 
+    GROUPS = {**IRKABase.GROUPS,
+              "solves": IRKABase.GROUPS["solves"].extended("refine_when", "refine_precision", "kernel_projection",
+                                                           "kernel_tol", "check_solves", "executor")}
+
     #: bases with fewer entries are made orthonormal in order (``_map_bases``)
     PARALLEL_BASES_MIN = 1 << 20
 

@@ -10,6 +10,7 @@ from ...errors import InputError, RankWarning, StabilityWarning
 from ...rom import FirstOrderROM
 from ...utils import band_pair, default_threads, map_threads
 from ..base import Option, Reducer
+from ..cost import cost_record
 from ..registry import Description
 from .pencil import conjugate_points, loewner_pencil, project, real_form, truncation_bases
 
@@ -162,13 +163,11 @@ class Loewner(Reducer):
                                                                                  float(d["omega"][-1])],
             "singular_values": (s_row / s_row[0])[: min(s_row.size, 2 * k + 10)],
             "rank": rank, "rank_capped": bool(k < r), "imag_dropped": d["imag"], "stable": stable,
-            "lu_count": int(lus) if fresh else 0,
-            "lu_count_shared": int(n),  # one LU per sample (a conjugate point is free), whoever paid it
             "samples_from_memo": int(n - lus),
-            # this call did not pay every sample: studies add the unpaid cost back for standalone times
-            "setup_reused": (not fresh) or lus < n,
-            "setup_cost": cost, "setup_paid": paid,
             "setup_cost_unknown": [key for key, v in d["cost"].items() if v is None],
-            "time_breakdown": {**paid, "projection": t_proj},
+            # one LU per sample (a conjugate point is free), whoever paid it; a call that did not pay every
+            # sample reused them: studies add the unpaid cost back for standalone times
+            **cost_record(lus_shared=n, lus_paid=lus if fresh else 0, setup_cost=cost, paid=paid,
+                          breakdown={"projection": t_proj}),
         }
         return rom, info

@@ -62,6 +62,7 @@ from ...errors import ConvergenceWarning, InputError, RankWarning, SingularShift
 from ...linalg.eigen import constrained_modes
 from ...rom import SecondOrderROM
 from ..base import Option, Reducer
+from ..cost import cost_record
 from ..registry import Description
 from .selection import band_order, dominance, dominance_order, lowest_order
 
@@ -250,11 +251,11 @@ class Modal(Reducer):
             "static_dropped": bool(o["static_correction"] and not m_static),  # K singular on ker G
             "max_residual": float(modes["residuals"][chosen].max(initial=0.0)),
             "converged": covered, "status": status, "status_reason": reason,
-            "lu_count": int(paid), "lu_count_shared": int(shared),
-            "setup_reused": paid < shared,  # this call did not pay the r-independent LUs
-            "setup_cost": {"modes": modes["time"], "static": st["time"] if st is not None else 0.0},
-            "time_breakdown": {"static": t1 - t0 if static_fresh else 0.0, "modes": t2 - t1 if grown else 0.0,
-                               "projection": t3 - t2},
+            # the LUs of the modes and the static response: r-independent, kept across calls
+            **cost_record(lus_shared=shared, lus_paid=paid,
+                          setup_cost={"modes": modes["time"], "static": st["time"] if st is not None else 0.0},
+                          paid={"static": t1 - t0 if static_fresh else 0.0, "modes": t2 - t1 if grown else 0.0},
+                          breakdown={"projection": t3 - t2}),
         }
         if o["selection"] == "dominance":
             info["dominance"] = modes["dominance"][chosen]
