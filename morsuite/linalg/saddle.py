@@ -24,7 +24,8 @@ later shift. Solves and their accuracy check are in
 
 Options of :class:`SaddlePointSolver` (defaults): ``cache_size=2``,
 ``pivot_tol=0`` (off), ``rcond_tol=0`` (off), ``permc_spec="COLAMD"``,
-``diag_pivot_thresh=0.1``, ``backward_tol=1e-10``, ``scaling="diagonal"``,
+``diag_pivot_thresh=0.1``, ``backward_tol=1e-10``, ``backward_target=1e-15``,
+``refine_steps=4``, ``scaling="diagonal"``,
 ``ruiz_sweeps=2``, ``reuse_ordering=True``, ``backend="auto"`` (the LU:
 banded with a Schur-complement border for narrow RCM bands, KLU for narrow bands
 with a larger border, rslab's supernodal LU (or PARDISO) for wide bands, chosen from the pattern alone by :mod:`morsuite.linalg.backends`; measurements
@@ -33,7 +34,9 @@ in ``docs/design/backends.md``).
 Cost: one sparse LU per distinct shift, none for a cached shift or the
 conjugate of one (real data); ``rcond_tol > 0`` adds 10-20% of an LU, Ruiz
 scaling about 12% per sweep, the diagonal scaling O(n1). A solve that fails
-the backward-error check costs one more LU per fallback tried.
+the backward-error check costs one more LU per fallback tried; a refinement
+step towards ``backward_target`` one more solve (no LU;
+:mod:`morsuite.linalg.accuracy`).
 """
 
 
@@ -52,6 +55,7 @@ from . import kernels
 from .backends import LIBRARY_BACKENDS, BandedBorderLU, analyse, permuted_pattern, resolve_backend, superlu_ordering
 from .backends_ext import KLULU, PardisoLU
 from .backends_rslab import RslabLDLT, RslabLU, rslab_factor
+from .accuracy import default_target
 from .saddle_lu import SaddleLU, SolverStats, rcond_estimate
 
 __all__ = ["SaddlePointSolver", "SaddleLU", "SolverStats"]
@@ -104,13 +108,22 @@ class SaddlePointSolver:
         scaling (its column scaling is computed per column of S).
     backward_tol : float
         Largest normwise backward error of the factorized, equilibrated system
-        accepted from a solve (default 1e-10; 0 turns the check off). Above it
+        accepted from a solve (default 1e-10; 0 turns every check off). Above it
         one step of iterative refinement is made; if that does not help, the
         matrix is refactored with, in turn, the same ordering and diagonal
         pivot threshold 0.01, a fresh COLAMD ordering, and MMD_AT_PLUS_A with
         partial pivoting (the last resort: it can fill in heavily), each solve
         checked again; if none passes, :class:`SingularShiftError`: an
         inaccurate solve is never returned silently.
+    backward_target, refine_steps : float, int
+        The backward error every checked solve reaches (default 1e-15, about 9
+        units of roundoff; :mod:`morsuite.linalg.accuracy` defines it and how it
+        is certified): above it, at most ``refine_steps`` (4) refinement steps
+        with a double-double residual and the same LU, then one fallback LU,
+        then the solve is returned flagged (``stats.above_target``, an
+        :class:`~morsuite.errors.AccuracyWarning`). ``backward_target=0``: the
+        check of ``backward_tol`` alone (before 2026-11-29); None (default): 1e-15,
+        or 0 where the environment sets ``MORSUITE_SOLVE_TARGET=off``.
     pattern : dict, optional
         The ``pattern`` of another solver of the same M, D, K, G (shared,
         read-only, with its stored column ordering); default: built here.
@@ -126,13 +139,16 @@ class SaddlePointSolver:
     Notes
     -----
     ``stats.factorizations`` counts every LU made; it is the floor against which
-    the run time of a reducer is judged.
+    the run time of a reducer is judged. ``stats.checked_solves``, ``above_target``,
+    ``refinement_steps``, ``target_fallbacks`` and ``backward_error_max`` record the
+    backward-error target (also in the open :func:`~morsuite.linalg.accuracy.recording`).
     """
 
     def __init__(self, M, D, K, G, *, cache_size: int = 2, pivot_tol: float = 0.0,
                  rcond_tol: float = 0.0, permc_spec: str = "COLAMD", diag_pivot_thresh: float = 0.1,
                  backward_tol: float = 1e-10, scaling: str = "diagonal", ruiz_sweeps: int = 2,
-                 pattern: dict | None = None, reuse_ordering: bool = True, backend: str = "auto"):
+                 pattern: dict | None = None, reuse_ordering: bool = True, backend: str = "auto",
+                 backward_target: float | None = None, refine_steps: int = 4):
         self.n1 = M.shape[0]
         self.n2 = G.shape[0]
         self.cache_size = int(cache_size)
@@ -141,6 +157,15 @@ class SaddlePointSolver:
         self.permc_spec = permc_spec
         self.diag_pivot_thresh = float(diag_pivot_thresh)
         self.backward_tol = float(backward_tol)
+        try:
+            self.backward_target = default_target() if backward_target is None else float(backward_target)
+        except (TypeError, ValueError):
+            self.backward_target = float("nan")
+        if isinstance(backward_target, bool) or not self.backward_target >= 0:
+            raise InputError(f"backward_target must be a number >= 0 or None; got {backward_target!r}")
+        if isinstance(refine_steps, bool) or not isinstance(refine_steps, (int, np.integer)) or refine_steps < 0:
+            raise InputError(f"refine_steps must be an integer >= 0; got {refine_steps!r}")
+        self.refine_steps = int(refine_steps)
         if scaling not in ("diagonal", "ruiz", "none"):
             raise InputError(f"scaling must be 'diagonal', 'ruiz' or 'none'; got {scaling!r}")
         self.scaling = scaling
@@ -265,7 +290,8 @@ class SaddlePointSolver:
             self.stats.add(reused=1)
             return SaddleLU(key, base.lu, self.n1, self.n2, not base.conjugate, self.stats,
                             base.min_pivot_ratio, base.complex_lu, base.matrix, base.backward_tol, base.norms,
-                            base.dr, base.dc, q=base.q)
+                            base.dr, base.dc, q=base.q, target=base.target, refine_steps=base.refine_steps,
+                            structure=base.structure, contraction=base.contraction)
         t0 = time.perf_counter()
         perm = self._ordering()
         dr, dc, As, norms = self._assemble_scaled(a, b, c, perm)
@@ -337,7 +363,8 @@ class SaddlePointSolver:
         ) if checked else ()
         f = SaddleLU(key, lu, self.n1, self.n2, False, self.stats, ratio, np.iscomplexobj(As.data),
                      As if checked else None, self.backward_tol, norms, dr, dc,
-                     fallback, q=perm["q"] if perm else None)
+                     fallback, q=perm["q"] if perm else None, target=self.backward_target if checked else 0.0,
+                     refine_steps=self.refine_steps, structure=perm if perm else self.pattern)
         if self.cache_size > 0:
             self._cache[key] = f
             while len(self._cache) > self.cache_size:

@@ -10,30 +10,43 @@ symmetrically renumbered matrix :math:`A_e = (D_r S D_c)[q][:, q]` of
 
 made by :class:`~morsuite.linalg.saddle.SaddlePointSolver`, and solves
 :math:`Sx = b` or :math:`S^Tx = b` (plain transpose) for one or many
-right-hand sides; for real data it also stands for the conjugate matrix. After
-each solve the normwise backward error of the factorized system,
-:math:`\|b_e - A_e x_e\| / (\|A_e\|\|x_e\| + \|b_e\|)`, is checked against
-``backward_tol`` (1e-10 by default; 0: no check): above it, one step of
-iterative refinement, then the fallback factorizations in turn, then
-:class:`SingularShiftError`. :func:`rcond_estimate` estimates the reciprocal
-condition of the equilibrated matrix for ``rcond_tol``.
+right-hand sides; for real data it also stands for the conjugate matrix. Each
+solve is checked by its normwise backward error on the factorized system,
+:math:`\eta = \|b_e - A_e x_e\| / (\|A_e\|\|x_e\| + \|b_e\|)` (defined precisely, with what
+"reached" means, in :mod:`morsuite.linalg.accuracy`):
 
-Cost: a solve is two triangular solves; the check one sparse product (about 3%
-of an LU); a fallback one more LU (counted in ``stats.factorizations`` and
-``stats.refactorizations``); :func:`rcond_estimate` a few solves (10-20% of an LU).
+- above ``backward_tol`` (1e-10; an unstable factor): one step of iterative refinement, then
+  the fallback factorizations in turn, then :class:`SingularShiftError`;
+- then, down to ``backward_target`` (1e-15, about 9 units of roundoff): certified in double where
+  the residual's rounding bound allows it, else measured with a double-double residual; above the
+  target, refinement with that residual and the same LU (at most ``refine_steps``), then one
+  fallback factorization, then the solve is returned flagged (``stats.above_target``, an
+  :class:`~morsuite.errors.AccuracyWarning`, the run's record of :mod:`~morsuite.linalg.accuracy`).
+
+``backward_target=0`` restores the check before 2026-11-29 (``backward_tol`` only).
+:func:`rcond_estimate` estimates the reciprocal condition of the equilibrated matrix for ``rcond_tol``.
+
+Cost: a solve is two triangular solves; the check one sparse product (about 3% of an LU),
+plus one with :math:`|A_e|` for the certificate in double, or one double-double product (about
+90 flops per complex entry: 2-4% of a 3D element model's LU at n1 = 2e4, where it is always
+needed); a refinement step one solve and one double-double product; a fallback one more LU
+(counted in ``stats.factorizations`` and ``stats.refactorizations``); :func:`rcond_estimate` a few
+solves (10-20% of an LU). Measured: ``docs/design/backends.md`` (2026-11-29).
 """
 
 from __future__ import annotations
 
 import threading
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..errors import InputError, SingularShiftError
+from ..errors import AccuracyWarning, InputError, SingularShiftError
+from . import accuracy, dd_kernels, kernels
 
 __all__ = ["SaddleLU", "SolverStats", "rcond_estimate"]
 
@@ -51,12 +64,25 @@ class SolverStats:
     factor_time_s: float = 0.0
     solve_time_s: float = 0.0
     assemble_time_s: float = 0.0
+    # the backward-error target (:mod:`morsuite.linalg.accuracy`): right-hand sides checked, of them
+    # returned above the target (flagged), refinement steps and fallback LUs on the way to it, the worst
+    # certified backward error and the largest target (these two merge by maximum, not by sum)
+    checked_solves: int = 0
+    above_target: int = 0
+    refinement_steps: int = 0
+    target_fallbacks: int = 0
+    backward_error_max: float = 0.0
+    backward_target: float = 0.0
+
+    #: counters that merge by maximum
+    MAXIMA = ("backward_error_max", "backward_target")
 
     def add(self, **amounts):
-        """Add to counters, thread-safely (factorizations and solves may run in a thread pool)."""
+        """Add to counters (the largest for :data:`MAXIMA`), thread-safely (factorizations and solves may
+        run in a thread pool)."""
         with _STATS_LOCK:
             for k, v in amounts.items():
-                setattr(self, k, getattr(self, k) + v)
+                setattr(self, k, max(getattr(self, k), v) if k in self.MAXIMA else getattr(self, k) + v)
 
     def as_dict(self) -> dict:
         """The counters as a plain dict (for ``info`` and manifests)."""
@@ -67,8 +93,8 @@ class SolverStats:
         return SolverStats(**self.__dict__)
 
     def since(self, earlier: "SolverStats") -> dict:
-        """Counters accumulated since the snapshot ``earlier``."""
-        return {k: v - getattr(earlier, k) for k, v in self.__dict__.items()}
+        """Counters accumulated since the snapshot ``earlier`` (:data:`MAXIMA`: the value now)."""
+        return {k: v if k in self.MAXIMA else v - getattr(earlier, k) for k, v in self.__dict__.items()}
 
 
 @dataclass
@@ -95,6 +121,12 @@ class SaddleLU:
     fallback: tuple = ()  # callables () -> another LU of the same matrix, tried in order
     refactored: bool = False
     q: object = field(default=None, repr=False)  # the LU is of (Dr S Dc)[q][:, q] (a reused ordering)
+    target: float = 0.0  # backward_target (0: backward_tol only, the check before 2026-11-29)
+    refine_steps: int = 0  # most refinement steps per solve on the way to the target
+    structure: object = field(default=None, repr=False)  # the pattern dict of ``matrix`` (cached structures)
+    #: largest ratio of successive backward errors seen in the target refinement (the factor's contraction)
+    contraction: float = 0.0
+    target_fallback: bool = False  # the one fallback LU of a missed target was tried
 
     def solve(self, rhs, *, trans: bool = False, full: bool = False):
         """Solve :math:`S x = b` (``trans=False``) or :math:`S^T x = b`.
@@ -167,21 +199,49 @@ class SaddleLU:
             self.norms["1"] = float(np.add.reduceat(av, A.indptr[:-1]).max()) if av.size else 0.0
         return self.norms["1"]
 
-    def _backward_error(self, b, x, trans):
-        """Normwise backward error per column, the worst: ||r|| / (||A|| ||x|| + ||b||).
+    def _etas(self, b, x, trans, r=None):
+        """Normwise backward error of each column, its residual and its denominator:
+        ``(eta, r, den)`` with ``eta = ||r|| / den``, ``den = ||A|| ||x|| + ||b||``.
 
-        1-norms for ``A x = b``, inf-norms for ``A^T x = b`` (``||A^T||_inf = ||A||_1``).
+        1-norms for ``A x = b``, inf-norms for ``A^T x = b`` (``||A^T||_inf = ||A||_1``). ``r``, if
+        given, is the residual (formed in extended precision); else ``b - A x`` in double.
         """
-        r = b - self._apply(x, trans)
+        if r is None:
+            r = b - self._apply(x, trans)
         red = np.max if trans else np.sum
         den = self._norm() * red(np.abs(x), axis=0) + red(np.abs(b), axis=0)
         with np.errstate(invalid="ignore", divide="ignore"):
-            return float(np.max(np.where(den > 0, red(np.abs(r), axis=0) / den, 0.0))), r
+            eta = np.where(den > 0, red(np.abs(r), axis=0) / np.where(den > 0, den, 1.0), 0.0)
+        return eta, r, den
+
+    def _backward_error(self, b, x, trans):
+        """Normwise backward error per column, the worst: ``(max eta, r)`` (:meth:`_etas`)."""
+        eta, r, _ = self._etas(b, x, trans)
+        return float(np.max(eta)) if eta.size else 0.0, r
 
     def _checked(self, b, x, trans):
         eta, r = self._backward_error(b, x, trans)
-        if eta <= self.backward_tol:
-            return x
+        if not eta <= self.backward_tol:
+            x, eta = self._stabilised(b, x, r, trans)
+        steps = fell = 0
+        etas = np.full(b.shape[1], eta)
+        if self.target > 0:
+            x, etas, steps, fell = self._to_target(b, x, trans)
+        above = int(np.count_nonzero(etas > self.target)) if self.target > 0 else 0
+        worst = float(np.max(etas)) if etas.size else 0.0
+        self.stats.add(checked_solves=b.shape[1], above_target=above, refinement_steps=steps, target_fallbacks=fell,
+                       backward_error_max=worst, backward_target=self.target)
+        accuracy.note(eta=worst, target=self.target, checked=b.shape[1], above_target=above, refinement_steps=steps,
+                      fallback_lus=fell)
+        if above:
+            warnings.warn("saddle-point solves stayed above their backward-error target after refinement and a "
+                          "fallback LU (near a pole?): counted in the solver's stats.above_target and in the run's "
+                          "solve_accuracy record", AccuracyWarning, stacklevel=4)
+        return x
+
+    def _stabilised(self, b, x, r, trans):
+        """An unstable factor (backward error above ``backward_tol``): one refinement step, then the fallback
+        factorizations in turn; :class:`SingularShiftError` if none passes. Returns ``(x, eta)``."""
         x = x + self._lu_solve(r, trans)  # one step of iterative refinement
         eta, _ = self._backward_error(b, x, trans)
         while not eta <= self.backward_tol and self.fallback:
@@ -203,7 +263,153 @@ class SaddleLU:
                 f"{eta:.1e} > backward_tol {self.backward_tol:.0e} after one refinement step "
                 "(the shift is at or next to a pole)"
             )
-        return x
+        return x, eta
+
+    # -- the backward-error target (morsuite.linalg.accuracy) ---------------------------------------
+    def _to_target(self, b, x, trans):
+        """``(x, eta, steps, fallback_lus)``: each column certified at or below ``target`` or refined
+        towards it (:meth:`_refine`), one fallback LU where refinement stagnates above it; ``eta``
+        the certified backward error of each column."""
+        eta = self._certified(b, x, trans)
+        todo = eta > self.target
+        if not todo.any():
+            return x, eta, 0, 0
+        x = np.array(x, dtype=np.result_type(x, b))
+        xt, eta_t, steps = self._refine(b[:, todo], x[:, todo], trans)
+        x[:, todo], eta[todo] = xt, eta_t
+        fell = 0
+        if (eta > self.target).any() and self.fallback and not self.target_fallback:
+            # refinement stagnated above the target: the next LU of the fallback list, once per factorization,
+            # kept only where it does better (it costs an LU: counted)
+            self.target_fallback, fell = True, 1
+            t0 = time.perf_counter()
+            old = self.lu
+            try:
+                self.lu = self.fallback[0]()
+            except (RuntimeError, SingularShiftError):
+                self.lu = None
+            self.stats.add(factorizations=1, refactorizations=1, factor_time_s=time.perf_counter() - t0)
+            if self.lu is not None:
+                x2 = self._lu_solve(b, trans)
+                eta2, _ = self._backward_error(b, x2, trans)
+                if eta2 <= self.backward_tol:
+                    x2 = np.array(x2, dtype=np.result_type(x2, b))
+                    e2 = self._certified(b, x2, trans)
+                    sel = e2 > self.target
+                    if sel.any():
+                        x2[:, sel], e2[sel], s2 = self._refine(b[:, sel], x2[:, sel], trans)
+                        steps += s2
+                    if np.max(e2) < np.max(eta):
+                        self.fallback, self.refactored = self.fallback[1:], True
+                        return x2, e2, steps, fell
+            self.lu = old
+        return x, eta, steps, fell
+
+    def _certified(self, b, x, trans):
+        """Per column, an upper bound of the backward error: the one computed in double plus the rigorous
+        bound of that residual's rounding (:mod:`morsuite.linalg.accuracy`); inf where that bound alone is
+        above the target on most rows (3D elements), so that the column is measured in extended precision."""
+        gam = self._gammas(trans, np.iscomplexobj(x) or np.iscomplexobj(b) or np.iscomplexobj(self.matrix.data))
+        if gam is None:
+            return np.full(b.shape[1], np.inf)
+        eta, _, den = self._etas(b, x, trans)
+        absA = self._abs_matrix()
+        ax = (absA.T if trans else absA) @ np.abs(x)
+        red = np.max if trans else np.sum
+        with np.errstate(invalid="ignore", divide="ignore"):
+            beta = np.where(den > 0, red(gam[:, None] * (np.abs(b) + ax), axis=0) / np.where(den > 0, den, 1.0), 0.0)
+        return eta + beta
+
+    def _gammas(self, trans, cplx):
+        r""":math:`\gamma_{k_i+1}` (:math:`\gamma_{k_i+4}` complex: a complex product rounds by at most
+        :math:`\sqrt 2\gamma_2`) per row of the product (rows of A, or of :math:`A^T`), the bound of a
+        residual's rounding; None where its median is above the target (then no certificate in double)."""
+        key = ("gammas", bool(trans), bool(cplx))
+        cache = self.norms
+        if key not in cache:
+            A = self.matrix
+            k = np.diff(A.indptr) if trans else np.bincount(A.indices, minlength=A.shape[0])
+            g = accuracy.gamma(k + (4 if cplx else 1))
+            cache[key] = g if g.size and np.median(g) <= self.target else None
+        return cache[key]
+
+    def _abs_matrix(self):
+        """|A| of the factorized matrix (real, the same structure), made once."""
+        if "abs" not in self.norms:
+            A = self.matrix
+            self.norms["abs"] = sp.csc_matrix((np.abs(A.data), A.indices, A.indptr), shape=A.shape)
+        return self.norms["abs"]
+
+    def _refine(self, b, x, trans):
+        """Refine the columns of x towards ``target`` with the same LU and an extended-precision residual:
+        ``(x, eta, steps)``, ``eta`` measured from that residual (accurate far below the target); a column
+        stops when a step does not halve its backward error (the better iterate is kept), after
+        ``refine_steps`` steps at most."""
+        eta, r, _ = self._etas(b, x, trans, self._ext_residual(b, x, trans))
+        active = eta > self.target
+        steps = 0
+        while active.any() and steps < self.refine_steps:
+            cols = np.flatnonzero(active)
+            xn = x[:, cols] + self._lu_solve(r[:, cols], trans)
+            en, rn, _ = self._etas(b[:, cols], xn, trans, self._ext_residual(b[:, cols], xn, trans))
+            steps += 1
+            with np.errstate(invalid="ignore", divide="ignore"):
+                ratio = np.where(eta[cols] > 0, en / np.where(eta[cols] > 0, eta[cols], 1.0), 0.0)
+            self.contraction = max(self.contraction, float(np.max(ratio)))
+            better = en < eta[cols]
+            keep = cols[better]
+            x[:, keep], eta[keep], r[:, keep] = xn[:, better], en[better], rn[:, better]
+            active[cols] = (en > self.target) & (ratio <= 0.5)
+        return x, eta, steps
+
+    def _ext_residual(self, b, x, trans):
+        """``b - A x`` (``A^T x``) of the factorized matrix, formed in double-double (numba) or long double
+        and rounded to double once; 2-D ``b``, ``x`` in the LU's space."""
+        if self.conjugate:  # b - conj(A) x = conj(conj(b) - A conj(x))
+            return np.conj(self._ext_residual_plain(np.conj(b), np.conj(x), trans))
+        return self._ext_residual_plain(b, x, trans)
+
+    def _ext_residual_plain(self, b, x, trans):
+        structure = _segments(self.matrix, self.structure, trans)
+        cplx = np.iscomplexobj(b) or np.iscomplexobj(x) or np.iscomplexobj(self.matrix.data)
+        out = np.empty(b.shape, dtype=complex if cplx else float)
+        if kernels.available():
+            data = self._dd_data()
+            for j in range(b.shape[1]):
+                xj, bj = x[:, j], b[:, j]
+                xs = (np.ascontiguousarray(xj.real, dtype=float), _NO_LOW,
+                      np.ascontiguousarray(xj.imag, dtype=float) if np.iscomplexobj(xj) else None, _NO_LOW)
+                bs = (np.ascontiguousarray(bj.real, dtype=float), _NO_LOW,
+                      np.ascontiguousarray(bj.imag, dtype=float) if np.iscomplexobj(bj) else None, _NO_LOW)
+                rr, _, ri, _ = dd_kernels.product(structure, data, xs, bs)
+                out[:, j] = rr if ri is None else rr + 1j * ri
+            return out
+        ptr, idx, order = structure  # numpy's long double: a gather, a product and a segmented sum
+        vals = self.matrix.data[order]
+        nonempty = np.flatnonzero(np.diff(ptr) > 0)
+        for j in range(b.shape[1]):
+            parts = []
+            for part in ((vals.real, x[:, j].real), (vals.imag, x[:, j].imag), (vals.real, x[:, j].imag),
+                         (vals.imag, x[:, j].real)):
+                y = np.zeros(b.shape[0], dtype=np.longdouble)
+                y[nonempty] = np.add.reduceat(part[0].astype(np.longdouble) * part[1].astype(np.longdouble)[idx],
+                                              ptr[nonempty])
+                parts.append(y)
+            re = b[:, j].real.astype(np.longdouble) - (parts[0] - parts[1])
+            out[:, j] = re.astype(float)
+            if cplx:
+                out[:, j] += 1j * (np.imag(b[:, j]).astype(np.longdouble) - (parts[2] + parts[3])).astype(float)
+        return out
+
+    def _dd_data(self):
+        """The factorized matrix's entries as :func:`~morsuite.linalg.dd_kernels.product` takes them, made once."""
+        if "dd" not in self.norms:
+            d = self.matrix.data
+            zeros = np.zeros(d.size)
+            self.norms["dd"] = (np.ascontiguousarray(d.real, dtype=float), zeros,
+                                np.ascontiguousarray(d.imag, dtype=float) if np.iscomplexobj(d) else None,
+                                zeros if np.iscomplexobj(d) else None)
+        return self.norms["dd"]
 
     def _to_lu_space(self, b, trans):
         """Right-hand side of the factorized system Ae = (Dr S Dc)[q][:, q] for S x = b (S^T x = b).
@@ -239,6 +445,30 @@ class SaddleLU:
         else:
             x = self.lu.solve(np.ascontiguousarray(b, dtype=complex if self.complex_lu else float), trans=tr)
         return x
+
+
+_NO_LOW = np.empty(0)  # the low part of a double: zero
+
+
+def _segments(A, structure, trans):
+    """``(ptr, idx, order)`` (int64) of the rows of ``A`` (``trans``: of its columns) for
+    :func:`~morsuite.linalg.dd_kernels.product`: row i's terms are ``u`` in ``ptr[i]:ptr[i+1]``, entry
+    ``order[u]`` of ``A.data``, column ``idx[u]``. Kept in ``structure`` (the pattern dict of A: shared by
+    every LU of the pattern) when given."""
+    key = ("_segments", bool(trans))
+    if structure is not None and key in structure:
+        return structure[key]
+    indptr, indices = np.asarray(A.indptr, dtype=np.int64), np.asarray(A.indices, dtype=np.int64)
+    if trans:
+        seg = (indptr, indices, np.arange(indices.size, dtype=np.int64))
+    else:  # the CSR order of the CSC entries: by row, columns ascending within a row (a stable sort)
+        order = np.argsort(indices, kind="stable").astype(np.int64)
+        cols = np.repeat(np.arange(A.shape[1], dtype=np.int64), np.diff(indptr))
+        ptr = np.concatenate([[0], np.cumsum(np.bincount(indices, minlength=A.shape[0]))]).astype(np.int64)
+        seg = (ptr, cols[order], order)
+    if structure is not None:
+        structure[key] = seg
+    return seg
 
 
 def rcond_estimate(A, solve, n1: int, mag) -> float:
