@@ -220,13 +220,13 @@ class SaddleLU:
         return float(np.max(eta)) if eta.size else 0.0, r
 
     def _checked(self, b, x, trans):
-        eta, r = self._backward_error(b, x, trans)
-        if not eta <= self.backward_tol:
+        etas, r, ext = self._measure(b, x, trans)
+        if not np.max(etas) <= self.backward_tol:
             x, eta = self._stabilised(b, x, r, trans)
+            etas, r, ext = self._measure(b, x, trans) if self.target > 0 else (np.full(b.shape[1], eta), None, False)
         steps = fell = 0
-        etas = np.full(b.shape[1], eta)
         if self.target > 0:
-            x, etas, steps, fell = self._to_target(b, x, trans)
+            x, etas, steps, fell = self._to_target(b, x, trans, etas, r, ext)
         above = int(np.count_nonzero(etas > self.target)) if self.target > 0 else 0
         worst = float(np.max(etas)) if etas.size else 0.0
         self.stats.add(checked_solves=b.shape[1], above_target=above, refinement_steps=steps, target_fallbacks=fell,
@@ -266,17 +266,34 @@ class SaddleLU:
         return x, eta
 
     # -- the backward-error target (morsuite.linalg.accuracy) ---------------------------------------
-    def _to_target(self, b, x, trans):
-        """``(x, eta, steps, fallback_lus)``: each column certified at or below ``target`` or refined
-        towards it (:meth:`_refine`), one fallback LU where refinement stagnates above it; ``eta``
-        the certified backward error of each column."""
-        eta = self._certified(b, x, trans)
+    def _measure(self, b, x, trans):
+        """``(eta, r, ext)`` of each column: with a target, its backward error certified (:mod:`~morsuite.linalg.accuracy`),
+        from the extended residual (``ext`` True) where the rounding bound of a double residual is above the target
+        on most rows (3D elements), else the one computed in double plus that bound; without, the one computed in
+        double. ``r`` the residual it was computed from."""
+        cplx = np.iscomplexobj(x) or np.iscomplexobj(b) or np.iscomplexobj(self.matrix.data)
+        gam = self._gammas(trans, cplx) if self.target > 0 else None
+        if self.target > 0 and gam is None:
+            eta, r, _ = self._etas(b, x, trans, self._ext_residual(b, x, trans))
+            return eta, r, True
+        eta, r, den = self._etas(b, x, trans)
+        if gam is not None:  # the rigorous bound of the double residual's rounding
+            ax = (self._abs_matrix().T if trans else self._abs_matrix()) @ np.abs(x)
+            red = np.max if trans else np.sum
+            with np.errstate(invalid="ignore", divide="ignore"):
+                eta = eta + np.where(den > 0, red(gam[:, None] * (np.abs(b) + ax), axis=0)
+                                     / np.where(den > 0, den, 1.0), 0.0)
+        return eta, r, False
+
+    def _to_target(self, b, x, trans, eta, r, ext):
+        """``(x, eta, steps, fallback_lus)``: each column at or below ``target`` (``eta``, ``r``, ``ext`` as
+        :meth:`_measure` gave them for ``x``) or refined towards it (:meth:`_refine`), one fallback LU where
+        refinement stagnates above it; ``eta`` the certified backward error of each column."""
         todo = eta > self.target
         if not todo.any():
             return x, eta, 0, 0
         x = np.array(x, dtype=np.result_type(x, b))
-        xt, eta_t, steps = self._refine(b[:, todo], x[:, todo], trans)
-        x[:, todo], eta[todo] = xt, eta_t
+        x[:, todo], eta[todo], steps = self._refine(b[:, todo], x[:, todo], trans, r[:, todo] if ext else None)
         fell = 0
         if (eta > self.target).any() and self.fallback and not self.target_fallback:
             # refinement stagnated above the target: the next LU of the fallback list, once per factorization,
@@ -291,13 +308,12 @@ class SaddleLU:
             self.stats.add(factorizations=1, refactorizations=1, factor_time_s=time.perf_counter() - t0)
             if self.lu is not None:
                 x2 = self._lu_solve(b, trans)
-                eta2, _ = self._backward_error(b, x2, trans)
-                if eta2 <= self.backward_tol:
+                e2, r2, ext2 = self._measure(b, x2, trans)
+                if np.max(e2) <= self.backward_tol:
                     x2 = np.array(x2, dtype=np.result_type(x2, b))
-                    e2 = self._certified(b, x2, trans)
                     sel = e2 > self.target
                     if sel.any():
-                        x2[:, sel], e2[sel], s2 = self._refine(b[:, sel], x2[:, sel], trans)
+                        x2[:, sel], e2[sel], s2 = self._refine(b[:, sel], x2[:, sel], trans, r2[:, sel] if ext2 else None)
                         steps += s2
                     if np.max(e2) < np.max(eta):
                         self.fallback, self.refactored = self.fallback[1:], True
@@ -305,33 +321,20 @@ class SaddleLU:
             self.lu = old
         return x, eta, steps, fell
 
-    def _certified(self, b, x, trans):
-        """Per column, an upper bound of the backward error: the one computed in double plus the rigorous
-        bound of that residual's rounding (:mod:`morsuite.linalg.accuracy`); inf where that bound alone is
-        above the target on most rows (3D elements), so that the column is measured in extended precision."""
-        gam = self._gammas(trans, np.iscomplexobj(x) or np.iscomplexobj(b) or np.iscomplexobj(self.matrix.data))
-        if gam is None:
-            return np.full(b.shape[1], np.inf)
-        eta, _, den = self._etas(b, x, trans)
-        absA = self._abs_matrix()
-        ax = (absA.T if trans else absA) @ np.abs(x)
-        red = np.max if trans else np.sum
-        with np.errstate(invalid="ignore", divide="ignore"):
-            beta = np.where(den > 0, red(gam[:, None] * (np.abs(b) + ax), axis=0) / np.where(den > 0, den, 1.0), 0.0)
-        return eta + beta
-
     def _gammas(self, trans, cplx):
         r""":math:`\gamma_{k_i+1}` (:math:`\gamma_{k_i+4}` complex: a complex product rounds by at most
         :math:`\sqrt 2\gamma_2`) per row of the product (rows of A, or of :math:`A^T`), the bound of a
-        residual's rounding; None where its median is above the target (then no certificate in double)."""
-        key = ("gammas", bool(trans), bool(cplx))
-        cache = self.norms
+        residual's rounding; None where its median is above the target (then no certificate in double).
+        Kept with the pattern (``structure``)."""
+        key = ("_gammas", bool(trans), bool(cplx))
+        cache = self.structure if self.structure is not None else self.norms
         if key not in cache:
             A = self.matrix
             k = np.diff(A.indptr) if trans else np.bincount(A.indices, minlength=A.shape[0])
             g = accuracy.gamma(k + (4 if cplx else 1))
-            cache[key] = g if g.size and np.median(g) <= self.target else None
-        return cache[key]
+            cache[key] = (g, float(np.median(g)) if g.size else np.inf)
+        g, median = cache[key]
+        return g if median <= self.target else None
 
     def _abs_matrix(self):
         """|A| of the factorized matrix (real, the same structure), made once."""
@@ -340,12 +343,12 @@ class SaddleLU:
             self.norms["abs"] = sp.csc_matrix((np.abs(A.data), A.indices, A.indptr), shape=A.shape)
         return self.norms["abs"]
 
-    def _refine(self, b, x, trans):
-        """Refine the columns of x towards ``target`` with the same LU and an extended-precision residual:
-        ``(x, eta, steps)``, ``eta`` measured from that residual (accurate far below the target); a column
-        stops when a step does not halve its backward error (the better iterate is kept), after
-        ``refine_steps`` steps at most."""
-        eta, r, _ = self._etas(b, x, trans, self._ext_residual(b, x, trans))
+    def _refine(self, b, x, trans, r=None):
+        """Refine the columns of x towards ``target`` with the same LU and an extended-precision residual
+        (``r``: x's, if known): ``(x, eta, steps)``, ``eta`` measured from that residual (accurate far below
+        the target); a column stops when a step does not halve its backward error (the better iterate is
+        kept), after ``refine_steps`` steps at most."""
+        eta, r, _ = self._etas(b, x, trans, self._ext_residual(b, x, trans) if r is None else r)
         active = eta > self.target
         steps = 0
         while active.any() and steps < self.refine_steps:
@@ -371,21 +374,19 @@ class SaddleLU:
 
     def _ext_residual_plain(self, b, x, trans):
         structure = _segments(self.matrix, self.structure, trans)
-        cplx = np.iscomplexobj(b) or np.iscomplexobj(x) or np.iscomplexobj(self.matrix.data)
+        A = self.matrix
+        cplx = np.iscomplexobj(b) or np.iscomplexobj(x) or np.iscomplexobj(A.data)
         out = np.empty(b.shape, dtype=complex if cplx else float)
-        if kernels.available():
-            data = self._dd_data()
+        if kernels.available():  # Dot2: twice the working precision, rounded once
+            if "parts" not in self.norms:  # the entries' real and imaginary parts, contiguous: once per LU
+                d = A.data
+                self.norms["parts"] = (np.ascontiguousarray(d.real, dtype=float),
+                                       np.ascontiguousarray(d.imag, dtype=float) if np.iscomplexobj(d) else None)
             for j in range(b.shape[1]):
-                xj, bj = x[:, j], b[:, j]
-                xs = (np.ascontiguousarray(xj.real, dtype=float), _NO_LOW,
-                      np.ascontiguousarray(xj.imag, dtype=float) if np.iscomplexobj(xj) else None, _NO_LOW)
-                bs = (np.ascontiguousarray(bj.real, dtype=float), _NO_LOW,
-                      np.ascontiguousarray(bj.imag, dtype=float) if np.iscomplexobj(bj) else None, _NO_LOW)
-                rr, _, ri, _ = dd_kernels.product(structure, data, xs, bs)
-                out[:, j] = rr if ri is None else rr + 1j * ri
+                out[:, j] = dd_kernels.residual(structure, self.norms["parts"], x[:, j], b[:, j])
             return out
         ptr, idx, order = structure  # numpy's long double: a gather, a product and a segmented sum
-        vals = self.matrix.data[order]
+        vals = A.data[order]
         nonempty = np.flatnonzero(np.diff(ptr) > 0)
         for j in range(b.shape[1]):
             parts = []
@@ -400,16 +401,6 @@ class SaddleLU:
             if cplx:
                 out[:, j] += 1j * (np.imag(b[:, j]).astype(np.longdouble) - (parts[2] + parts[3])).astype(float)
         return out
-
-    def _dd_data(self):
-        """The factorized matrix's entries as :func:`~morsuite.linalg.dd_kernels.product` takes them, made once."""
-        if "dd" not in self.norms:
-            d = self.matrix.data
-            zeros = np.zeros(d.size)
-            self.norms["dd"] = (np.ascontiguousarray(d.real, dtype=float), zeros,
-                                np.ascontiguousarray(d.imag, dtype=float) if np.iscomplexobj(d) else None,
-                                zeros if np.iscomplexobj(d) else None)
-        return self.norms["dd"]
 
     def _to_lu_space(self, b, trans):
         """Right-hand side of the factorized system Ae = (Dr S Dc)[q][:, q] for S x = b (S^T x = b).
@@ -447,12 +438,9 @@ class SaddleLU:
         return x
 
 
-_NO_LOW = np.empty(0)  # the low part of a double: zero
-
-
 def _segments(A, structure, trans):
     """``(ptr, idx, order)`` (int64) of the rows of ``A`` (``trans``: of its columns) for
-    :func:`~morsuite.linalg.dd_kernels.product`: row i's terms are ``u`` in ``ptr[i]:ptr[i+1]``, entry
+    :func:`~morsuite.linalg.dd_kernels.residual`: row i's terms are ``u`` in ``ptr[i]:ptr[i+1]``, entry
     ``order[u]`` of ``A.data``, column ``idx[u]``. Kept in ``structure`` (the pattern dict of A: shared by
     every LU of the pattern) when given."""
     key = ("_segments", bool(trans))
