@@ -15,7 +15,13 @@ the median of the per-frequency ratios, LUs, refinement steps and fallback LUs o
 worst backward error each way (the rule before measures it in double) and the largest difference of the
 two responses relative to the response. Models: fem_block(4000) (40 frequencies) and fem_block(20000)
 (24; target: at most 1.15 times the time before); quick: fem_block(1000), 8 frequencies, not judged.
-Quoted in ``docs/design/backends.md`` (2026-11-29).
+
+Accuracy rows (``accuracy``): issue 45's case, ``random_constrained(n1=1200, n2=10, m=2, p=2, seed=1,
+extra_springs=3.0)`` at modal damping 1e-3, 1e-4 and 1e-5, :meth:`~morsuite.models.Index3Model.freqresp`
+at its first undamped frequency by rslab (its LDL^T), KLU and SuperLU under both rules: the largest entry
+of the difference from a reference relative to the largest of the reference (SuperLU's LU refined four
+fixed steps against the exact :math:`S(j\omega)` in double-double), the worst backward error and the
+refinement steps. Quoted in ``docs/design/backends.md`` (2026-11-29).
 """
 
 from __future__ import annotations
@@ -29,7 +35,7 @@ import numpy as np
 from . import benchmark
 from .backends import _load, _versions
 
-__all__ = ["bench_solve_accuracy", "sweep_side_by_side"]
+__all__ = ["bench_solve_accuracy", "sweep_side_by_side", "resonance_accuracy"]
 
 MODELS = (("fem_block:n1=4000", 40, None), ("fem_block:n1=20000", 24, 1.15))
 MODELS_QUICK = (("fem_block:n1=1000", 8, None),)
@@ -96,6 +102,38 @@ def sweep_side_by_side(spec: str, n: int, echo=None) -> dict:
             "max_rel_diff": diff}
 
 
+def resonance_accuracy(zeta: float, backends=("rslab", "klu", "superlu")) -> list:
+    """Rows of the accuracy table at one damping (the module docstring): per backend and rule, the relative
+    error of ``freqresp`` at the first undamped frequency, its worst backward error and refinement steps."""
+    import scipy.linalg as sla
+
+    from ..linalg.refine import SaddleOperator, refine_columns
+    from ..models import random_constrained
+
+    fom = random_constrained(n1=1200, n2=10, m=2, p=2, seed=1, zeta=zeta, extra_springs=3.0)
+    Z = sla.null_space(fom.G.toarray())
+    lam = sla.eigh(Z.T @ fom.K.toarray() @ Z, Z.T @ fom.M.toarray() @ Z, eigvals_only=True, subset_by_index=[0, 0])
+    w = float(np.sqrt(lam[0]))
+    solver = fom.new_solver(cache_size=0, backend="superlu")
+    lu = solver.factor(1j * w)
+    xr, xi, _ = refine_columns(lu, fom.F, lu.solve(fom.F, full=True), False, 1j * w, SaddleOperator(solver.pattern),
+                               steps=4)
+    ref = fom.L @ (xr[:fom.n1].astype(float) + 1j * xi[:fom.n1].astype(float))
+    rows = []
+    for backend in backends:
+        for rule in ("before", "target"):
+            with _rule(rule):
+                fom.lu_backend = backend
+                T = fom.freqresp([w])[0]
+            st = fom.last_freqresp_stats
+            rows.append({"zeta": zeta, "omega": w, "backend": backend, "rule": rule,
+                         "factor": type(fom.new_solver().factor(1j * w).lu).__name__,
+                         "rel_error": float(np.max(np.abs(T - ref)) / np.max(np.abs(ref))),
+                         "backward_error_max": float(st["backward_error_max"]),
+                         "refinement_steps": int(st["refinement_steps"]), "lus": int(st["factorizations"])})
+    return rows
+
+
 @benchmark("solve-accuracy")
 def bench_solve_accuracy(quick: bool) -> dict:
     """A band sweep solved to the backward-error target against the rule before it (fem_block 4000, 20000)."""
@@ -112,6 +150,11 @@ def bench_solve_accuracy(quick: bool) -> dict:
               f"{row['target_fallbacks']}; worst backward errors {row['backward_error_max']['target']:.1e} / "
               f"{row['backward_error_max']['before']:.1e}; responses differ by {row['max_rel_diff']:.1e}")
         rows.append(row)
+    accuracy = [row for zeta in ((1e-4,) if quick else (1e-3, 1e-4, 1e-5)) for row in resonance_accuracy(zeta)]
+    for row in accuracy:
+        print(f"zeta = {row['zeta']:.0e}, {row['backend']} ({row['factor']}), rule {row['rule']}: relative error "
+              f"{row['rel_error']:.1e}, backward error {row['backward_error_max']:.1e}, "
+              f"{row['refinement_steps']} refinement steps")
     targets = {spec: target for spec, _, target in (MODELS_QUICK if quick else MODELS)}
     ratios = {}
     for row in rows:
@@ -121,5 +164,5 @@ def bench_solve_accuracy(quick: bool) -> dict:
             "pass": None if target is None else bool(row["target_over_before"] <= target),
             "what": f"{row['frequencies']} band samples (LU, solve and refinement, transposed solve), one thread, "
                     "the two rules alternating"}
-    return {"rows": rows, "ratios": ratios, "load_before": load0, "load_after": _load(), "versions": _versions(),
-            "quick": quick}
+    return {"rows": rows, "accuracy": accuracy, "ratios": ratios, "load_before": load0, "load_after": _load(),
+            "versions": _versions(), "quick": quick}
