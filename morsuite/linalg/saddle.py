@@ -64,6 +64,13 @@ __all__ = ["SaddlePointSolver", "SaddleLU", "SolverStats"]
 _LIBRARY_LU = {"klu": KLULU, "rslab": rslab_factor, "pardiso": PardisoLU}
 
 
+def _without_check_caches(pattern: dict) -> dict:
+    """``pattern`` (and the renumbered patterns it holds) without the check's cached structures."""
+    def keep(key):
+        return not (isinstance(key, tuple) and key and key[0] in ("_segments", "_gammas"))
+    return {k: (_without_check_caches(v) if isinstance(v, dict) else v) for k, v in pattern.items() if keep(k)}
+
+
 class SaddlePointSolver:
     r"""Factory of factorizations of the bordered matrix of a constrained system.
 
@@ -200,10 +207,12 @@ class SaddlePointSolver:
         self.backend = self.analysis["backend"]
 
     def __getstate__(self):
-        """Pickled (e.g. to Dask workers) without the cached factorizations: KLU's and PARDISO's
-        are handles of this process."""
+        """Pickled (e.g. to Dask workers) without the cached factorizations (KLU's and PARDISO's
+        are handles of this process) and without the structures the backward-error check keeps
+        with the pattern (:func:`~morsuite.linalg.saddle_lu._segments`: made again where needed)."""
         state = dict(self.__dict__)
         state["_cache"] = OrderedDict()
+        state["pattern"] = _without_check_caches(self.pattern)
         return state
 
     # -- pattern ---------------------------------------------------------

@@ -171,8 +171,9 @@ class SaddleLU:
         return x[:, 0] if vector else x
 
     def backward_error(self, rhs, *, trans: bool = False) -> float:
-        """Normwise backward error of one unchecked solve with ``rhs`` (n1 or n1 + n2 rows),
-        measured as the per-solve check measures it (on the equilibrated system)."""
+        """Normwise backward error of one unchecked solve with ``rhs`` (n1 or n1 + n2 rows) on the
+        equilibrated system, from a residual in double (the check certifies it:
+        :mod:`morsuite.linalg.accuracy`)."""
         if self.matrix is None:
             raise InputError("backward_error needs a factorization made with backward_tol > 0")
         b = np.asarray(rhs).reshape(np.shape(rhs)[0], -1)
