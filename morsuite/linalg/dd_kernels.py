@@ -124,37 +124,28 @@ def _build():
             if yi_h.size:
                 yi_h[row], yi_l[row] = ih, il
 
+    @njit(inline="always")
+    def dot2(s, c, a, x, sign):
+        # s + sign * a x by Dot2's step: the product exact (TwoProd), the sum by TwoSum, both errors into c
+        p = a * x
+        s, q = two_sum(s, sign * p)
+        return s, c + (q + sign * fma(a, x, -p))
+
     @njit(cache=True, nogil=True)
     def _residual(ptr, idx, order, ar, ai, xr, xi, br, bi, rr, ri, a_imag, x_imag, b_imag):
-        # r = b - A x per row by Ogita, Rump and Oishi's Dot2: each product exact (TwoProd), the running
-        # sum by TwoSum, the errors summed in double and added once
+        # r = b - A x per row by Ogita, Rump and Oishi's Dot2, the errors summed in double and added once
         for row in range(ptr.size - 1):
             sr, cr = br[row], 0.0
             si, ci = (bi[row] if b_imag else 0.0), 0.0
             for u in range(ptr[row], ptr[row + 1]):
                 t, j = order[u], idx[u]
-                a, x, y = ar[t], xr[j], 0.0
-                p = a * x
-                e = fma(a, x, -p)
-                sr, q = two_sum(sr, -p)
-                cr += q - e
+                sr, cr = dot2(sr, cr, ar[t], xr[j], -1.0)
                 if x_imag:
-                    y = xi[j]
-                    p = a * y
-                    e = fma(a, y, -p)
-                    si, q = two_sum(si, -p)
-                    ci += q - e
+                    si, ci = dot2(si, ci, ar[t], xi[j], -1.0)
                 if a_imag:
-                    c = ai[t]
-                    p = c * x
-                    e = fma(c, x, -p)
-                    si, q = two_sum(si, -p)
-                    ci += q - e
+                    si, ci = dot2(si, ci, ai[t], xr[j], -1.0)
                     if x_imag:
-                        p = c * y
-                        e = fma(c, y, -p)
-                        sr, q = two_sum(sr, p)
-                        cr += q + e
+                        sr, cr = dot2(sr, cr, ai[t], xi[j], 1.0)
             rr[row] = sr + cr
             ri[row] = si + ci
 
