@@ -220,7 +220,7 @@ def test_reducer_info_records_the_worst_backward_error(monkeypatch):
     assert 0 < res.info["solve_backward_error"] <= accuracy.BACKWARD_TARGET
     json.dumps(res.info)
     # an unreachable target (1e-30, below the rounding of any double solution) is flagged, not hidden
-    monkeypatch.setattr("morsuite.linalg.saddle.default_target", lambda: 1e-30)
+    monkeypatch.setattr("morsuite.linalg.accuracy.default_target", lambda: 1e-30)
     with pytest.warns(AccuracyWarning):
         res = ms.reducers.make("krylov", _model(1e-3, 0.05)).reduce(4)
     acc = res.info["solve_accuracy"]

@@ -1,8 +1,8 @@
-"""Benchmark ``solve-accuracy``: the cost of solving to the backward-error target, against the rule before it.
+r"""Benchmark ``solve-accuracy``: the cost of solving to the backward-error target, against the rule before it.
 
-Since 2026-11-29 every checked saddle-point solve reaches a backward error of 1e-15
+Since 2026-12-02 every checked saddle-point solve reaches a backward error of 1e-15
 (:mod:`morsuite.linalg.accuracy`: certified in double or measured in double-double, refined with the same
-LU where above it) and frequency responses refine against the exact :math:`S(j\\omega)` until their estimated
+LU where above it) and frequency responses refine against the exact :math:`S(j\omega)` until their estimated
 error is below double's rounding; before, solves were accepted up to 1e-10 and a band sample refined one
 fixed step. This bench times one band sweep both ways in one process (``MORSUITE_SOLVE_TARGET=off``
 restores the rule before, :func:`~morsuite.linalg.accuracy.target_off`): at ``n`` log-spaced frequencies
@@ -21,7 +21,7 @@ extra_springs=3.0)`` at modal damping 1e-3, 1e-4 and 1e-5, :meth:`~morsuite.mode
 at its first undamped frequency by rslab (its LDL^T), KLU and SuperLU under both rules: the largest entry
 of the difference from a reference relative to the largest of the reference (SuperLU's LU refined four
 fixed steps against the exact :math:`S(j\omega)` in double-double), the worst backward error and the
-refinement steps. Quoted in ``docs/design/backends.md`` (2026-11-29).
+refinement steps. Quoted in ``docs/design/backends.md`` (2026-12-02).
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ MODELS_QUICK = (("fem_block:n1=1000", 8, None),)
 
 @contextlib.contextmanager
 def _rule(variant: str):
-    """``"before"``: the environment of the rule before 2026-11-29 inside the block; ``"target"``: today's."""
+    """``"before"``: the environment of the rule before 2026-12-02 inside the block; ``"target"``: today's."""
     old = os.environ.get("MORSUITE_SOLVE_TARGET")
     if variant == "before":
         os.environ["MORSUITE_SOLVE_TARGET"] = "off"

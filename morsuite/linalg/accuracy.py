@@ -44,7 +44,7 @@ counters Dask workers send back) adds to it: the worst :math:`\eta`, how many so
 sides) were checked and how many stayed above the target, refinement steps and fallback LUs.
 :meth:`SolveAccuracy.as_info` is the plain data that reducers put into ``info["solve_accuracy"]``
 (and the worst into ``info["solve_backward_error"]``), and the study tasks into their
-manifest entries. Measurements: ``docs/design/backends.md`` (2026-11-29).
+manifest entries. Measurements: ``docs/design/backends.md`` (2026-12-02).
 """
 
 from __future__ import annotations
@@ -53,11 +53,17 @@ import contextlib
 import contextvars
 import os
 import threading
+import time
 
 import numpy as np
+import scipy.sparse as sp
 
-__all__ = ["BACKWARD_TARGET", "FORWARD_TOL", "FORWARD_MAX_STEPS", "SolveAccuracy", "recording", "note", "note_stats", "gamma",
-           "target_off", "default_target", "forward_tol"]
+from ..errors import InputError, SingularShiftError
+from . import dd_kernels, kernels
+
+__all__ = ["BACKWARD_TARGET", "FORWARD_TOL", "FORWARD_MAX_STEPS", "SolveAccuracy", "TargetRefinement", "recording",
+           "note", "note_stats", "gamma", "target_off", "default_target", "forward_tol", "check_options",
+           "without_check_caches"]
 
 #: default ``backward_target`` of :class:`~morsuite.linalg.saddle.SaddlePointSolver` (about 9 u)
 BACKWARD_TARGET = 1e-15
@@ -77,7 +83,7 @@ _LOCK = threading.Lock()
 
 def target_off() -> bool:
     """True when the environment variable ``MORSUITE_SOLVE_TARGET`` is ``off``: solvers made then check
-    ``backward_tol`` alone and frequency responses refine a fixed number of steps, as before 2026-11-29
+    ``backward_tol`` alone and frequency responses refine a fixed number of steps, as before 2026-12-02
     (for comparisons: ``morsuite bench solve-accuracy``)."""
     return os.environ.get("MORSUITE_SOLVE_TARGET", "").strip().lower() == "off"
 
@@ -91,6 +97,28 @@ def forward_tol():
     """The ``tol`` of :func:`~morsuite.linalg.refine.refine_columns` for frequency responses:
     :data:`FORWARD_TOL`, None (fixed steps) when :func:`target_off`."""
     return None if target_off() else FORWARD_TOL
+
+
+def check_options(backward_target, refine_steps) -> tuple:
+    """``(backward_target, refine_steps)`` of a solver validated: a number >= 0 (None: :func:`default_target`)
+    and an int >= 0; :class:`~morsuite.errors.InputError` naming the argument otherwise."""
+    try:
+        target = default_target() if backward_target is None else float(backward_target)
+    except (TypeError, ValueError):
+        target = float("nan")
+    if isinstance(backward_target, bool) or not target >= 0:
+        raise InputError(f"backward_target must be a number >= 0 or None; got {backward_target!r}")
+    if isinstance(refine_steps, bool) or not isinstance(refine_steps, (int, np.integer)) or refine_steps < 0:
+        raise InputError(f"refine_steps must be an integer >= 0; got {refine_steps!r}")
+    return target, int(refine_steps)
+
+
+def without_check_caches(pattern: dict) -> dict:
+    """A solver's ``pattern`` (and the renumbered patterns it holds) without the structures
+    :class:`TargetRefinement` keeps there (made again where needed: a pickled solver leaves them behind)."""
+    def keep(key):
+        return not (isinstance(key, tuple) and key and key[0] in ("_segments", "_gammas"))
+    return {k: (without_check_caches(v) if isinstance(v, dict) else v) for k, v in pattern.items() if keep(k)}
 
 
 def gamma(n):
@@ -178,3 +206,167 @@ def note_stats(counts: dict) -> None:
         note(eta=counts.get("backward_error_max"), target=counts.get("backward_target", 0.0),
              checked=counts.get("checked_solves", 0), above_target=counts.get("above_target", 0),
              refinement_steps=counts.get("refinement_steps", 0), fallback_lus=counts.get("target_fallbacks", 0))
+
+
+class TargetRefinement:
+    """The backward-error certificate and the refinement to ``target`` of
+    :class:`~morsuite.linalg.saddle_lu.SaddleLU` (its fields: ``matrix``, ``target``, ``refine_steps``,
+    ``structure``, ``norms``, ``fallback``, ``stats``, ...; its ``_etas``, ``_lu_solve``): the module's
+    definitions made code. Cost: see the module docstring."""
+
+    def _measure(self, b, x, trans):
+        """``(eta, r, ext)`` of each column: with a target, its backward error certified (this module),
+        from the extended residual (``ext`` True) where the rounding bound of a double residual is above the target
+        on most rows (3D elements), else the one computed in double plus that bound; without, the one computed in
+        double. ``r`` the residual it was computed from."""
+        cplx = np.iscomplexobj(x) or np.iscomplexobj(b) or np.iscomplexobj(self.matrix.data)
+        gam = self._gammas(trans, cplx) if self.target > 0 else None
+        if self.target > 0 and gam is None:
+            eta, r, _ = self._etas(b, x, trans, self._ext_residual(b, x, trans))
+            return eta, r, True
+        eta, r, den = self._etas(b, x, trans)
+        if gam is not None:  # the rigorous bound of the double residual's rounding
+            ax = (self._abs_matrix().T if trans else self._abs_matrix()) @ np.abs(x)
+            red = np.max if trans else np.sum
+            with np.errstate(invalid="ignore", divide="ignore"):
+                eta = eta + np.where(den > 0, red(gam[:, None] * (np.abs(b) + ax), axis=0)
+                                     / np.where(den > 0, den, 1.0), 0.0)
+        return eta, r, False
+
+    def _to_target(self, b, x, trans, eta, r, ext):
+        """``(x, eta, steps, fallback_lus)``: each column at or below ``target`` (``eta``, ``r``, ``ext`` as
+        :meth:`_measure` gave them for ``x``) or refined towards it (:meth:`_refine`), one fallback LU where
+        refinement stagnates above it; ``eta`` the certified backward error of each column."""
+        todo = eta > self.target
+        if not todo.any():
+            return x, eta, 0, 0
+        x = np.array(x, dtype=np.result_type(x, b))
+        x[:, todo], eta[todo], steps = self._refine(b[:, todo], x[:, todo], trans, r[:, todo] if ext else None)
+        fell = 0
+        if (eta > self.target).any() and self.fallback and not self.target_fallback:
+            # refinement stagnated above the target: the next LU of the fallback list, once per factorization,
+            # kept only where it does better (it costs an LU: counted)
+            self.target_fallback, fell = True, 1
+            t0 = time.perf_counter()
+            old = self.lu
+            try:
+                self.lu = self.fallback[0]()
+            except (RuntimeError, SingularShiftError):
+                self.lu = None
+            self.stats.add(factorizations=1, refactorizations=1, factor_time_s=time.perf_counter() - t0)
+            if self.lu is not None:
+                x2 = self._lu_solve(b, trans)
+                e2, r2, ext2 = self._measure(b, x2, trans)
+                if np.max(e2) <= self.backward_tol:
+                    x2 = np.array(x2, dtype=np.result_type(x2, b))
+                    sel = e2 > self.target
+                    if sel.any():
+                        x2[:, sel], e2[sel], s2 = self._refine(b[:, sel], x2[:, sel], trans, r2[:, sel] if ext2 else None)
+                        steps += s2
+                    if np.max(e2) < np.max(eta):
+                        self.fallback, self.refactored = self.fallback[1:], True
+                        return x2, e2, steps, fell
+            self.lu = old
+        return x, eta, steps, fell
+
+    def _gammas(self, trans, cplx):
+        r""":math:`\gamma_{k_i+1}` (:math:`\gamma_{k_i+4}` complex: a complex product rounds by at most
+        :math:`\sqrt 2\gamma_2`) per row of the product (rows of A, or of :math:`A^T`), the bound of a
+        residual's rounding; None where its median is above the target (then no certificate in double).
+        Kept with the pattern (``structure``)."""
+        key = ("_gammas", bool(trans), bool(cplx))
+        cache = self.structure if self.structure is not None else self.norms
+        if key not in cache:
+            A = self.matrix
+            k = np.diff(A.indptr) if trans else np.bincount(A.indices, minlength=A.shape[0])
+            g = gamma(k + (4 if cplx else 1))
+            cache[key] = (g, float(np.median(g)) if g.size else np.inf)
+        g, median = cache[key]
+        return g if median <= self.target else None
+
+    def _abs_matrix(self):
+        """|A| of the factorized matrix (real, the same structure), made once."""
+        if "abs" not in self.norms:
+            A = self.matrix
+            self.norms["abs"] = sp.csc_matrix((np.abs(A.data), A.indices, A.indptr), shape=A.shape)
+        return self.norms["abs"]
+
+    def _refine(self, b, x, trans, r=None):
+        """Refine the columns of x towards ``target`` with the same LU and an extended-precision residual
+        (``r``: x's, if known): ``(x, eta, steps)``, ``eta`` measured from that residual (accurate far below
+        the target); a column stops when a step does not halve its backward error (the better iterate is
+        kept), after ``refine_steps`` steps at most."""
+        eta, r, _ = self._etas(b, x, trans, self._ext_residual(b, x, trans) if r is None else r)
+        active = eta > self.target
+        steps = 0
+        while active.any() and steps < self.refine_steps:
+            cols = np.flatnonzero(active)
+            xn = x[:, cols] + self._lu_solve(r[:, cols], trans)
+            en, rn, _ = self._etas(b[:, cols], xn, trans, self._ext_residual(b[:, cols], xn, trans))
+            steps += 1
+            with np.errstate(invalid="ignore", divide="ignore"):
+                ratio = np.where(eta[cols] > 0, en / np.where(eta[cols] > 0, eta[cols], 1.0), 0.0)
+            self.contraction = max(self.contraction, float(np.max(ratio)))
+            better = en < eta[cols]
+            keep = cols[better]
+            x[:, keep], eta[keep], r[:, keep] = xn[:, better], en[better], rn[:, better]
+            active[cols] = (en > self.target) & (ratio <= 0.5)
+        return x, eta, steps
+
+    def _ext_residual(self, b, x, trans):
+        """``b - A x`` (``A^T x``) of the factorized matrix, formed in double-double (numba) or long double
+        and rounded to double once; 2-D ``b``, ``x`` in the LU's space."""
+        if self.conjugate:  # b - conj(A) x = conj(conj(b) - A conj(x))
+            return np.conj(self._ext_residual_plain(np.conj(b), np.conj(x), trans))
+        return self._ext_residual_plain(b, x, trans)
+
+    def _ext_residual_plain(self, b, x, trans):
+        structure = _segments(self.matrix, self.structure, trans)
+        A = self.matrix
+        cplx = np.iscomplexobj(b) or np.iscomplexobj(x) or np.iscomplexobj(A.data)
+        out = np.empty(b.shape, dtype=complex if cplx else float)
+        if kernels.available():  # Dot2: twice the working precision, rounded once
+            if "parts" not in self.norms:  # the entries' real and imaginary parts, contiguous: once per LU
+                d = A.data
+                self.norms["parts"] = (np.ascontiguousarray(d.real, dtype=float),
+                                       np.ascontiguousarray(d.imag, dtype=float) if np.iscomplexobj(d) else None)
+            for j in range(b.shape[1]):
+                out[:, j] = dd_kernels.residual(structure, self.norms["parts"], x[:, j], b[:, j])
+            return out
+        ptr, idx, order = structure  # numpy's long double: a gather, a product and a segmented sum
+        vals = A.data[order]
+        nonempty = np.flatnonzero(np.diff(ptr) > 0)
+        for j in range(b.shape[1]):
+            parts = []
+            for part in ((vals.real, x[:, j].real), (vals.imag, x[:, j].imag), (vals.real, x[:, j].imag),
+                         (vals.imag, x[:, j].real)):
+                y = np.zeros(b.shape[0], dtype=np.longdouble)
+                y[nonempty] = np.add.reduceat(part[0].astype(np.longdouble) * part[1].astype(np.longdouble)[idx],
+                                              ptr[nonempty])
+                parts.append(y)
+            re = b[:, j].real.astype(np.longdouble) - (parts[0] - parts[1])
+            out[:, j] = re.astype(float)
+            if cplx:
+                out[:, j] += 1j * (np.imag(b[:, j]).astype(np.longdouble) - (parts[2] + parts[3])).astype(float)
+        return out
+
+
+def _segments(A, structure, trans):
+    """``(ptr, idx, order)`` (int64) of the rows of ``A`` (``trans``: of its columns) for
+    :func:`~morsuite.linalg.dd_kernels.residual`: row i's terms are ``u`` in ``ptr[i]:ptr[i+1]``, entry
+    ``order[u]`` of ``A.data``, column ``idx[u]``. Kept in ``structure`` (the pattern dict of A: shared by
+    every LU of the pattern) when given."""
+    key = ("_segments", bool(trans))
+    if structure is not None and key in structure:
+        return structure[key]
+    indptr, indices = np.asarray(A.indptr, dtype=np.int64), np.asarray(A.indices, dtype=np.int64)
+    if trans:
+        seg = (indptr, indices, np.arange(indices.size, dtype=np.int64))
+    else:  # the CSR order of the CSC entries: by row, columns ascending within a row (a stable sort)
+        order = np.argsort(indices, kind="stable").astype(np.int64)
+        cols = np.repeat(np.arange(A.shape[1], dtype=np.int64), np.diff(indptr))
+        ptr = np.concatenate([[0], np.cumsum(np.bincount(indices, minlength=A.shape[0]))]).astype(np.int64)
+        seg = (ptr, cols[order], order)
+    if structure is not None:
+        structure[key] = seg
+    return seg

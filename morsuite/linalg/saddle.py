@@ -35,8 +35,7 @@ Cost: one sparse LU per distinct shift, none for a cached shift or the
 conjugate of one (real data); ``rcond_tol > 0`` adds 10-20% of an LU, Ruiz
 scaling about 12% per sweep, the diagonal scaling O(n1). A solve that fails
 the backward-error check costs one more LU per fallback tried; a refinement
-step towards ``backward_target`` one more solve (no LU;
-:mod:`morsuite.linalg.accuracy`).
+step towards ``backward_target`` one more solve (:mod:`morsuite.linalg.accuracy`).
 """
 
 
@@ -54,21 +53,14 @@ from ..errors import InputError, SingularShiftError
 from . import kernels
 from .backends import LIBRARY_BACKENDS, BandedBorderLU, analyse, permuted_pattern, resolve_backend, superlu_ordering
 from .backends_ext import KLULU, PardisoLU
-from .backends_rslab import RslabLDLT, RslabLU, rslab_factor
-from .accuracy import default_target
-from .saddle_lu import SaddleLU, SolverStats, rcond_estimate
+from .backends_rslab import rslab_factor
+from .accuracy import check_options, without_check_caches
+from .saddle_lu import SaddleLU, SolverStats, fallback_factors, rcond_estimate
 
 __all__ = ["SaddlePointSolver", "SaddleLU", "SolverStats"]
 
 #: the factorization (class or factory: rslab chooses its LDL^T or LU) of each library backend
 _LIBRARY_LU = {"klu": KLULU, "rslab": rslab_factor, "pardiso": PardisoLU}
-
-
-def _without_check_caches(pattern: dict) -> dict:
-    """``pattern`` (and the renumbered patterns it holds) without the check's cached structures."""
-    def keep(key):
-        return not (isinstance(key, tuple) and key and key[0] in ("_segments", "_gammas"))
-    return {k: (_without_check_caches(v) if isinstance(v, dict) else v) for k, v in pattern.items() if keep(k)}
 
 
 class SaddlePointSolver:
@@ -123,14 +115,11 @@ class SaddlePointSolver:
         checked again; if none passes, :class:`SingularShiftError`: an
         inaccurate solve is never returned silently.
     backward_target, refine_steps : float, int
-        The backward error every checked solve reaches (default 1e-15, about 9
-        units of roundoff; :mod:`morsuite.linalg.accuracy` defines it and how it
-        is certified): above it, at most ``refine_steps`` (4) refinement steps
-        with a double-double residual and the same LU, then one fallback LU,
-        then the solve is returned flagged (``stats.above_target``, an
-        :class:`~morsuite.errors.AccuracyWarning`). ``backward_target=0``: the
-        check of ``backward_tol`` alone (before 2026-11-29); None (default): 1e-15,
-        or 0 where the environment sets ``MORSUITE_SOLVE_TARGET=off``.
+        The backward error every checked solve reaches (None, default: 1e-15, about
+        9 units of roundoff, or 0 where ``MORSUITE_SOLVE_TARGET=off``; 0: the check of
+        ``backward_tol`` alone, before 2026-12-02): above it, at most ``refine_steps``
+        (4) refinement steps with an extended residual and the same LU, one fallback
+        LU, then the solve is returned flagged (:mod:`morsuite.linalg.accuracy`).
     pattern : dict, optional
         The ``pattern`` of another solver of the same M, D, K, G (shared,
         read-only, with its stored column ordering); default: built here.
@@ -164,15 +153,7 @@ class SaddlePointSolver:
         self.permc_spec = permc_spec
         self.diag_pivot_thresh = float(diag_pivot_thresh)
         self.backward_tol = float(backward_tol)
-        try:
-            self.backward_target = default_target() if backward_target is None else float(backward_target)
-        except (TypeError, ValueError):
-            self.backward_target = float("nan")
-        if isinstance(backward_target, bool) or not self.backward_target >= 0:
-            raise InputError(f"backward_target must be a number >= 0 or None; got {backward_target!r}")
-        if isinstance(refine_steps, bool) or not isinstance(refine_steps, (int, np.integer)) or refine_steps < 0:
-            raise InputError(f"refine_steps must be an integer >= 0; got {refine_steps!r}")
-        self.refine_steps = int(refine_steps)
+        self.backward_target, self.refine_steps = check_options(backward_target, refine_steps)
         if scaling not in ("diagonal", "ruiz", "none"):
             raise InputError(f"scaling must be 'diagonal', 'ruiz' or 'none'; got {scaling!r}")
         self.scaling = scaling
@@ -209,10 +190,10 @@ class SaddlePointSolver:
     def __getstate__(self):
         """Pickled (e.g. to Dask workers) without the cached factorizations (KLU's and PARDISO's
         are handles of this process) and without the structures the backward-error check keeps
-        with the pattern (:func:`~morsuite.linalg.saddle_lu._segments`: made again where needed)."""
+        with the pattern (:func:`~morsuite.linalg.accuracy.without_check_caches`)."""
         state = dict(self.__dict__)
         state["_cache"] = OrderedDict()
-        state["pattern"] = _without_check_caches(self.pattern)
+        state["pattern"] = without_check_caches(self.pattern)
         return state
 
     # -- pattern ---------------------------------------------------------
@@ -356,20 +337,7 @@ class SaddlePointSolver:
         checked = self.backward_tol > 0
 
         spec = "NATURAL" if perm and not banded else self.permc_spec
-        fallback = ((
-            # rslab's LDL^T perturbs tiny pivots: its own LU (threshold pivoting) of the same matrix first
-            lambda As=As: RslabLU(As, self.pattern),
-        ) if checked and isinstance(lu, RslabLDLT) else ()) + ((
-            # the banded LU pivots within A11 only (KLU, PARDISO: own pivoting): SuperLU on the same matrix first
-            lambda As=As: spla.splu(As, permc_spec="COLAMD", diag_pivot_thresh=self.diag_pivot_thresh),
-        ) if other and isinstance(lu, (BandedBorderLU, KLULU, RslabLU, RslabLDLT, PardisoLU)) else ()) + (
-            # more weight on the diagonal of the equilibrated matrix, same ordering (cheap)
-            lambda As=As: spla.splu(As, permc_spec=spec, diag_pivot_thresh=min(0.01, self.diag_pivot_thresh)),
-            # a fresh column ordering
-            lambda As=As: spla.splu(As, permc_spec="COLAMD", diag_pivot_thresh=self.diag_pivot_thresh),
-            # symmetric ordering, partial pivoting: the last resort (it can fill in heavily)
-            lambda As=As: spla.splu(As, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=1.0),
-        ) if checked else ()
+        fallback = fallback_factors(As, lu, self.pattern, spec, self.diag_pivot_thresh) if checked else ()
         f = SaddleLU(key, lu, self.n1, self.n2, False, self.stats, ratio, np.iscomplexobj(As.data),
                      As if checked else None, self.backward_tol, norms, dr, dc,
                      fallback, q=perm["q"] if perm else None, target=self.backward_target if checked else 0.0,

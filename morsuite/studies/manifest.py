@@ -9,7 +9,7 @@ accuracy ``floor``/``rel_floor``, ``trusted``, warnings); a simulation's, its LU
 solves, growth flag and output errors. The full response, the reductions and the norms
 carry ``solve_backward_error`` and ``solve_accuracy``: what their checked saddle-point
 solves reached (:mod:`morsuite.linalg.accuracy`; None for an entry cached before
-2026-11-29). ``reused`` and ``computed`` at the
+2026-12-02). ``reused`` and ``computed`` at the
 top level list the ids of each.
 """
 
