@@ -312,21 +312,27 @@ class Index3Model:
         Y = f.solve(self.L.T.astype(X.dtype), trans=True)  # left solve
         return -(Y.T @ ((2 * s) * (self.M @ X) + self.D @ X))
 
-    def freqresp(self, omega, *, progress: bool = False):
+    def freqresp(self, omega, *, progress: bool = False, refine: bool = True):
         """Frequency response at ``s = 1j * omega``: complex (len(omega), p, m).
 
         One LU per frequency, all inputs solved at once; no factorization is
         kept, so memory is O(nnz) whatever the grid size. Each solve reaches the
-        backward-error target of :mod:`morsuite.linalg.accuracy` and is then refined
-        against the exact :math:`S(j\\omega)` (residual in double-double, the same LU)
-        until its estimated relative error is below ``FORWARD_TOL`` (one step, more
-        near a lightly damped resonance: :func:`~morsuite.linalg.refine.refine_columns`),
-        as the band response of :func:`morsuite.analysis.response.band_response` is.
+        backward-error target of :mod:`morsuite.linalg.accuracy`; with ``refine`` (default
+        True) it is then refined against the exact :math:`S(j\\omega)` (residual in
+        double-double, the same LU) until its estimated relative error is below
+        ``FORWARD_TOL`` (one step, more near a lightly damped resonance:
+        :func:`~morsuite.linalg.refine.refine_columns`), as the band response of
+        :func:`morsuite.analysis.response.band_response` is. Cost of the refinement: one solve and
+        one double-double product per frequency, 0.3-0.6 of an LU on chains, a few percent on
+        3D elements (``docs/design/backends.md``, 2026-12-02); ``refine=False``: the LU's
+        solution, backward stable, whose error the condition of :math:`S(j\\omega)` multiplies.
         """
         omega = _check_omega(omega)
+        if not isinstance(refine, (bool, np.bool_)):
+            raise InputError(f"refine must be True or False; got {refine!r}")
         out = np.empty((omega.size, self.p, self.m), dtype=complex)
         solver = self.new_solver(cache_size=0)
-        op = None if target_off() else SaddleOperator(solver.pattern)
+        op = None if target_off() or not refine else SaddleOperator(solver.pattern)
         it = range(omega.size)
         if progress:
             from tqdm.auto import tqdm
