@@ -205,7 +205,7 @@ def test_dot2_residual_against_exact_rational_arithmetic(s, trans):
 
     import morsuite as ms
     from morsuite.linalg import dd_kernels
-    from morsuite.linalg.saddle_lu import _segments
+    from morsuite.linalg.accuracy import _segments
 
     if not kernels.available():
         pytest.skip("numba is not installed")

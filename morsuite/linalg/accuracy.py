@@ -19,11 +19,11 @@ roundoff :math:`u = 2^{-53}`) or is flagged. "Reaches" is certified, not estimat
 - in double, when :math:`\hat\eta + \beta \le` target: :math:`\hat\eta` from the residual computed
   in double and :math:`\beta` the rigorous bound of that residual's rounding,
   :math:`\sum_i \gamma_{k_i+1}(|b_e| + |A||x_e|)_i` over the denominator (:math:`k_i` the entries of
-  row i; :math:`\gamma_{k+3}` in complex arithmetic; :math:`\gamma_n = nu/(1-nu)`): the
-  chains' few entries per row allow it;
-- else with the residual formed in double-double (:mod:`morsuite.linalg.dd_kernels`; numpy's long
-  double without numba), accurate far below the target (3D elements: 81 entries per row, where
-  :math:`\beta` alone exceeds the target).
+  row i; :math:`\gamma_{k_i+4}` in complex arithmetic, whose products round by at most
+  :math:`\sqrt 2\gamma_2`; :math:`\gamma_n = nu/(1-nu)`): the chains' few entries per row allow it;
+- else with the residual formed by Dot2 (:func:`morsuite.linalg.dd_kernels.residual`: as if in twice
+  the working precision; numpy's long double without numba), accurate far below the target (3D
+  elements: 81 entries per row, where :math:`\beta` alone exceeds the target).
 
 Above the target, iterative refinement with that extended residual and the same LU (at most
 ``refine_steps`` steps, stopped when a step does not halve :math:`\eta`); if it stagnates, one
@@ -37,6 +37,11 @@ The LU's matrix differs from the exact :math:`S(s)` by the rounding of its assem
 units of roundoff of the terms :math:`|a||M| + |b||D| + |K|`); frequency responses refine
 against the exact :math:`S(s)` in double-double beyond that
 (:func:`morsuite.linalg.refine.refine_columns`).
+
+:class:`TargetRefinement` is that code (a base of :class:`~morsuite.linalg.saddle_lu.SaddleLU`).
+Cost per checked solve: one product with :math:`|A|` beside the residual's (certificate in double), or one
+Dot2 residual (about three double products' work); a refinement step one solve and one Dot2 residual;
+a fallback one LU.
 
 **The record.** :func:`recording` opens a record; every checked solve made while it is open
 (in this thread and in the threads of :func:`morsuite.utils.map_threads` it starts, and the
@@ -314,8 +319,9 @@ class TargetRefinement:
         return x, eta, steps
 
     def _ext_residual(self, b, x, trans):
-        """``b - A x`` (``A^T x``) of the factorized matrix, formed in double-double (numba) or long double
-        and rounded to double once; 2-D ``b``, ``x`` in the LU's space."""
+        """``b - A x`` (``A^T x``) of the factorized matrix, formed by Dot2 (:func:`~morsuite.linalg.dd_kernels.residual`:
+        as in twice the working precision; without numba in numpy's long double) and rounded to double once;
+        2-D ``b``, ``x`` in the LU's space."""
         if self.conjugate:  # b - conj(A) x = conj(conj(b) - A conj(x))
             return np.conj(self._ext_residual_plain(np.conj(b), np.conj(x), trans))
         return self._ext_residual_plain(b, x, trans)
