@@ -90,7 +90,8 @@ def test_band_tolerance_met_and_the_next_smaller_misses_against_a_dense_referenc
     assert outcomes[1].chosen.states >= outcomes[0].chosen.states
     # the counts: every evaluated order once, the method's LUs and the errors' apart
     cands = sorted(search.candidates.values(), key=lambda c: c.index)
-    assert [c.cum_lus for c in cands] == list(np.cumsum([c.lus for c in cands]))
+    proxy = 0 if search.proxy is None else search.proxy._cum_lus  # the proxy's LU is the method's too
+    assert [c.cum_lus for c in cands] == list(proxy + np.cumsum([c.lus for c in cands]))
     assert all(c.eval_lus == 0 for c in cands)  # a band error costs no LU beyond the reference response
 
 
@@ -130,11 +131,19 @@ def test_cap_and_untrusted_say_so(tcom):
     assert set(OUTCOMES) >= {"met", "budget", "cap", "untrusted", "failed"}
 
 
-def test_irka_continues_from_the_nearest_model(tcom):
-    _, search = reach_tolerance(tcom, "irka", 1e-3, measure="band")
+def test_irka_is_steered_by_its_proxy_and_continues_from_the_nearest_model(tcom):
+    outcomes, search = reach_tolerance(tcom, "irka", 1e-3, measure="band")
+    assert search.proxy_method == "krylov" and search.proxy is not None
+    proxy_met = search.proxy.candidates[next(c.r for c in search.proxy.candidates.values()
+                                             if c.meets(1e-3) and c.r - 1 in search.proxy.candidates)]
     cands = sorted(search.candidates.values(), key=lambda c: c.index)
-    assert cands[0].info.get("continued_from") is None
+    # the first order is the proxy's (or a quarter of it, to calibrate), started from the proxy's model
+    assert cands[0].states in (proxy_met.states, max(2, proxy_met.states // 4 // 2 * 2))
+    assert cands[0].info["continued_from"] is not None
     assert all(c.info.get("continued_from") is not None for c in cands[1:] if c.error is None)
+    # the proxy's LU is the method's too
+    assert outcomes[0].lus == search.proxy._cum_lus + sum(c.lus for c in cands)
+    assert reach_tolerance(tcom, "irka", 1e-3, measure="band", proxy=None)[1].proxy is None
 
 
 def test_bad_arguments_are_named(tcom):

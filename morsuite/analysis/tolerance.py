@@ -63,6 +63,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError, MorsuiteError, OptionError
+from . import _tolerance_route as route
 
 __all__ = ["MEASURES", "OUTCOMES", "BAND_FLOOR", "Candidate", "Outcome", "ToleranceSearch", "reach_tolerance"]
 
@@ -217,7 +218,7 @@ class ToleranceSearch:
 
     def __init__(self, fom, method: str, *, options=None, measure: str = "band", omega=None, H_full=None,
                  norm_options=None, budget_lus=None, budget_s=None, max_states=None, start_states=None,
-                 growth: float = 2.0, reducer=None):
+                 growth: float = 2.0, reducer=None, proxy: str | None = "auto", reference=None):
         from .. import reducers
 
         if measure not in MEASURES:
@@ -243,7 +244,16 @@ class ToleranceSearch:
         self._failures = 0
         self.reference_lus, self.reference_time_s = 0, 0.0
         self.model_norm = None
-        self._setup_reference(omega, H_full)
+        if reference is not None:  # another search's reference (a proxy's): nothing computed again
+            for k in ("omega", "H_full", "scale", "model_norm"):
+                setattr(self, k, reference.get(k))
+        else:
+            self._setup_reference(omega, H_full)
+        if proxy == "auto":
+            proxy = PROXY if getattr(self.red, "costly_orders", False) else None
+        if proxy is not None and proxy == method:
+            proxy = None
+        self.proxy_method, self.proxy, self._proxy_outcomes = proxy, None, []
 
     # -- the reference: band response or model norm ------------------------------
     def _setup_reference(self, omega, H_full):
@@ -318,8 +328,10 @@ class ToleranceSearch:
         if r in self.candidates:
             return self.candidates[r]
         near = [c for c in self.candidates.values() if c.rom is not None and c.error is None and np.isfinite(c.value)]
+        if not near and self.proxy is not None:  # the first order: from the proxy's model of about these states
+            near = [c for c in self.proxy.candidates.values() if c.rom is not None and c.error is None]
         if near:
-            self.red.continue_from(min(near, key=lambda c: (abs(c.r - r), c.r > r)).rom)
+            self.red.continue_from(min(near, key=lambda c: (abs(c.states - r * self.spo), c.states > r * self.spo)).rom)
         cand = Candidate(r=int(r), index=len(self.candidates))
         t0 = time.perf_counter()
         try:
@@ -362,45 +374,44 @@ class ToleranceSearch:
         done = [c for c in self.candidates.values() if c.error is None and np.isfinite(c.value) and c.stable]
         return min(done, key=lambda c: (c.value, c.r)) if done else None
 
+    def _run_proxy(self, tol):
+        """The proxy's search for ``tol`` (once per tolerance), its LUs and time added to this search's."""
+        if self.proxy_method is None:
+            return None
+        if self.proxy is None:
+            ref = {"omega": getattr(self, "omega", None), "H_full": getattr(self, "H_full", None),
+                   "scale": self.scale, "model_norm": self.model_norm}
+            self.proxy = ToleranceSearch(self.fom, self.proxy_method, measure=self.measure, norm_options=self.norm_options,
+                                         max_states=self.r_max * self.spo, proxy=None, reference=ref)
+        before = (self.proxy._cum_lus, self.proxy._cum_eval, self.proxy._cum_time)
+        out = self.proxy.run([tol])[0]
+        self._cum_lus += self.proxy._cum_lus - before[0]
+        self._cum_eval += self.proxy._cum_eval - before[1]
+        self._cum_time += self.proxy._cum_time - before[2]
+        return out
+
     def _guess(self, tol):
+        if self.proxy is not None:  # the proxy's order that met the tolerance, in this method's orders
+            out = next((o for o in self._proxy_outcomes if o.tol == tol), None)
+            if out is not None and out.status == "met":
+                return int(min(max(1, -(-out.chosen.states // self.spo)), self.r_max))
         try:
             g = self.red.order_guess(tol, measure=self.measure, scale=self.scale)
         except (MorsuiteError, ValueError, ArithmeticError, np.linalg.LinAlgError):
             return None
         return None if g is None else int(min(max(1, g), self.r_max))
 
-    def _grow(self, lo: int) -> int:
-        """The next order above the largest miss ``lo``: extrapolated from the two largest misses
-        (log error linear in r), between 1.25 lo and ``growth`` lo."""
-        lo_c = self.candidates[lo]
-        step_max = max(lo + 1, math.floor(lo * self.growth))
-        nxt = step_max
-        misses = sorted(r for r, c in self.candidates.items() if r < lo and c.error is None and
-                        np.isfinite(c.value) and c.value > lo_c.value > 0)
-        if misses and np.isfinite(lo_c.value) and lo_c.value > 0:
-            r0 = misses[-1]
-            slope = (math.log(lo_c.value) - math.log(self.candidates[r0].value)) / (lo - r0)
-            if slope < 0:
-                target = lo + (math.log(self._tol) - math.log(lo_c.value)) / slope
-                nxt = int(math.ceil(1.1 * target))
-        nxt = min(max(nxt, lo + max(1, math.ceil(0.25 * lo))), step_max)
-        return min(nxt, self.r_max)
+    def _points(self):
+        """(states, value) of every evaluated order with a finite value."""
+        return [(c.states, c.value) for c in self.candidates.values() if c.error is None and np.isfinite(c.value)]
 
-    def _between(self, lo: int, hi: int, bisect: bool) -> int:
-        """An order strictly between the miss ``lo`` and the meet ``hi`` (log-linear interpolation of the
-        errors, or the midpoint when ``bisect`` or the errors do not allow it); near ``hi`` it is hi - 1."""
-        mid = (lo + hi) // 2
-        a, b = self.candidates[lo].value, self.candidates[hi].value
-        nxt = mid
-        if not bisect and np.isfinite(a) and a > self._tol > 0 and 0 < b < a:
-            t = (math.log(a) - math.log(self._tol)) / (math.log(a) - math.log(b))
-            nxt = int(math.ceil(lo + t * (hi - lo)))
-        if nxt >= hi - 1 or hi - lo <= 2:
-            nxt = hi - 1
-        return min(max(nxt, lo + 1), hi - 1)
+    def _proxy_points(self, tol):
+        return None if self.proxy is None else [(c.states, c.value) for c in self.proxy.candidates.values()
+                                                if c.error is None and np.isfinite(c.value)]
 
     def _settle(self, tol) -> Outcome:
-        self._tol = tol
+        if self.proxy_method is not None:
+            self._proxy_outcomes.append(self._run_proxy(tol))
         guessed, widths = False, []
         while True:
             evald = self.candidates
@@ -422,12 +433,17 @@ class ToleranceSearch:
             if not guessed and (g := self._guess(tol)) is not None and g not in evald \
                     and (lo is None or g > lo) and (hi is None or g < hi):
                 guessed = True
-                self.evaluate(g)
+                if self.proxy is not None and not evald and g >= 4 * CALIBRATE:
+                    # a costly method's first run is a small one: it calibrates the proxy's curve to this
+                    # method's before the run near the tolerance (grow below predicts from both)
+                    self.evaluate(max(1, g // CALIBRATE))
+                else:
+                    self.evaluate(g)
                 continue
-            if lo is None:
-                nxt = self.r_start if hi is None else max(1, hi // 2) if hi > 1 else None
-                if hi is not None and nxt == hi:
-                    nxt = hi - 1
+            if lo is None and hi is None:
+                nxt = self.r_start
+            elif lo is None:  # only meets so far: towards the boundary below the smallest one
+                nxt = route.between(self._points(), 0, hi, tol, self.spo, False, self._proxy_points(tol))
             elif hi is None:
                 c = evald[lo]
                 if lo >= self.r_max:
@@ -439,11 +455,12 @@ class ToleranceSearch:
                 if self._untrusted_below(tol):
                     return self._stop(tol, "untrusted", "errors below the tolerance could not be trusted (below "
                                                         "their floor or not certified)")
-                nxt = self._grow(lo)
+                nxt = route.grow(self._points(), lo, tol, self.spo, self.growth, self.r_max,
+                                 self._proxy_points(tol))
             else:
                 widths.append(hi - lo)
                 bisect = len(widths) >= 3 and widths[-1] > widths[-3] / 2  # no halving in two steps
-                nxt = self._between(lo, hi, bisect)
+                nxt = route.between(self._points(), lo, hi, tol, self.spo, bisect, self._proxy_points(tol))
             self.evaluate(nxt)
 
     def _untrusted_below(self, tol) -> bool:
@@ -469,7 +486,10 @@ class ToleranceSearch:
 
     def record(self, outcomes) -> dict:
         """The search as plain data: method, measure, scale, reference cost, every candidate, the outcomes."""
-        return {"method": self.method, "measure": self.measure, "scale": self.scale,
+        px = None if self.proxy is None else {"method": self.proxy_method, "lus": int(self.proxy._cum_lus),
+                                              "candidates": [c.plain() for c in sorted(self.proxy.candidates.values(),
+                                                                                       key=lambda c: c.index)]}
+        return {"method": self.method, "measure": self.measure, "scale": self.scale, "proxy": px,
                 "states_per_order": self.spo, "r_max": self.r_max, "budget_lus": self.budget_lus,
                 "budget_s": self.budget_s, "reference_lus": int(self.reference_lus),
                 "reference_time_s": float(self.reference_time_s),
@@ -480,6 +500,13 @@ class ToleranceSearch:
 
 #: default largest number of first-order states a search tries
 MAX_STATES_DEFAULT = 400
+
+#: the proxy of methods whose orders are costly (``costly_orders``): one-point Krylov, one LU in all
+PROXY = "krylov"
+
+#: a proxy-steered search first runs the costly method at 1 / CALIBRATE of the proxy's order (when that
+#: order is at least 4 CALIBRATE): its error against the proxy's calibrates the prediction of the next
+CALIBRATE = 4
 
 
 def reach_tolerance(fom, method: str, tol, **kwargs):

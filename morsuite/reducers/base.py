@@ -205,6 +205,10 @@ class Reducer:
         """Hook: cross-option checks."""
 
     # -- what the reducer says of itself and its route to a tolerance (analysis.tolerance) --------
+    #: True for a method whose every order costs a run of its own (an iteration of LUs): a tolerance
+    #: search steers it by a cheap proxy's error curve (analysis.tolerance.PROXY) instead of trying orders
+    costly_orders: ClassVar[bool] = False
+
     def states_per_order(self) -> int:
         """First-order states per unit of ``r``: 2 for a second-order reduced model (r x r matrices,
         2r states; the default), 1 for a first-order one (r states). Cost: none."""

@@ -268,6 +268,9 @@ class IRKAFO(SurrogatePhase, IRKA):
         Gramian factors exist; None before (no LU here)."""
         return None if self._bt is None else self._bt.order_guess(tol, measure=measure, scale=scale)
 
+    #: its orders are steered by its BT start's Hankel singular values (order_guess), not a proxy
+    costly_orders = False
+
     def continue_from(self, rom) -> bool:
         """No continuation: the start at every order is the BT model of that order from the cached Gramian
         factors (r-independent work, paid once), which measured the better start (the earlier model's poles
