@@ -106,14 +106,18 @@ def test_h2_tolerance_against_dense_lyapunov(tcom):
     assert _error_h2(tcom, o.smaller.rom) / norm > 1e-3
 
 
-def test_bt_guess_comes_from_its_hankel_singular_values(tcom):
-    s = ToleranceSearch(tcom, "bt", measure="band")
+@pytest.mark.parametrize("method", ["bt", "irka-fo"])
+def test_bt_guess_comes_from_its_hankel_singular_values_and_the_gramians_are_counted_once(tcom, method):
+    s = ToleranceSearch(tcom, method, measure="band")
     s.run([1e-3])
-    # the first order tried is the start (2 states); the next is the Hankel singular values' guess
-    order = [c.r for c in sorted(s.candidates.values(), key=lambda c: c.index)]
-    hsv = np.asarray(s.candidates[order[0]].info["hsv"])
-    guess = int(np.flatnonzero(hsv > 1e-3 * s.scale)[-1]) + 1
-    assert order[1] == guess
+    # the first order tried is the Hankel singular values' guess (the Gramian factors computed for it)
+    cands = sorted(s.candidates.values(), key=lambda c: c.index)
+    bt = ms.reducers.make("bt", ms.models.tcom(nc=20)).reduce(2).info  # a fresh model: its own LR-ADI
+    hsv = np.asarray(bt["hsv"])
+    assert cands[0].r == int(np.flatnonzero(hsv > 1e-3 * s.scale)[-1]) + 1
+    # the Gramian factors' LUs are the search's once, at the first order (reused by the later ones)
+    assert cands[0].lus >= bt["lu_count"] > 0
+    assert all(c.info["setup_reused"] for c in cands)
 
 
 def test_budget_stops_with_the_best_model(tcom):

@@ -219,7 +219,7 @@ class Reducer:
         absolute norm it is relative to, ``measure`` one of "band", "h2", "hinf"), from what this
         reducer has already computed (e.g. Hankel singular values), or None (default: no guess).
         A guess only steers :class:`~morsuite.analysis.tolerance.ToleranceSearch`; every order it
-        returns is verified. Cost: none (no LU)."""
+        returns is verified. Cost: at most the r-independent work the first reduction pays anyway."""
         return None
 
     def continue_from(self, rom) -> bool:

@@ -155,10 +155,10 @@ class SquareRootBT(Reducer):
         r"""The smallest order whose first discarded Hankel singular value is at most ``tol * scale``:
         :math:`N = \min\{N : \sigma_{N+1} \le \text{tol}\cdot\text{scale}\}` states (r = N, or
         :math:`\lceil N/2\rceil` for a second-order level). A guess, not a bound (the first-order
-        bound is :math:`2\sum_{k>N}\sigma_k`); None until the Gramian factors exist (no LU here)."""
-        g = getattr(self, "_gram", None)
-        if not g or "c" not in g:
-            return None
+        bound is :math:`2\sum_{k>N}\sigma_k`). Cost: the Gramian factors when they do not exist yet (what
+        the first reduction pays anyway; it then reports them as reused shared work)."""
+        if getattr(self, "_gram", None) is None:
+            self._gramians()
         hsv = np.asarray(self._svd("fo")[1])
         if hsv.size == 0 or not (scale > 0):
             return None
