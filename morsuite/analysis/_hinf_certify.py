@@ -53,8 +53,10 @@ def refine_peak(sig, lo, c, hi, rtol, budget, bar=None):
     Stops when the gain still predicted by the local quadratic model,
     :math:`\sigma'(x)^2 / (2|\sigma''|)` with :math:`\sigma''` from the last two
     derivatives, is below :data:`STOP_MARGIN` times ``rtol`` times the
-    best value, when the bracket has
-    shrunk to rounding, or when ``budget`` LUs are spent; with ``bar`` (a value
+    best value, when the bracket has shrunk to rounding or below what its ends' slopes times its width
+    could add to the best value (also :data:`STOP_MARGIN` ``rtol``: samples whose rounding exceeds
+    ``rtol`` made the bracket shrink by bisection to 1e-13, 20 samples more on tcom(136)), or when
+    ``budget`` LUs are spent; with ``bar`` (a value
     found elsewhere) also when the peak the model predicts, raised by
     :data:`BAR_MARGIN`, stays below ``bar``: this maximum cannot be the largest.
     """
@@ -128,6 +130,8 @@ def refine_peak(sig, lo, c, hi, rtol, budget, bar=None):
                 break
         elif curv < 0 and fx >= best[0] and dx * dx / (2.0 * -curv) <= stop * fx:
             break
+        if max(abs(da), abs(db)) * (b - a) <= stop * best[0]:
+            break  # the bracket is narrower than its ends' slopes could gain on: samples at the rounding level
         if bar is not None and curv < 0 and (1.0 + BAR_MARGIN) * (fx + dx * dx / (2.0 * -curv)) < bar:
             break
     return best, used, history
@@ -137,8 +141,11 @@ def peak_check(sig, w, rtol):
     r"""Whether the sample at ``w`` is a local maximum of :math:`\sigma` to ``rtol``: the gain still predicted
     there by the quadratic model, :math:`\sigma'(w)^2 / (2|\sigma''|)` with :math:`\sigma''` from the
     derivatives at ``w`` and at the nearest sample on the side :math:`\sigma'(w)` points to (which must lie
-    below), at most ``rtol`` :math:`\sigma(w)`. :math:`\omega = 0` (where :math:`\sigma' = 0` by symmetry)
-    counts when the next sample's slope is not positive. Returns ``(ok, record)``; no LU."""
+    below), at most ``rtol`` :math:`\sigma(w)` plus the samples' rounding, :math:`16\varepsilon\|T\|`
+    (``sig.scale``); a slope below :math:`16\varepsilon\|T'(j\omega)\|` (the derivative's rounding: it is
+    not refined, and an error of 1e-11 of :math:`\|T\|` has slopes at that level) counts as zero. :math:`\omega = 0`
+    (where :math:`\sigma' = 0` by symmetry) counts when the next sample's slope is not positive. Returns
+    ``(ok, record)``; no LU."""
     f, d = sig(w)
     ws = np.array(sorted(sig.samples))
     i = int(np.searchsorted(ws, w))
@@ -147,6 +154,10 @@ def peak_check(sig, w, rtol):
         ok = ws.size < 2 or sig.samples[ws[1]][1] <= 0
         rec["gain"] = 0.0 if ok else np.inf
         return bool(ok), rec
+    full = getattr(sig, "full", {})
+    if w in full and abs(d) <= 16.0 * EPS * float(np.linalg.norm(np.asarray(full[w][1]))):
+        rec["gain"] = 0.0  # a slope at the rounding of T' (the derivative is not refined): a maximum to rounding
+        return True, rec
     j = i + 1 if d > 0 else i - 1
     if not 0 <= j < ws.size:
         rec["gain"] = np.inf if d != 0 else 0.0
@@ -160,7 +171,7 @@ def peak_check(sig, w, rtol):
     else:
         gain = d * d / (2.0 * -curv)
     rec["gain"] = float(gain)
-    return bool(gain <= rtol * f), rec
+    return bool(gain <= rtol * f + 16.0 * EPS * getattr(sig, "scale", 0.0)), rec
 
 
 def polish(sig, w, rtol, budget):

@@ -392,7 +392,7 @@ def realization_response(fom, real, ws, arrays=None) -> np.ndarray:
     what is measured is the modal form's deviation from the model), block by block, :math:`O(n)` per
     frequency; else the full realization by dense LU solves (:math:`O(n^3)`: as accurate as the
     realization itself; a Hessenberg form, :math:`O(n^2)` per frequency, was 40x less accurate at
-    tcom(100)'s first resonance, 2026-11-29); the reduced model by dense solves."""
+    tcom(100)'s first resonance, 2026-12-02); the reduced model by dense solves."""
     info = real[5]
     p, m = fom.p, fom.m
     out = np.empty((len(ws), p, m), dtype=complex)

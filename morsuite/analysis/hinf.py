@@ -31,7 +31,9 @@ Search
        bracket or the derivative has no sign change; the bracket keeps the
        best sample at an end), until the gain the local quadratic model
        still predicts is below ``rtol`` relative, or the LU budget
-       ``max_lus`` is spent. Also :math:`\|D\|` at :math:`\omega = \infty`.
+       ``max_lus`` is spent. Maxima other than the best whose sample is below
+       :math:`10^3\varepsilon\|T\|` (rounding, not peaks) are not refined.
+       Also :math:`\|D\|` at :math:`\omega = \infty`.
     4. The best sample is checked to be a local maximum to ``rtol`` (the gain
        :math:`\sigma'^2 / (2|\sigma''|)` the quadratic model through it and its
        nearest sample predicts, :func:`~morsuite.analysis._hinf_certify.peak_check`)
@@ -104,7 +106,7 @@ from ..linalg.gramians import cached_gramian_factors
 from ..utils import blas_threads
 from ..norms._common import adi_options, check_fom, flexible_route, infinite, refuse_rigid, validate_rom
 from ..norms._fom import FomResponse
-from ._hinf_certify import BAR_MARGIN, POLISH_LUS, certificate as _certificate, polish as _polish, \
+from ._hinf_certify import BAR_MARGIN, POLISH_LUS, RESOLUTION, certificate as _certificate, polish as _polish, \
     refine_peak as _refine
 from ._hinf_grid import start_grid as _grid
 from ._hinf_screen import model_poles, predicted_peak, screen as screen_resonances
@@ -246,6 +248,10 @@ def _search(fom, rr, rom_poles, feed, *, max_lus, grid_lus, rtol, per_decade, re
             break
         if e < skip_factor * best[0]:
             skipped.append({"start": float(ws[i]), "estimate": float(e)})
+            continue
+        if fs[i] < best[0] and fs[i] < RESOLUTION * EPS * sig.scale:
+            # a maximum at the samples' rounding level (below the certificate's resolution): noise, not a peak
+            skipped.append({"start": float(ws[i]), "value": float(fs[i]), "reason": "rounding level"})
             continue
         if i == ws.size - 1:
             continue  # the largest grid frequency: the response decays beyond it
