@@ -51,7 +51,7 @@ CHEAP_TIE = 1.2
 
 
 def _pct(tol: float) -> str:
-    return f"{tol * 100:g}%" if tol >= 1e-4 else f"{tol:.0e}"
+    return f"{tol * 100:g}%"
 
 
 def _search(res, scene, m):
@@ -142,14 +142,15 @@ def _states_figure(scene, study, res, notes):
                                                   "trusted": [c["trusted"] for c in pts]}, x="states", style="points"))
         chosen = {o["chosen"] for o in s["outcomes"] if o["status"] == "met"}
         star = [c for c in pts if c["r"] in chosen]
-        if star:
-            curves.append(Curve(f"chosen_{m}", f"{_label(study, m)}: chosen", {"states": [c["states"] for c in star],
-                                                                             "value": [c["value"] for c in star]},
-                                x="states", style="chosen"))
+        if star:  # one legend entry for every method's stars
+            label = "_chosen" if any(c.style == "chosen" for c in curves) else "chosen: meets it, one order fewer misses"
+            curves.append(Curve(f"chosen_{m}", label, {"states": [c["states"] for c in star],
+                                                       "value": [c["value"] for c in star]}, x="states", style="chosen"))
     curves += _levels(scene, xs)
     model = study.models[scene.model].name
     return FigureData(f"{scene.name}_states", scene.title or f"{model}: error against states, tolerances dotted",
-                      "first-order states of the reduced model", _YLABEL[measure], curves, xscale="log", notes=notes)
+                      "first-order states of the reduced model", _YLABEL[measure], curves, xscale="log", notes=notes,
+                      xplain=True)
 
 
 def _levels(scene, xs):
