@@ -114,6 +114,9 @@ def run_case(case: dict) -> dict:
                 row.update(time_breakdown=info.get("time_breakdown"),
                            **{k: info[k] for k in ("compress_tol", "stage_stall", "update_switch_reasons",
                                                    "factor_ranks") if k in info})
+                if isinstance(info.get("adi"), dict):  # LR-ADI's columns made and compressions, per equation
+                    row.update({f"adi_{k}": {eq: a.get(k) for eq, a in info["adi"].items()}
+                                for k in ("columns", "compressions")})
         except MemoryBudgetError as exc:
             status = "refused by memory guard"
             row["message"] = str(exc)
