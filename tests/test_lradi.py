@@ -387,7 +387,7 @@ def test_given_shifts_are_factored_once_each():
 def test_factor_store_compression_matches_truncated_svd():
     """Planted answer: columns spanning 12 directions with singular values down to 1e-9, plus
     noise at 1e-14; compression at 1e-11 keeps exactly the 12, and the Gramian to the bound."""
-    from morsuite.linalg.adi_iteration import FactorStore
+    from morsuite.linalg.factor_store import FactorStore
     rng = np.random.default_rng(5)
     n1 = 300
     U = np.linalg.qr(rng.standard_normal((2 * n1, 12)))[0]
@@ -426,7 +426,7 @@ def test_householder_fallback_by_row_blocks_is_a_qr_of_the_stacked_blocks():
     block of 6 rows, fewer than the 16 columns) is a QR of the stacked [X1; X2]: Q orthonormal to rounding,
     QR = X to rounding of ||X||, and R's singular values those of X (dense SVD); a rank-deficient block
     normalised by it keeps its numerical rank."""
-    from morsuite.linalg.adi_iteration import FactorStore
+    from morsuite.linalg.factor_store import FactorStore
     rng = np.random.default_rng(11)
     n1, b = 70, 16
     X = rng.standard_normal((2 * n1, 10)) @ rng.standard_normal((10, b))  # rank 10
@@ -455,7 +455,7 @@ def test_compressed_store_keeps_the_plain_gramian_on_both_normalisations():
     pair inserted: the compressed store's ZZ^T is within the documented bound of the plain
     store's fed the same columns; the well-conditioned blocks take Cholesky-QR, the block
     with the pair (Gram condition about 1e20) the Householder fallback; Q stays orthonormal."""
-    from morsuite.linalg.adi_iteration import FactorStore
+    from morsuite.linalg.factor_store import FactorStore
     fom = ms.models.tcom(nc=30)
     n1 = fom.n1
     Z = lradi(fom, "controllability", tol=1e-12, compress_tol=0.0).Z

@@ -74,7 +74,7 @@ class LRADIResult:
     lu_pool_peak_mib : float
         Largest estimated memory of the kept LUs.
     compress_tol : float
-        Column compression tolerance (0: none; :class:`~morsuite.linalg.adi_iteration.FactorStore`).
+        Column compression tolerance (0: none; :class:`~morsuite.linalg.factor_store.FactorStore`).
     compress_from_mib : float
         With ``compress_tol`` > 0: the factor was kept plain up to this many MiB (``compressions`` 0: it stayed so).
     columns : int

@@ -52,7 +52,7 @@ ADI distance
 :math:`|p - q|/|p + \bar q| \le 0.5` of a kept LU's shift q is served by that
 LU), ``pool_full_reuse=0.8`` (once the pool has had to drop an LU: reuse within ADI distance
 0.8, and drop the kept LU farthest from the current batch's shifts), ``compress_tol=0`` (no column compression;
-:class:`~morsuite.linalg.adi_iteration.FactorStore`).
+:class:`~morsuite.linalg.factor_store.FactorStore`).
 
 Cost in sparse LUs: one per distinct shift that no kept LU serves (a complex pair: one complex LU),
 plus one real LU of :math:`[[M, G^T], [G, 0]]` for the projector
@@ -344,7 +344,7 @@ def lradi(fom, equation="controllability", *, tol=1e-10, maxiter=2000, shifts="p
     compress_tol : float in [0, 1)
         Column compression of the factor as it grows: new directions below
         ``compress_tol`` times its largest singular value are dropped
-        (:class:`~morsuite.linalg.adi_iteration.FactorStore`); 0 (default) keeps
+        (:class:`~morsuite.linalg.factor_store.FactorStore`); 0 (default) keeps
         every column in the order made, the layout that the exact H2 error's
         error-Gramian route replays (:mod:`morsuite.norms.error_gramian`).
     compress_from_mib : float >= 0
