@@ -2,7 +2,7 @@ r"""Benchmark ``bt-scaling``: balanced truncation's time per LU from dsms(2e4) t
 
 ``bt`` at r = 10 with its default options (``gramian_cache="reducer"``: a fresh LR-ADI per run) on
 dsms(g) at the two sizes, each run in its own child process (:func:`~morsuite.bench.scaling_case.run_isolated`:
-the model built there, the kernels warmed before the timer), the sizes alternating so that a change
+the model built there, the compiled kernels loaded before the timer), the sizes alternating so that a change
 of load hits both alike: ``reps`` runs per size (5; ``quick``: dsms(2000) and dsms(20000), 2 runs, in
 this process). The exponent :math:`p` of the time per LU, :math:`t/N_{LU} \sim n_1^p`, from the
 medians of the two sizes: target :math:`p \le 1.10` (issue 47: 1.61 when the factors were compressed
@@ -58,7 +58,7 @@ def bench_bt_scaling(quick: bool = False) -> dict:
     for _ in range(reps):
         for g in sizes:
             case = {"model": "dsms", "size": g, "task": "bt", "r": 10, "options": {"gramian_cache": "reducer"},
-                    "trace": False}
+                    "trace": False, "warm": True}
             rows.append(_row(case, isolate=not quick))
             r = rows[-1]
             print(f"bt-scaling: dsms({g}) {r['status']}"

@@ -188,14 +188,16 @@ class ADIIteration:
         else:  # M^T ker G is not range(Pi) when M is not symmetric
             self.W2 = self.W2 + c * self.proj.project(self.Mt @ R2)
 
-    def take_block(self):
-        """The primal columns produced since the last call, and the primal residual directions."""
+    def take_block(self) -> list:
+        """The primal columns produced since the last call, and the primal residual directions: a list of
+        n1-row arrays (the caller stacks the blocks of both equations once: at n1 = 2e5 every fresh
+        n1 x k array is page-faulted anew, ``docs/design/lradi.md``)."""
         cols = list(self.block)
         self.block = []
         # E^{-1}W (controllability) or its primal counterpart (observability): where the residual lives
         cols += [self.W1, self.proj(self.W2)[1]] if self.equation == "controllability" else \
             [self.proj(self.W1)[1], self.proj(self.W2)[1]]
-        return np.column_stack(cols)
+        return cols
 
     def finish(self):
         """Complete the factor (absorb the last compressed columns); call once, after the last step."""

@@ -219,7 +219,7 @@ def _iterate(fom, equations, tol, maxiter, strategy, num_shifts, selection, solv
             if fixed is not None:
                 new = fixed
             else:
-                basis = np.hstack([it.take_block() for it in active])
+                basis = np.column_stack([c for it in active for c in it.take_block()])  # one n1 x k array
                 new = list(projection_shifts(fom, basis, num_shifts,
                                              residuals=[(it.equation, it.W1, it.W2) for it in active],
                                              selection=selection, used=used))
