@@ -27,8 +27,9 @@ def warm_kernels(first: int = 0) -> float:
     flag per process); returns the seconds it took (0.0 after the first call, or where the kernels
     are off). Every kernel is a module-level function compiled with ``cache=True``, so only a fresh
     install's first process compiles (about 8.5 s, 2026-11-26); later processes load the machine
-    code (0.25 s with numba's own start-up, 2026-12-02, ``docs/design/backends.md``;
-    ``tests/test_kernel_cache.py`` checks that nothing compiles again). Called by
+    code (0.37 s on a quiet machine, of which 0.33 s is numba's own start: its import and its
+    registries; 2026-12-02, ``docs/design/backends.md``; ``tests/test_kernel_cache.py`` checks
+    that nothing compiles again). Called by
     :meth:`morsuite.reducers.base.Reducer.reduce` before its timer starts and by the study runner's
     worker processes.
 
