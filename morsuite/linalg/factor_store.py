@@ -72,10 +72,10 @@ class FactorStore:
     SVD of Z itself) plus :math:`20\sqrt{b}\,\varepsilon\,\sigma_1(Z)^2` (the
     absorption). Every kept column is a combination of appended ones, so the store
     commutes with any projection applied to the rows (the observability position
-    block is kept unprojected, see :class:`ADIIteration`).
+    block is kept unprojected, see :class:`~morsuite.linalg.adi_iteration.ADIIteration`).
 
     Memory: plain, the blocks grow by doubling and are trimmed to the columns in use at
-    :meth:`finish`; compressed, by an eighth (at least ``chunk`` columns); Q and the
+    :meth:`finish` when more than a quarter of them is unused; compressed, by an eighth (at least ``chunk`` columns); Q and the
     waiting columns share the blocks (``k_peak``: the most held at once, about
     ``GROWTH`` times the kept rank, at least the rank plus ``chunk``, instead of every
     column produced).
@@ -136,11 +136,13 @@ class FactorStore:
                 setattr(self, name, Z)
 
     def _trim(self):
-        """Release the unused columns of the blocks (one block copied at a time): the factor
-        is kept for the reducer's life, and a doubled store can hold twice its columns."""
+        """Release the unused columns of the blocks (one block copied at a time) where more than a quarter
+        of the columns in use (at least 8) is unused: the factor is kept for the reducer's life, and a
+        doubled store can hold twice its columns; a smaller slack is not worth a copy of the factor (at
+        dsms(2e5), 114 columns in a room of 128: 365 MB copied to free 45 MB)."""
         for name in ("Z1", "Z2"):
             Z = getattr(self, name)
-            if Z.shape[1] > self.k + max(8, self.k // 16):
+            if Z.shape[1] > self.k + max(8, self.k // 4):
                 setattr(self, name, np.array(Z[:, :self.k], order="F"))
 
     def append(self, c, X1, X2):
