@@ -80,7 +80,7 @@ def bench_bt_scaling(quick: bool = False) -> dict:
             "value": p, "target": TARGET if kind == "wall" else None,
             "pass": None if quick or kind == "cpu" else bool(p <= TARGET),
             "what": f"log(t/LU at n1 = {large['n1']} / t/LU at n1 = {small['n1']}) / log(n1 ratio), medians "
-                    f"of {reps} fresh processes per size, {kind} time of reduce(10)"
+                    f"of {reps} {'runs in this process' if quick else 'fresh processes'} per size, {kind} time of reduce(10)"
                     + (" (quick: smoke run, not judged)" if quick else "")}
     for name, v in ratios.items():
         print(f"{name:45s} {v['value']:6.3f}  (target <= {v['target']})")
