@@ -280,22 +280,36 @@ def _add_run_parser(sub):
 
 
 def _add_compare_parser(sub):
-    """``morsuite compare MODEL --states N [N ...] [--methods ...] [--band LO HI] [--input ...] [--out DIR]``
+    """``morsuite compare MODEL [--states N ...] [--tol TOL ...] [--error band|h2|hinf] [--budget-lus N]
+    [--budget-s S] [--save-roms] [--methods ...] [--band LO HI] [--input ...] [--out DIR] [--jobs N]``
     (see :mod:`morsuite.studies.compare`)."""
 
     def cmd_compare(args) -> int:
         from .studies.compare import compare, rigid_line, verdict_lines
 
+        from .studies.workers import usable_cores
+
         line = rigid_line(args.model)
         if line:
             print(line)
+        jobs = args.jobs if args.jobs is not None else min(2, len(usable_cores()))
         result, path = compare(args.model, args.states, args.methods, args.band, args.input, out=args.out,
-                               name=args.name, quiet=args.quiet)
+                               name=args.name, quiet=args.quiet, jobs=jobs, tol=args.tol, error=args.error,
+                               budget_lus=args.budget_lus, budget_s=args.budget_s, max_states=args.max_states,
+                               save_roms=args.save_roms)
         print("\n".join(verdict_lines(result)))
         print(f"report: {result.outdir / 'index.html'}\nstudy:  {path} (morsuite run {path} --out {args.out})")
+        roms = sorted(str(f) for f in result.files if f.parent.name == "roms")
+        if roms:
+            print("models: " + "\n        ".join(roms))
         status = result.summary["status"].astype(str)
         if len(status) and not (status == "ok").any():  # every reduction failed: say why, exit non-zero
             print(f"morsuite compare: every reduction failed; the first: {status.iloc[0]}", file=sys.stderr)
+            return 1
+        failed = [a for a in result.manifest["artifacts"] if a.get("kind") == "tolerance" and a.get("error")]
+        if args.tol and len(failed) == sum(1 for a in result.manifest["artifacts"] if a.get("kind") == "tolerance"):
+            print(f"morsuite compare: every tolerance search failed; the first: {failed[0]['error']}",
+                  file=sys.stderr)
             return 1
         return 0
 
@@ -303,8 +317,21 @@ def _add_compare_parser(sub):
     p = sub.add_parser("compare", help="compare reducers on one model at equal first-order states: a study, "
                                        "its HTML report and the verdict")
     p.add_argument("model", help=MODEL_HELP)
-    p.add_argument("--states", required=True, nargs="+", type=int, metavar="N",
+    p.add_argument("--states", nargs="+", type=int, metavar="N",
                    help="first-order states of the reduced models (even: a second-order ROM of order r has 2r)")
+    p.add_argument("--tol", nargs="+", type=float, metavar="TOL",
+                   help="relative tolerances in (0, 1): each method's smallest model within each, its cost, "
+                        "the cheapest and the smallest (give --states, --tol or both)")
+    p.add_argument("--error", default="band", choices=("band", "h2", "hinf"),
+                   help="the error --tol bounds: band max error over the band's peak (default), H2 error over "
+                        "||T||_H2, or the certified Hinf error bound over ||T||_Hinf")
+    p.add_argument("--budget-lus", type=int, metavar="N", help="each method's budget of sparse LUs in the search")
+    p.add_argument("--budget-s", type=float, metavar="S", help="each method's time budget of the search (s)")
+    p.add_argument("--max-states", type=int, metavar="N", help="the largest model tried (default 400 states)")
+    p.add_argument("--save-roms", action="store_true",
+                   help="write each chosen model as .npz and .mat with a JSON provenance sidecar (OUT/NAME/roms/)")
+    p.add_argument("--jobs", type=int, metavar="N",
+                   help="worker processes, each pinned to a core (default: the usable cores, at most 2)")
     p.add_argument("--methods", nargs="+", metavar="NAME",
                    help=f"default: {' '.join(DEFAULT_METHODS)}; valid: {', '.join(METHODS)}")
     p.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),

@@ -148,6 +148,26 @@ class SquareRootBT(Reducer):
         order = self.fom.order
         return 2 * order if self.options["form"] == "first-order" else order
 
+    def states_per_order(self) -> int:
+        """1 for ``form="first-order"`` (r counts states), else 2 (a second-order model of order r)."""
+        return 1 if self.options["form"] == "first-order" else 2
+
+    def order_guess(self, tol: float, *, measure: str, scale: float) -> int | None:
+        r"""The smallest order whose first discarded Hankel singular value is at most ``tol * scale``:
+        :math:`N = \min\{N : \sigma_{N+1} \le \text{tol}\cdot\text{scale}\}` states (r = N, or
+        :math:`\lceil N/2\rceil` for a second-order level). A guess, not a bound (the first-order
+        bound is :math:`2\sum_{k>N}\sigma_k`). Cost: the Gramian factors when they do not exist yet (what
+        the first reduction pays anyway; it then reports them as reused shared work)."""
+        if getattr(self, "_gram", None) is None:
+            self._gramians()
+        hsv = np.asarray(self._svd("fo")[1])
+        if hsv.size == 0 or not (scale > 0):
+            return None
+        above = np.flatnonzero(hsv > tol * scale)
+        n = int(above[-1]) + 1 if above.size else 1
+        n = max(1, min(n, hsv.size))
+        return n if self.options["form"] == "first-order" else max(1, -(-n // 2))
+
     def _validate_r(self, r):
         if self.options["form"] == "first-order" and isinstance(r, Integral) and not isinstance(r, bool) \
                 and r > self.max_order():
