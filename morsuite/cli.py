@@ -228,19 +228,26 @@ def _add_run_parser(sub):
         from .studies.batch import shared_compute
         from .studies.cache import Cache
         from .studies.memo import SpecMemo
-        from .studies.workers import sigterm_exits, usable_cores
+        from .studies.workers import default_jobs, sigterm_exits
 
         cache = Cache(args.cache or Path(args.out) / ".cache", read=not args.no_cache)
         memo = SpecMemo(cache)  # validated models/methods: a cached study builds no model
         studies = [load_spec(path, memo=memo) for path in args.specs]  # every spec is valid before anything runs
-        jobs = args.jobs if args.jobs is not None else 1 if args.scheduler else min(2, len(usable_cores()))
+        rule = None
+        if args.jobs is not None:
+            jobs = args.jobs
+        elif args.scheduler:
+            jobs = 1
+        else:  # the usable cores, bounded by memory (studies.workers.default_jobs)
+            rule = default_jobs(max((m.n1 for s in studies for m in s.models.values()), default=0))
+            jobs = rule["jobs"]
         if not args.dry_run and jobs > 1 and args.scheduler is None and not args.no_cache:
             # what any of the studies lacks computed once, then each study's report, on pinned workers
             memo.flush()
             with sigterm_exits():  # stopped, the run stops its workers (studies.workers)
                 shared_compute(studies, cache, jobs, out=args.out, quiet=args.quiet,
                                run_kwargs={"out": args.out, "cache_dir": args.cache, "quiet": args.quiet,
-                                           "rerender": args.rerender})
+                                           "rerender": args.rerender}, jobs_rule=rule)
             return 0
         for study in studies:
             if args.dry_run:
@@ -256,7 +263,8 @@ def _add_run_parser(sub):
     p.add_argument("specs", nargs="+", metavar="SPEC", help="study spec files, e.g. studies/paper_*.toml")
     p.add_argument("--out", default="results", metavar="DIR", help="results root (default: results)")
     p.add_argument("--jobs", type=int, default=None, metavar="N",
-                   help="worker processes, each pinned to a core (default: the usable cores, at most 2); "
+                   help="worker processes, each pinned to a core (default: the usable cores, as many as the "
+                        "available memory holds: morsuite.studies.workers.default_jobs); "
                         "with N > 1 what the studies lack is computed once, side by side, before their reports "
                         "(morsuite.studies.batch); 1: one study after the other on Dask's synchronous scheduler")
     p.add_argument("--scheduler", metavar="ADDRESS", help="dask.distributed scheduler, e.g. tcp://HOST:8786")

@@ -83,8 +83,9 @@ shifts, rank, columns, LUs reused and dropped, ``shift_reuse``, ``lu_pool_mib``,
 ``compress_tol``),
 ``compress_tol`` (the column compression used: option ``compress_tol``, by default 0 below
 :attr:`BT.COMPRESS_MIN_N1` positions and :attr:`BT.COMPRESS_AUTO_TOL` from there on, where the
-plain factors no longer fit in memory; a compressed factor cannot serve the exact H2 error's
-error-Gramian route, which then runs its own LR-ADI),
+plain factors may no longer fit in memory; a factor is compressed only once it exceeds lradi's
+``compress_from_mib``, 1024 MiB, and ``info["adi"]`` records its ``compressions``; a compressed
+factor cannot serve the exact H2 error's error-Gramian route, which then runs its own LR-ADI),
 ``adi_iterations``, ``residual_history``, ``factor_ranks``,
 ``lu_count`` (the LR-ADI's LUs when this call ran it, else 0), ``lu_count_shared`` (the
 LR-ADI's LUs, whoever paid them), ``time_breakdown`` (adi, of which lu, solves, shifts; svd;
@@ -350,8 +351,8 @@ class BT(SquareRootBT):
                                "directions below compress_tol times the factor's largest singular value are "
                                "dropped (0: none); None (default): 0 below COMPRESS_MIN_N1 positions (the exact "
                                "H2 error's error-Gramian route shares uncompressed factors), COMPRESS_AUTO_TOL "
-                               "from there on (tcom at n1 = 1e6: about 1300 columns per factor, 42 GB plain); "
-                               "the value used is info['compress_tol']", low=0, high=1, open_high=True,
+                               "from there on (tcom at n1 = 1e6: about 1300 columns per factor, 42 GB plain), "
+                               "applied once a factor exceeds 1024 MiB; the value used is info['compress_tol']", low=0, high=1, open_high=True,
                                nullable=True),
         "gramian_cache": Option("model", "choice", "where the LR-ADI factors are kept: in the model's cache, "
                                 "shared with every bt reducer and analysis.h2_norm / h2_error on the same model "
