@@ -64,6 +64,7 @@ import numpy as np
 
 from ..errors import InputError, MorsuiteError, OptionError
 from . import _tolerance_route as route
+from ._tolerance_error import BAND_FLOOR, Reference
 
 __all__ = ["MEASURES", "OUTCOMES", "BAND_FLOOR", "Candidate", "Outcome", "ToleranceSearch", "reach_tolerance"]
 
@@ -79,10 +80,6 @@ OUTCOMES = {
                  "not certified)",
     "failed": "the reductions failed",
 }
-
-#: relative level below which a sampled band error is not trusted: the refined full response and the
-#: dense reduced one carry rounding of about this relative size (an estimate, docs/design/tolerance.md)
-BAND_FLOOR = 1e-12
 
 #: consecutive failed reductions after which a search gives up
 MAX_FAILURES = 2
@@ -206,6 +203,14 @@ class ToleranceSearch:
         Largest factor between two orders of the growing phase (default 2).
     reducer : Reducer, optional
         A reducer instance to use instead of ``make(method, fom, **options)`` (its state is reused).
+    proxy : str or None
+        A cheap method whose search on the same error steers this one (its order the first guess, a
+        quarter of it first when large, its model the first start; ``_tolerance_route``): ``"auto"``
+        (default) takes :data:`PROXY` for a reducer with ``costly_orders`` (the IRKA family, so-h2) and
+        none otherwise; its LUs and time are this search's.
+    reference : Reference, optional
+        Another search's reference (:class:`~morsuite.analysis._tolerance_error.Reference`), shared instead
+        of computing the band response or norm again.
 
     Attributes
     ----------
@@ -242,73 +247,17 @@ class ToleranceSearch:
         self._cum_lus, self._cum_eval, self._cum_time = 0, 0, 0.0
         self._shared_counted = False
         self._failures = 0
-        self.reference_lus, self.reference_time_s = 0, 0.0
-        self.model_norm = None
-        if reference is not None:  # another search's reference (a proxy's): nothing computed again
-            for k in ("omega", "H_full", "scale", "model_norm"):
-                setattr(self, k, reference.get(k))
-        else:
-            self._setup_reference(omega, H_full)
+        # what the errors are relative to; a proxy shares its caller's (nothing computed again)
+        self.ref = reference if reference is not None else \
+            Reference(fom, measure, omega=omega, H_full=H_full, norm_options=self.norm_options)
+        self.scale, self.model_norm = self.ref.scale, self.ref.model_norm
+        self.reference_lus, self.reference_time_s = (0, 0.0) if reference is not None else (self.ref.lus,
+                                                                                           self.ref.time_s)
         if proxy == "auto":
             proxy = PROXY if getattr(self.red, "costly_orders", False) else None
         if proxy is not None and proxy == method:
             proxy = None
         self.proxy_method, self.proxy, self._proxy_outcomes = proxy, None, []
-
-    # -- the reference: band response or model norm ------------------------------
-    def _setup_reference(self, omega, H_full):
-        from .compare import model_norm
-        from .response import band_response, freq_grid, sigma_max
-
-        t0 = time.perf_counter()
-        if self.measure == "band":
-            self.omega = freq_grid(self.fom.band) if omega is None else np.asarray(omega, dtype=float).ravel()
-            if H_full is None:
-                H_full, self.reference_lus = band_response(self.fom, self.omega)
-            self.H_full = np.asarray(H_full)
-            if self.H_full.shape != (self.omega.size, self.fom.p, self.fom.m):
-                raise InputError(f"H_full has shape {self.H_full.shape}; expected "
-                                 f"{(self.omega.size, self.fom.p, self.fom.m)} (omega, p, m)")
-            self.scale = float(np.max(sigma_max(self.H_full)))
-        else:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")  # recorded in the norm's record
-                self.model_norm = model_norm(self.fom, self.measure, self.norm_options.get(self.measure))
-            self.scale = float(self.model_norm["value"])
-            self.reference_lus = int(self.model_norm["lu_count"])
-        self.reference_time_s = time.perf_counter() - t0
-        if not (self.scale > 0 and np.isfinite(self.scale)):
-            raise InputError(f"the full model's {self.measure} scale is {self.scale!r}: a relative tolerance needs a "
-                             "positive finite norm")
-
-    # -- one order -----------------------------------------------------------------
-    def _error(self, rom) -> dict:
-        """The relative error of ``rom`` with its floor and trust (and the record behind it)."""
-        from .compare import error_norm
-        from .response import sigma_max
-
-        if self.measure == "band":
-            e = sigma_max(self.H_full - rom.freqresp(self.omega))
-            k = int(np.argmax(e))
-            value = float(e[k]) / self.scale
-            return {"value": value, "floor": BAND_FLOOR, "trusted": bool(np.isfinite(value) and value > BAND_FLOOR),
-                    "lus": 0, "record": {"max_abs_error": float(e[k]), "omega_max": float(self.omega[k]),
-                                         "grid": [float(self.omega[0]), float(self.omega[-1]), int(self.omega.size)]}}
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # recorded in the record's warnings
-            rec = error_norm(self.fom, rom, self.measure, self.norm_options.get(self.measure))
-        keep = {k: rec.get(k) for k in ("value", "route", "floor", "trusted", "lower_bound", "upper_bound",
-                                        "certified", "peak_frequency", "reason") if k in rec}
-        if self.measure == "h2":
-            value = rec["value"] / self.scale
-            floor = (rec.get("floor") or 0.0) / self.scale
-            trusted = bool(rec.get("trusted")) and bool(self.model_norm.get("trusted"))
-        else:
-            certified = bool(rec.get("certified")) and rec.get("upper_bound") is not None
-            value = (rec["upper_bound"] if certified else rec["value"]) / self.scale
-            floor, trusted = 0.0, certified  # the upper bound is the value: nothing to add
-        return {"value": float(value), "floor": float(floor), "trusted": trusted, "lus": int(rec.get("lu_count") or 0),
-                "record": keep}
 
     def _cost(self, info, wall) -> tuple[int, float]:
         """(LUs, seconds) of one reduction in the search: its own, plus the shared work it relied on the
@@ -351,7 +300,7 @@ class ToleranceSearch:
             cand.stable = bool(info.get("stable", res.rom.is_stable()))
             cand.lus, cand.time_s = self._cost(info, time.perf_counter() - t0)
             t1 = time.perf_counter()
-            err = self._error(res.rom)
+            err = self.ref.error(res.rom)
             cand.eval_time_s = time.perf_counter() - t1
             cand.value, cand.floor, cand.trusted = err["value"], err["floor"], err["trusted"]
             cand.eval_lus, cand.record = err["lus"], err["record"]
@@ -379,10 +328,8 @@ class ToleranceSearch:
         if self.proxy_method is None:
             return None
         if self.proxy is None:
-            ref = {"omega": getattr(self, "omega", None), "H_full": getattr(self, "H_full", None),
-                   "scale": self.scale, "model_norm": self.model_norm}
             self.proxy = ToleranceSearch(self.fom, self.proxy_method, measure=self.measure, norm_options=self.norm_options,
-                                         max_states=self.r_max * self.spo, proxy=None, reference=ref)
+                                         max_states=self.r_max * self.spo, proxy=None, reference=self.ref)
         before = (self.proxy._cum_lus, self.proxy._cum_eval, self.proxy._cum_time)
         out = self.proxy.run([tol])[0]
         self._cum_lus += self.proxy._cum_lus - before[0]
