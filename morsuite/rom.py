@@ -75,7 +75,7 @@ class _ROMBase:
     def save(self, path) -> Path:
         """Write the matrices alone to one ``.npz`` or ``.mat`` file (chosen by the extension), atomically.
 
-        The file holds ``kind`` and the matrices of :attr:`_fields` under their own names
+        The file holds ``kind`` and the matrices under their own names
         (:mod:`morsuite.romfiles` lists them); no provenance sidecar is written:
         :func:`morsuite.romfiles.save_rom` writes both formats and the sidecar, and is what the
         command line uses. Cost: writing ``r^2`` numbers.

@@ -52,8 +52,9 @@ from .utils import atomic_write_text, strict_json, to_plain
 __all__ = ["FORMAT", "FORMAT_VERSION", "FORMATS", "VARIABLES", "ERROR_KEYS", "save_rom", "load_rom",
            "read_sidecar", "model_hash", "provenance_of", "grid_omega"]
 
-#: the sidecar's ``format`` value, and the version this code writes (and the newest it reads)
+#: the sidecar's ``format`` value
 FORMAT = "morsuite-rom"
+#: the sidecar's ``format_version`` this code writes (and the newest it reads)
 FORMAT_VERSION = 1
 #: the file formats :func:`save_rom` writes, in the order :func:`load_rom` looks for them by stem
 FORMATS = ("npz", "mat")
@@ -253,7 +254,7 @@ def model_hash(fom) -> str:
     types and LU settings aside). Unlike :meth:`morsuite.models.Index3Model.digest`, which
     hashes the matrices as stored (the key of caches), it does not depend on how the model
     was assembled. Kept in ``fom.cache``. Cost: one copy and pass over the matrices
-    (measured: 0.10 s at fem_block(n1=20000), 3.0 M nonzeros; ``docs/design/romfiles.md``).
+    (measured at fem_block(n1=20000): ``docs/design/romfiles.md``).
 
     Raises
     ------

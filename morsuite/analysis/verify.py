@@ -19,7 +19,7 @@ band errors
     the LU value's measured error, gives its level :math:`\rho = \max_\omega \delta(\omega) /
     \sigma_{\max}(T(j\omega))`. The recorded value came from an LU of another run (another
     backend, ordering or machine): frequency by frequency its error differs from this one's by
-    orders of magnitude (where one is small by chance), its level by a factor below 2 (measured,
+    orders of magnitude (where one is small by chance), its level by a small factor (measured,
     ``docs/design/romfiles.md``). The allowance at :math:`\omega` is
     :math:`(c\rho + 16\varepsilon)\,\sigma_{\max}(T(j\omega))` (:math:`c` = :data:`LU_FACTOR`,
     16 = :data:`ROUNDING`), plus the same for the reduced model's dense solves (against their
