@@ -151,14 +151,13 @@ def save_rom(rom, path, *, provenance=None, formats=FORMATS) -> list[Path]:
     record = {"format": FORMAT, "format_version": FORMAT_VERSION, "kind": rom.kind, "order": int(rom.order),
               "states": int(rom.states), "m": int(rom.m), "p": int(rom.p), "variables": list(VARIABLES[rom.kind]),
               "files": {}, "provenance": provenance}
-    text = _json_text(record, "provenance")  # refused before any file is written
+    _json_text(record, "provenance")  # not JSON data: refused before any file is written
     written = []
     for fmt in formats:
         target = rom.save(_with(stem, "." + fmt))
         record["files"][fmt] = {"name": target.name, "sha256": _sha256(target), "bytes": target.stat().st_size}
         written.append(target)
-    text = _json_text(record, "provenance")
-    atomic_write_text(side, text)
+    atomic_write_text(side, _json_text(record, "provenance"))
     return written + [side]
 
 
@@ -320,8 +319,7 @@ def grid_omega(record) -> np.ndarray:
 
 
 def _get(errors, key):
-    v = errors.get(key)
-    return to_plain(v)
+    return to_plain(errors.get(key))
 
 
 def _errors_record(errors, grid):
