@@ -353,7 +353,8 @@ def _errors_record(errors, grid):
     return {"band": band, "h2": h2, "hinf": hinf, "norms": note, "norm_warnings": list(e.get("norm_warnings") or [])}
 
 
-def provenance_of(fom, method, options, info, errors=None, band=None, grid=None, *, source=None, cost=None) -> dict:
+def provenance_of(fom, method, options, info, errors=None, band=None, grid=None, *, source=None, cost=None,
+                  extra=None) -> dict:
     """The provenance record of a reduced model, as ``morsuite reduce --save`` and the study runner write it.
 
     Parameters
@@ -387,6 +388,9 @@ def provenance_of(fom, method, options, info, errors=None, band=None, grid=None,
         The model as the caller named it (a catalog spec or a path).
     cost : dict, optional
         Further cost figures merged into ``cost`` (e.g. a study's ``lu_count_standalone``).
+    extra : dict, optional
+        Further top-level entries (e.g. a study's name and scene, a tolerance search's
+        record); a key of the record itself is refused.
 
     Returns
     -------
@@ -405,8 +409,9 @@ def provenance_of(fom, method, options, info, errors=None, band=None, grid=None,
         raise InputError(f"info must be a reducer's info dict; got {type(info).__name__}")
     if options is not None and not isinstance(options, dict):
         raise InputError(f"options must be a dict or None; got {type(options).__name__}")
-    if cost is not None and not isinstance(cost, dict):
-        raise InputError(f"cost must be a dict or None; got {type(cost).__name__}")
+    for name, value in (("cost", cost), ("extra", extra)):
+        if value is not None and not isinstance(value, dict):
+            raise InputError(f"{name} must be a dict or None; got {type(value).__name__}")
     lo, hi = (float(b) for b in (band if band is not None else fom.band))
     backend = info.get("lu_backend")
     record = {
@@ -426,4 +431,8 @@ def provenance_of(fom, method, options, info, errors=None, band=None, grid=None,
         "morsuite": __version__,
         "created_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
     }
+    clash = sorted(set(extra or {}) & set(record))
+    if clash:
+        raise InputError(f"extra may not replace the record's own key(s) {', '.join(map(repr, clash))}")
+    record.update(extra or {})
     return to_plain(record)

@@ -218,6 +218,10 @@ def test_provenance_of_records_the_errors_and_refuses_unknown_keys(dsms, reducti
         provenance_of(dsms, "irka", {}, res.info, {"h2_eror": 1.0})
     with pytest.raises(ms.InputError, match="grid is required with band errors"):
         provenance_of(dsms, "irka", {}, res.info, {"max_abs_error": 1.0})
+    tol = {"tol": 0.01, "measure": "band", "status": "met"}
+    assert provenance_of(dsms, "irka", {}, res.info, extra={"tolerance": tol})["tolerance"] == tol
+    with pytest.raises(ms.InputError, match="extra may not replace the record's own key\\(s\\) 'model'"):
+        provenance_of(dsms, "irka", {}, res.info, extra={"model": "x"})
     assert {"h2_floor", "h2_norm_floor", "hinf_norm_upper_bound", "norm_options"} <= set(ERROR_KEYS)
 
 
