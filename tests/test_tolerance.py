@@ -11,6 +11,7 @@ References, independent of the code under test:
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import warnings
@@ -271,3 +272,28 @@ def test_compare_tol_prints_the_table_and_writes_the_study(tmp_path, capsys):
     assert 'kind = "tolerance"' in toml and 'error = "h2"' in toml
     assert main(["compare", "tcom:nc=20", "--out", str(tmp_path / "x"), "--quiet"]) == 2
     assert "--tol" in capsys.readouterr().err
+
+
+def test_saved_models_load_bit_identical_and_verify_reproduces_their_errors(tmp_path, capsys):
+    from morsuite.cli import main
+    from morsuite.studies.tolerance import entry_from_cache
+
+    assert main(["compare", "tcom:nc=20", "--tol", "1e-2", "--error", "h2", "--methods", "bt", "--out", str(tmp_path),
+                 "--quiet", "--jobs", "1", "--save-roms"]) == 0
+    out = capsys.readouterr().out
+    stem = tmp_path / "compare_tcom_nc20" / "roms" / "to_reach_bt_tol0p01"
+    assert str(stem) + ".npz" in out
+    # the saved model is the search's, to the bit (its arrays in the study's cache)
+    from morsuite.studies.cache import Cache
+    arts = json.loads((tmp_path / "compare_tcom_nc20" / "manifest.json").read_text())["artifacts"]
+    key = next(a["key"] for a in arts if a["kind"] == "tolerance")
+    entry = entry_from_cache(*Cache(tmp_path / ".cache").get("tolerance", key))
+    chosen = entry["search"]["outcomes"][0]["chosen"]
+    for ext in ("npz", "mat"):
+        rom = ms.load_rom(f"{stem}.{ext}")
+        for f, arr in entry["roms"][chosen]["arrays"].items():
+            if f != "basis":
+                assert np.array_equal(getattr(rom, f), arr)
+        assert rom.provenance["provenance"]["tolerance"]["status"] == "met"
+    assert main(["verify", "tcom:nc=20", f"{stem}.mat"]) == 0
+    assert "verified: every recorded value agrees" in capsys.readouterr().out

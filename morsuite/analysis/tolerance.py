@@ -436,7 +436,9 @@ class ToleranceSearch:
         px = None if self.proxy is None else {"method": self.proxy_method, "lus": int(self.proxy._cum_lus),
                                               "candidates": [c.plain() for c in sorted(self.proxy.candidates.values(),
                                                                                        key=lambda c: c.index)]}
-        return {"method": self.method, "measure": self.measure, "scale": self.scale, "proxy": px,
+        norm = None if self.model_norm is None else {k: self.model_norm.get(k) for k in (
+            "value", "route", "floor", "rel_floor", "trusted", "lower_bound", "upper_bound", "certified", "options")}
+        return {"method": self.method, "measure": self.measure, "scale": self.scale, "norm": norm, "proxy": px,
                 "states_per_order": self.spo, "r_max": self.r_max, "budget_lus": self.budget_lus,
                 "budget_s": self.budget_s, "reference_lus": int(self.reference_lus),
                 "reference_time_s": float(self.reference_time_s),
