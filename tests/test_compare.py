@@ -169,7 +169,7 @@ def test_a_run_in_which_every_method_fails_exits_non_zero(tmp_path, monkeypatch,
     for name in ("bt", "irka"):
         monkeypatch.setattr(ms.reducers.get_class(name), "_reduce", fails)
     rc = main(["compare", "dsms:g=40", "--states", "4", "--methods", "bt", "irka", "--out", str(tmp_path),
-               "--quiet"])
+               "--quiet", "--jobs", "1"])  # the patched reducers live in this process
     err = capsys.readouterr().err
     assert rc == 1 and "every reduction failed" in err and "exactly singular" in err
     assert (tmp_path / "compare_dsms_g40" / "index.html").exists()

@@ -75,7 +75,14 @@ SCENE_KEY_DOCS = {
     "r": "reduced order: an int, a list, or { from = 2, to = 40, step = 2 } (required)",
     "grid": "grid name (default: \"default\", the model's band with 200 points)",
     "paper_csv": "reference curve(s) to overlay: a path, or a table { curve = path }",
-    "error": "absolute or relative error",
+    "error": "error scenes: absolute or relative error; tolerance scenes: the error the tolerance bounds, band (max "
+             "over the grid over the band's peak), h2 (over ||T||_H2) or hinf (certified upper bound over ||T||_Hinf)",
+    "tol": "tolerance scene: a relative tolerance in (0, 1) or a list of them (required)",
+    "budget_lus": "tolerance scene: each method's sparse LUs in its search (default: no budget)",
+    "budget_s": "tolerance scene: each method's seconds of search (default: no budget)",
+    "max_states": "tolerance scene: the largest reduced model tried, in first-order states (default 400)",
+    "save_roms": "tolerance scene: write each chosen model as .npz and .mat with a JSON provenance sidecar into "
+                 "the study's roms/ folder (default: false)",
     "measure": "what is plotted against r: max absolute or relative error on the grid (max_abs, max_rel), or an "
                "exact norm of the error over the whole axis (h2, h2_rel, hinf, hinf_rel; no grid)",
     "norms": "table scene: exact error norms shown as columns, a list from \"h2\", \"hinf\"",
@@ -249,7 +256,8 @@ def spec_keys_rst() -> list[str]:
                 continue
             allowed = _admissible(choices)
             extra.append(f"``{key}``: {_toml(default)} ({_rst_cell(allowed)})")
-        needs = ["a grid" if kind.uses_grid else "no grid", "one r" if kind.one_r else "any number of r"]
+        needs = ["a grid" if kind.uses_grid else "no grid",
+                 "no r" if not kind.needs_r else "one r" if kind.one_r else "any number of r"]
         if kind.min_methods > 1:
             needs.append(f"at least {kind.min_methods} methods")
         rows.append([f"``{name}``", _rst_cell(kind.doc), ", ".join(needs), "; ".join(extra) or "\\-"])

@@ -24,11 +24,14 @@ def warm_kernels(first: int = 0) -> float:
     and a real shift (banded backend: the band LU, the border's half-sweeps, the one-pass assembly,
     the scatter), solves and transposed solves with one and three right-hand sides, one
     Gram-Schmidt basis, the dense pencil, the refinement's double-double residual and the backward-error
-    certificate's Dot2 residual. Idempotent (a flag per process); returns the seconds it took (0.0 after the
-    first call, or where the kernels are off). Measured 2026-11-26: about 8.5 s when nothing is
-    cached (a fresh install's first process), 0.2-0.5 s afterwards; called by
+    certificate's Dot2 residual. Idempotent (a flag per process); returns the seconds it took (0.0 after the first call, or where the kernels
+    are off). Every kernel is a module-level function compiled with ``cache=True``, so only a fresh
+    install's first process compiles (about 8.5 s, 2026-11-26); later processes load the machine
+    code (0.37 s on a quiet machine, of which 0.33 s is numba's own start: its import and its
+    registries; 2026-12-02, ``docs/design/backends.md``; ``tests/test_kernel_cache.py`` checks
+    that nothing compiles again). Called by
     :meth:`morsuite.reducers.base.Reducer.reduce` before its timer starts and by the study runner's
-    worker processes (``docs/design/backends.md``).
+    worker processes.
 
     ``first`` (default 0) picks which half is compiled first: 0 the complex kernels, 1 the real
     ones (then the other half). Two processes starting together with 0 and 1 (the study runner's

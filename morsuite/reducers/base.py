@@ -22,11 +22,11 @@ from typing import Any, Callable, ClassVar
 
 import numpy as np
 
-from ..errors import AccuracyWarning, InputError, OptionError
+from ..errors import AccuracyWarning, ConvergenceWarning, InputError, OptionError
 from ..linalg import accuracy
 from ..linalg.warmup import warm_kernels
 from ..utils import blas_threads, to_plain
-from .outcome import check_outcome, complete_outcome
+from .outcome import CONVERGED_STATUSES, check_outcome, complete_outcome
 
 __all__ = ["Option", "Reducer", "Reduction", "make", "available", "register", "get_class", "as_complex"]
 
@@ -205,6 +205,36 @@ class Reducer:
     def _check_options(self):
         """Hook: cross-option checks."""
 
+    # -- what the reducer says of itself and its route to a tolerance (analysis.tolerance) --------
+    #: True for a method whose every order costs a run of its own (an iteration of LUs): a tolerance
+    #: search steers it by a cheap proxy's error curve (analysis.tolerance.PROXY) instead of trying orders
+    costly_orders: ClassVar[bool] = False
+
+    def states_per_order(self) -> int:
+        """First-order states per unit of ``r``: 2 for a second-order reduced model (r x r matrices,
+        2r states; the default), 1 for a first-order one (r states). Cost: none."""
+        return 2
+
+    def order_guess(self, tol: float, *, measure: str, scale: float) -> int | None:
+        """Hook: a first guess of the order ``r`` whose error meets ``tol`` (relative; ``scale`` the
+        absolute norm it is relative to, ``measure`` one of "band", "h2", "hinf"), from what this
+        reducer has already computed (e.g. Hankel singular values), or None (default: no guess).
+        A guess only steers :class:`~morsuite.analysis.tolerance.ToleranceSearch`; every order it
+        returns is verified. Cost: at most the r-independent work the first reduction pays anyway."""
+        return None
+
+    def continue_from(self, rom) -> bool:
+        """Hook: start the next :meth:`reduce` from ``rom``, an earlier result of this reducer at a
+        smaller or larger order (continuation in r: its poles and residue directions as the next
+        interpolation data); True when the reducer uses it (default False: nothing to continue).
+        Cost: none here; the next reduction's."""
+        return False
+
+    def _continued_record(self):
+        """Hook: what ``info["continued_from"]`` says of the last call's start (``{"order", "states"}`` of the
+        model it continued from), None for a fresh start (the default)."""
+        return None
+
     def get_params(self) -> dict:
         """Options as plain data (arrays as lists), as recorded in ``info``."""
         return {k: to_plain(v) for k, v in self.options.items()}
@@ -248,7 +278,11 @@ class Reducer:
         order r + k (N + 2k states for a first-order model), ``info["r_flexible"]``,
         ``info["rigid_modes"]`` (their count and detection record: its LU is the model's,
         paid once and not in ``lu_count``), ``stable`` of the flexible part (the rigid poles at
-        0 are kept by design), and ``rom.flexible`` the flexible part's reduced model.
+        0 are kept by design), and ``rom.flexible`` the flexible part's reduced model. A model whose
+        rigid-body detection failed or is incomplete is reduced as detected, with a warning,
+        ``info["rigid_modes"]`` (the detection's ``status`` and ``reason``) and, where the method
+        said ``converged`` or ``direct``, status ``detection-failed`` (the method's own in
+        ``method_status``; :mod:`morsuite.reducers.outcome`).
         """
         r = self._validate_r(r)
         self._warnings = []
@@ -270,11 +304,19 @@ class Reducer:
             info.setdefault("stable", bool(rom.is_stable()))
             rom = with_rigid(self.model, rom)
             rigid = {"rigid_modes": self._rigid.summary(), "r_flexible": int(rom.flexible.order)}
+        detection = self._rigid.info.get("status", "ok")
+        if detection != "ok":  # the detection failed or is incomplete: said, recorded, never converged
+            rigid.setdefault("rigid_modes", self._rigid.summary())
+            self.warn(f"{self.name}: rigid-body detection on {self.model.name} {detection}: "
+                      f"{self._rigid.info.get('reason')}", ConvergenceWarning)
         base = {"method": self.name, "model": self.model.name, "r_requested": r,
                 "r": int(rom.order), "kind": rom.kind, "states": int(rom.states),
                 "time_s": elapsed, **rigid}
         base.update(info)
         complete_outcome(base)  # status <-> converged, lu_count, lu_count_shared (reducers.outcome)
+        if detection != "ok" and base["status"] in CONVERGED_STATUSES:
+            base.update(method_status=base["status"], status="detection-failed", converged=False,
+                        status_reason=f"rigid-body detection {detection}: {self._rigid.info.get('reason')}")
         check_outcome(base, self.name)
         base.setdefault("iterations", 0)
         if "stable" not in base:
@@ -286,6 +328,7 @@ class Reducer:
             self.warn(solves.message(), AccuracyWarning)
         if self.saddle_lu and hasattr(self.fom, "lu_analysis"):  # the sparse LU backend of the model's solvers
             base["lu_backend"] = self.fom.lu_analysis()
+        base["continued_from"] = self._continued_record()
         base["warnings"] = list(self._warnings)
         base["options"] = self.get_params()
         return Reduction(rom=rom, info=to_plain(base))

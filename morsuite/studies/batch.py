@@ -1,7 +1,8 @@
 """Several studies computed together on worker processes, one core each, before their reports.
 
-``morsuite run A.toml B.toml ... --jobs 2`` (the command line's default on two or more
-cores) first computes what any of the studies lacks, all at once, with :func:`shared_compute`:
+``morsuite run A.toml B.toml ... --jobs N`` (N > 1; by default the usable cores as far as
+memory holds them, :func:`~morsuite.studies.workers.default_jobs`) first computes what any of
+the studies lacks, all at once, with :func:`shared_compute`:
 
 - every artifact is planned per study (:func:`~morsuite.studies.plan.build_plan`) and keyed by
   content, so what several studies or scenes share (a reduced model of the same model,
@@ -9,8 +10,8 @@ cores) first computes what any of the studies lacks, all at once, with :func:`sh
   full-model simulation) is one unit of work, done once;
 - units run on ``jobs`` worker processes, each pinned to a core of its own (so the
   reducers' automatic thread counts, e.g. IRKA's ``solver_threads``, resolve to 1: every
-  timing of such a run is a single-threaded run on a core of its own, the other core
-  running another single-threaded unit; the manifest records this as ``shared_compute``);
+  timing of such a run is a single-threaded run on a core of its own, the other cores
+  running other single-threaded units; the manifest records this as ``shared_compute``);
 - a reducer group's orders run in increasing order on one reducer instance, as in a study's
   own graph, except for reducers with no r-independent work (``irka``) or a small one
   (``irka-projected``: its projector), whose orders are split into chunks
@@ -57,6 +58,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .plan import build_plan
+from .unit_times import previous_times as _previous_times, report_estimate as _report_estimate
 from .workers import terminate_on_exit, usable_cores, watch_parent
 
 __all__ = ["Shared", "shared_compute", "split_claims", "SPLIT", "usable_cores"]
@@ -146,30 +148,6 @@ class _Unit:
     gramians: bool = False    # reads the model's Gramian factors (GRAMIAN_READERS, the H2 norms)
 
 
-def _previous_times(out: Path) -> dict:
-    """(model name, reducer, options JSON, r) -> time (s) of the reductions, and
-    ("norm", model, reducer, options, r, kind) of the error norms, in the manifests under ``out``."""
-    times = {}
-    for path in sorted(Path(out).glob("*/manifest.json")):
-        try:
-            arts = json.loads(path.read_text()).get("artifacts") or []
-        except (OSError, ValueError):
-            continue
-        arts = [a for a in arts if isinstance(a, dict)]
-        opts = {a.get("id"): json.dumps(a.get("options"), sort_keys=True) for a in arts if a.get("kind") == "reduction"}
-        for a in arts:
-            if a.get("kind") == "reduction" and a.get("reducer"):
-                k = (a.get("model"), a["reducer"], opts[a.get("id")], a.get("r_requested"))
-            elif a.get("kind") == "norm_error" and a.get("reduction") in opts:
-                k = ("norm", a.get("model"), a.get("reducer"), opts[a["reduction"]], a.get("r_requested"), a.get("norm"))
-            else:
-                continue
-            t = a.get("wall_s") or a.get("time_s")
-            if isinstance(t, (int, float)):
-                times[k] = max(times.get(k, 0.0), float(t))
-    return times
-
-
 def _units(plans, cache, prev):
     """The units of work the plans lack, deduplicated by content, with their dependencies."""
     cache_root = str(cache.root)
@@ -239,6 +217,20 @@ def _units(plans, cache, prev):
                           keys={r: ng.keys[r] for r in part}, rom_from=[(src, {r: red.keys[r] for r in part})],
                           label=f"{ng.kind} errors {red.method.reducer} {red.model.name} r = {part}",
                           gramians=ng.kind == "h2"))
+    for plan in plans:
+        for t in plan.tolerances.values():
+            uid = "tolerance-" + t.key
+            if uid in units or have("tolerance", t.key):
+                continue
+            fkey = plan.foms[t.fom].key if t.fom else None
+            add(_Unit(uid, "morsuite.studies.tolerance:tolerance_search",
+                      (t.model.source, t.method.reducer, t.method.options, t.settings, t.norm_options, t.key, None,
+                       fkey, cache_root, RUN_BY), "tolerance", t.model.model_id,
+                      prev.get(("tolerance", t.key), float("inf")), keys={None: t.key},
+                      label=f"tolerance {t.method.reducer} {t.model.name} ({t.settings['error']} "
+                            f"{', '.join(f'{x:g}' for x in t.settings['tol'])})",
+                      gramians=t.method.reducer in GRAMIAN_READERS or t.settings["error"] == "h2",
+                      deps={f"fom-{fkey}"} if fkey and f"fom-{fkey}" in units else set()))
     # a model's error norms wait for their reductions
     for u in units.values():
         if u.kind == "norm_error":
@@ -309,7 +301,8 @@ def _store(cache, shared, u, value):
         shared.fresh.add((u.kind, key))
 
 
-def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, run_kwargs=None) -> Shared:
+def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, run_kwargs=None,
+                   jobs_rule=None) -> Shared:
     """Compute what ``studies`` lack, all at once, on ``jobs`` pinned worker processes (module docstring).
 
     Parameters
@@ -326,6 +319,9 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, 
         (figures and tables while other units still compute), with its share of what was
         computed (:func:`split_claims`); the results folder's index and ``run.json`` (the run's
         record below) are written at the end.
+    jobs_rule : dict or None
+        How ``jobs`` was chosen (:func:`~morsuite.studies.workers.default_jobs`' record), kept in the
+        record; None: given by the caller.
 
     Returns
     -------
@@ -339,7 +335,8 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, 
     n_units = len(units)
     shared = Shared(jobs)
     cores = usable_cores()
-    shared.record = {"jobs": jobs, "cores": cores, "pinned": True, "units": n_units, "run_by": RUN_BY}
+    shared.record = {"jobs": jobs, "cores": cores, "pinned": True, "units": n_units, "run_by": RUN_BY,
+                     "jobs_rule": jobs_rule if jobs_rule is not None else "given"}
     log, owners = [], {}
     if run_kwargs is not None and not units:  # all cached: the reports in this process, as without workers
         from .runner import run
@@ -451,6 +448,7 @@ def _claims(plan) -> list:
     out += [("model_norm", n.key) for n in plan.norms.values()]
     out += [("norm_error", g.keys[r]) for g in plan.norm_groups.values() for r in g.rs]
     out += [("simulation", s.key) for s in plan.sims.values()]
+    out += [("tolerance", t.key) for t in plan.tolerances.values()]
     return out
 
 
@@ -484,11 +482,3 @@ def _run_study(path, kwargs, shared):
         if pinned is not None:
             os.sched_setaffinity(0, pinned)
     return {"name": study.name, "timing": res.manifest["timing"], "files": len(res.files)}
-
-
-def _report_estimate(out, name) -> float:
-    """The last run's ``report_s`` of study ``name`` under ``out`` (inf when unknown)."""
-    try:
-        return float(json.loads((Path(out) / name / "manifest.json").read_text())["timing"]["report_s"])
-    except (OSError, ValueError, KeyError, TypeError):
-        return float("inf")

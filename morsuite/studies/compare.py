@@ -30,6 +30,7 @@ from ..errors import InputError
 from ..modelfiles import is_model_path
 from ..utils import atomic_write_text
 from .checks import suggest
+from .tol_options import TOL_MEASURES
 
 __all__ = ["METHODS", "DEFAULT_METHODS", "INPUTS", "compare_spec", "compare", "to_toml", "verdict_lines", "verdict_row",
            "rigid_line"]
@@ -74,8 +75,10 @@ def _file_band(fom) -> tuple:
     return default_band(lo, hi, 0.0)
 
 
-def compare_spec(model: str, states, methods=None, band=None, input=None, name=None) -> dict:
-    """The study (a dict, as its TOML reads) comparing ``methods`` on ``model`` at ``states``.
+def compare_spec(model: str, states=None, methods=None, band=None, input=None, name=None, *, tol=None,
+                 error: str = "band", budget_lus=None, budget_s=None, max_states=None, save_roms: bool = False) -> dict:
+    """The study (a dict, as its TOML reads) comparing ``methods`` on ``model`` at ``states`` and/or by the
+    smallest model within each tolerance of ``tol``.
 
     Parameters
     ----------
@@ -95,6 +98,12 @@ def compare_spec(model: str, states, methods=None, band=None, input=None, name=N
         ``step``, ``impulse``, ``chirp`` or a CSV file (t, u1..um): adds a time scene per N.
     name : str, optional
         The study's name (its output folder); default ``compare_`` and the model's name.
+    tol : sequence of float, optional
+        Relative tolerances in (0, 1): a ``tolerance`` scene first (:mod:`morsuite.studies.tol_options`),
+        each method's smallest model meeting each (``error``: ``band``, ``h2`` or ``hinf``), searched
+        within ``budget_lus`` / ``budget_s`` per method and ``max_states``; ``save_roms`` writes the chosen
+        models (.npz, .mat, .json) into the study's ``roms/`` folder. At least one of ``states`` and
+        ``tol`` is needed.
 
     Raises
     ------
@@ -112,11 +121,22 @@ def compare_spec(model: str, states, methods=None, band=None, input=None, name=N
             raise InputError(f"--methods: unknown method {m!r}{suggest(m, METHODS)}; valid: {', '.join(METHODS)}")
     if len(set(methods)) != len(methods):
         raise InputError(f"--methods: a method is named twice in {methods}")
+    if not states and not tol:
+        raise InputError("give --states N ... (a comparison at those sizes) or --tol TOL ... (the smallest model "
+                         "within each tolerance), or both")
+    if error not in TOL_MEASURES:
+        raise InputError(f"--error: expected one of {', '.join(TOL_MEASURES)}; got {error!r}")
+    tols = sorted({float(t) for t in (tol or [])}, reverse=True)
+    if any(not (0 < t < 1) for t in tols):
+        raise InputError(f"--tol: expected relative tolerances in (0, 1); got {tol}")
+    for flag, v in (("--budget-lus", budget_lus), ("--budget-s", budget_s), ("--max-states", max_states)):
+        if v is not None and not (v > 0):
+            raise InputError(f"{flag}: expected a positive number; got {v}")
     try:
         fom = models.parse(str(model))
     except (InputError, OSError, ValueError) as exc:
         raise InputError(f"MODEL {str(model)!r} cannot be read: {exc}") from exc
-    states = sorted(set(int(n) for n in states))
+    states = sorted(set(int(n) for n in (states or [])))
     second = [m for m in methods if METHODS[m][2] == 2]
     for n in states:
         if n < (2 if second else 1):
@@ -142,12 +162,13 @@ def compare_spec(model: str, states, methods=None, band=None, input=None, name=N
         source = str(Path(source).expanduser().resolve())
     name = name or _slug("compare_" + fom.name.replace("(", "_").replace(")", "").replace("=", ""))
 
-    spec = {"name": name, "title": f"{fom.name}: " + ", ".join(methods) + " at " +
-            ", ".join(str(n) for n in states) + " states",
+    asked = ([f"the smallest model within {', '.join(f'{t:g}' for t in tols)} ({error} error)"] if tols else []) + \
+        ([", ".join(str(n) for n in states) + " states"] if states else [])
+    spec = {"name": name, "title": f"{fom.name}: " + ", ".join(methods) + ": " + "; ".join(asked),
             "description": f"Written by morsuite compare: {len(methods)} methods on {fom.name} (n1 = {fom.n1}, "
-                           f"n2 = {fom.n2}) at equal first-order states {states}; band [{band[0]:.3g}, "
-                           f"{band[1]:.3g}] rad/s; exact H2 and Hinf errors of every reduction.",
-            "norms": ["h2", "hinf"], "models": {"model": source},
+                           f"n2 = {fom.n2}): " + "; ".join(asked) + f"; band [{band[0]:.3g}, {band[1]:.3g}] rad/s"
+                           + ("; exact H2 and Hinf errors of every reduction at those sizes." if states else "."),
+            "norms": ["h2", "hinf"] if states else [], "models": {"model": source},
             "grids": {"band": {"band": band, "n": 200}},
             # the H-infinity searches sample the band response's grid too: one memo of T(jw), no second LU
             # and refine only the maxima that may beat the best peak found, sample only the resonances
@@ -168,6 +189,15 @@ def compare_spec(model: str, states, methods=None, band=None, input=None, name=N
         return (rs if len(rs) > 1 else rs[0]), other
 
     aliases = [_alias(m) for m in methods]
+    if tols:
+        extra = {k: v for k, v in (("budget_lus", budget_lus), ("budget_s", budget_s), ("max_states", max_states))
+                 if v is not None}
+        spec["scenes"].append({"name": "to_reach", "kind": "tolerance", "model": "model", "methods": aliases,
+                               **({"grid": "band"} if error == "band" else {}), "tol": tols, "error": error,
+                               **{k: (int(v) if k != "budget_s" else float(v)) for k, v in extra.items()},
+                               **({"save_roms": True} if save_roms else {}),
+                               "title": f"{fom.name}: the smallest model within "
+                                        f"{', '.join(f'{t:g}' for t in tols)} ({error} error)"})
     for n in states:
         r, other = orders([n])
         extra = {"r_by_method": other} if other else {}
@@ -185,6 +215,8 @@ def compare_spec(model: str, states, methods=None, band=None, input=None, name=N
                                    **extra, "input": _input(input),
                                    "title": f"{fom.name}: {input if input in INPUTS else 'measured input'}, "
                                             f"{n} states"})
+    if not states:
+        return spec
     r, other = orders([states[-1]])
     spec["scenes"].append({"name": f"modes_{states[-1]}", "kind": "modes", "model": "model", "grid": "band",
                            "methods": aliases, "r": r, **({"r_by_method": other} if other else {}),
@@ -251,10 +283,37 @@ def to_toml(spec: dict, relative_to=None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def verdict_lines(result) -> list:
-    """What ``morsuite compare`` prints: per table, a row per method (states, flags, errors, time)
-    and the table's verdict."""
+def tolerance_lines(result) -> list:
+    """What ``morsuite compare --tol`` prints: per tolerance scene, a row per tolerance and method (status,
+    states, error, the next smaller model's states and error, LUs, time) and the headline."""
+    from .tolerance_scene import headline, tolerance_rows
+
     out = []
+    for scene in result.study.scenes:
+        if scene.kind != "tolerance":
+            continue
+        rows = tolerance_rows(scene, result.study, result.results)
+        out.append(f"== {scene.title or scene.name}")
+        out.append(f"{'tol':>8} {'method':<16}{'status':>9} {'states':>7} {'error':>11} {'smaller':>8} "
+                   f"{'its error':>11} {'LUs':>6} {'time (s)':>9}")
+        for r in rows:
+            def num(v, f):
+                return "" if v is None else format(v, f)
+            out.append(f"{r['tol']:>8.3g} {r['method']:<16}{r['status']:>9} {num(r['states'], 'd'):>7} "
+                       f"{num(r['error'], '.4g'):>11} {num(r['smaller_states'], 'd'):>8} "
+                       f"{num(r['smaller_error'], '.4g'):>11} {num(r['lu_count'], 'd'):>6} "
+                       f"{num(r['time_s'], '.3g'):>9}")
+        out.append(headline(rows, {m: m for m in scene.methods}))
+        out.append("")
+    return out
+
+
+def verdict_lines(result) -> list:
+    """What ``morsuite compare`` prints: the tolerance scenes' rows and headlines (:func:`tolerance_lines`),
+    then per table a row per method (states, flags, errors, time) and the table's verdict."""
+    out = tolerance_lines(result)
+    if not any(scene.kind == "table" for scene in result.study.scenes):
+        return out
     for scene in result.study.scenes:
         if scene.kind != "table":
             continue
@@ -294,12 +353,14 @@ def verdict_row(r: dict) -> str:
 
 
 def _table_note(result, name) -> str:
+    """The table's verdict (its note, :func:`morsuite.studies.scenes._verdict`: ranked at equal states and
+    above the floors only, ties at the rounding level said as ties), as its Markdown file holds it."""
     md = result.outdir / f"{name}.md"
     try:
         lines = md.read_text().splitlines()
     except OSError:
         return ""
-    return next((ln for ln in lines if "Smallest error" in ln), "")
+    return next((ln for ln in lines if ln.strip() and not ln.startswith(("#", "|"))), "")
 
 
 def rigid_line(model: str) -> str | None:
@@ -319,8 +380,13 @@ def rigid_line(model: str) -> str | None:
             "errors and norms are the flexible part's") if rigid.k else None
 
 
-def compare(model, states, methods=None, band=None, input=None, out="results", name=None, quiet=False):
-    """Build, write and run the comparison study (see :func:`compare_spec`); returns ``(RunResult, toml_path)``.
+def compare(model, states=None, methods=None, band=None, input=None, out="results", name=None, quiet=False, *,
+            jobs: int = 1, **tolerance):
+    """Build, write and run the comparison study (see :func:`compare_spec`; ``tolerance``: its keyword
+    arguments ``tol``, ``error``, ``budget_lus``, ``budget_s``, ``max_states``, ``save_roms``); returns
+    ``(RunResult, toml_path)``. ``jobs`` > 1 computes the study's units on that many pinned worker
+    processes first (:func:`~morsuite.studies.batch.shared_compute`, as ``morsuite run`` does), then
+    writes its report in this process.
 
     The spec is validated in full before anything is written, so a refused argument leaves
     nothing behind. The TOML goes to ``out/NAME/NAME.toml`` (atomically; file paths in it
@@ -335,7 +401,7 @@ def compare(model, states, methods=None, band=None, input=None, out="results", n
     from .runner import run
     from .spec import load_spec, study_from_dict
 
-    spec = compare_spec(model, states, methods, band, input, name)
+    spec = compare_spec(model, states, methods, band, input, name, **tolerance)
     study_from_dict(spec, source="morsuite compare")      # every check before anything is written
     out = Path(out)
     folder = out / spec["name"]
@@ -345,7 +411,15 @@ def compare(model, states, methods=None, band=None, input=None, out="results", n
     folder.mkdir(parents=True, exist_ok=True)
     atomic_write_text(path, to_toml(spec, relative_to=folder))
     try:
-        result = run(load_spec(path, memo=SpecMemo(Cache(out / ".cache"))), out=out, quiet=quiet)
+        cache = Cache(out / ".cache")
+        memo = SpecMemo(cache)
+        study = load_spec(path, memo=memo)
+        shared = None
+        if jobs > 1:
+            from .batch import shared_compute, split_claims
+            memo.flush()
+            shared = split_claims([study], shared_compute([study], cache, jobs, out=out, quiet=quiet))[0]
+        result = run(study, out=out, quiet=quiet, shared=shared)
     except BaseException:
         if old is not None:
             atomic_write_text(path, old)

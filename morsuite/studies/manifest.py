@@ -61,7 +61,7 @@ def _artifacts(plan, res) -> list:
                          "r_requested": r, "grid": list(plan.foms[mg.fom].bounds), "fom": mg.fom,
                          "reduction": f"{mg.reduce}/r{r}", "key": mg.keys[r], "cached": bool(e.get("cached")),
                          "time_s": e.get("time_s"), "error": e.get("error")})
-    arts += _norm_artifacts(plan, res) + _time_artifacts(plan, res)
+    arts += _norm_artifacts(plan, res) + _time_artifacts(plan, res) + _tolerance_artifacts(plan, res)
     for a in arts:
         a["reused"] = a["cached"]
     return arts
@@ -91,6 +91,22 @@ def _norm_artifacts(plan, res) -> list:
                          "reducer": red.method.reducer, "norm": g.kind, "r_requested": r,
                          "reduction": f"{g.reduce}/r{r}", "model_norm": g.norm, "key": g.keys[r],
                          "cached": bool(e.get("cached")), **{k: e.get(k) for k in _NORM_FIELDS}})
+    return arts
+
+
+def _tolerance_artifacts(plan, res) -> list:
+    """A record per tolerance search: its settings, every order it evaluated, one outcome per tolerance."""
+    arts = []
+    for tid, t in plan.tolerances.items():
+        e = res._tol.get(tid, {})
+        search = e.get("search") or {}
+        arts.append({"id": tid, "kind": "tolerance", "model": t.model.name, "reducer": t.method.reducer,
+                     "options": t.method.full_options, "settings": t.settings, "norm_options": t.norm_options,
+                     "fom": t.fom, "scenes": t.scenes, "key": t.key, "cached": bool(e.get("cached")),
+                     "time_s": e.get("time_s"), "lus": search.get("lus"), "scale": search.get("scale"),
+                     "outcomes": search.get("outcomes"), "candidates": search.get("candidates"),
+                     "warnings": e.get("warnings"), "error": e.get("error"), "scheduler": e.get("scheduler"),
+                     "host": e.get("host"), "created": e.get("created")})
     return arts
 
 

@@ -29,7 +29,7 @@ choices. Example::
     r = 30                               # int, list, or { from = 2, to = 40, step = 2 }
     # r_by_method = { irka_fo = 60 }     # other orders for some methods (first-order ROMs at 2r states)
     error = "abs"
-    paper_csv = "../shared/paper_figures/dsms_r30_abs_error_irka.csv"
+    paper_csv = "studies/paper_figures/dsms_r30_abs_error_irka.csv"
 
 Exact error norms (:mod:`morsuite.studies.norms`) are computed only where asked: the
 top-level ``norms = ["h2", "hinf"]`` (every reduction of the study; summary columns),
@@ -337,12 +337,20 @@ def _scene_entry(ctx, i, table, study_models, grids, methods, root):
         ctx.fail(f"{where}.methods", f"duplicate method in {mlist!r}")
     if len(mlist) < spec.min_methods:
         ctx.fail(f"{where}.methods", f"a {kind!r} scene needs at least {spec.min_methods} methods; got {mlist!r}")
-    if "r" not in table:
-        ctx.fail(where, "missing key 'r'")
-    rs = _r_values(ctx, f"{where}.r", table["r"])
-    if spec.one_r and len(rs) != 1:
-        ctx.fail(f"{where}.r", f"a {kind!r} scene shows one reduced order; got r = {list(rs)}")
-    by_method = _r_by_method(ctx, f"{where}.r_by_method", table.get("r_by_method", {}), mlist, spec, kind)
+    if not spec.needs_r:
+        for key in ("r", "r_by_method"):
+            if key in table:
+                ctx.fail(f"{where}.{key}", f"a {kind!r} scene finds its orders itself; remove {key!r}")
+        if kind == "tolerance" and "tol" not in table:
+            ctx.fail(where, "missing key 'tol' (a relative tolerance in (0, 1), or a list of them)")
+        rs, by_method = (), {}
+    else:
+        if "r" not in table:
+            ctx.fail(where, "missing key 'r'")
+        rs = _r_values(ctx, f"{where}.r", table["r"])
+        if spec.one_r and len(rs) != 1:
+            ctx.fail(f"{where}.r", f"a {kind!r} scene shows one reduced order; got r = {list(rs)}")
+        by_method = _r_by_method(ctx, f"{where}.r_by_method", table.get("r_by_method", {}), mlist, spec, kind)
     params = {}
     for key, (default, check) in spec.keys.items():
         if key in ("r", "grid", "paper_csv"):
@@ -362,8 +370,8 @@ def _scene_entry(ctx, i, table, study_models, grids, methods, root):
         grid = table.get("grid", DEFAULT_GRID)
         ctx.ref(f"{where}.grid", grid, grids, "grid")
     elif "grid" in table and spec.uses_grid:
-        ctx.fail(f"{where}.grid", f"measure {params.get('measure')!r} is a norm over the whole frequency axis "
-                                  "and uses no grid; remove 'grid'")
+        what = f"error {params.get('error')!r}" if kind == "tolerance" else f"measure {params.get('measure')!r}"
+        ctx.fail(f"{where}.grid", f"{what} is a norm over the whole frequency axis and uses no grid; remove 'grid'")
     title = table.get("title", "")
     ctx.string(f"{where}.title", title, empty=True)
     paper = {}
@@ -444,7 +452,7 @@ def study_from_dict(data: dict, *, path=None, source: str | None = None, memo=No
     models = {a: _model_entry(ctx, a, data["models"][a], root, memo) for a in data["models"] if a in used}
     for i, s in enumerate(scenes):
         order = models[s.model].order
-        if s.rs[-1] > order:
+        if s.rs and s.rs[-1] > order:
             ctx.fail(f"scenes[{i}] ({s.name!r}).r", f"r = {s.rs[-1]} exceeds the order n1 - n2 = {order} "
                                                     f"of model {s.model!r} ({models[s.model].name})")
         for alias, rs in s.r_by_method.items():

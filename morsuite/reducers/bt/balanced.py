@@ -83,8 +83,9 @@ shifts, rank, columns, LUs reused and dropped, ``shift_reuse``, ``lu_pool_mib``,
 ``compress_tol``),
 ``compress_tol`` (the column compression used: option ``compress_tol``, by default 0 below
 :attr:`BT.COMPRESS_MIN_N1` positions and :attr:`BT.COMPRESS_AUTO_TOL` from there on, where the
-plain factors no longer fit in memory; a compressed factor cannot serve the exact H2 error's
-error-Gramian route, which then runs its own LR-ADI),
+plain factors may no longer fit in memory; a factor is compressed only once it exceeds lradi's
+``compress_from_mib``, 1024 MiB, and ``info["adi"]`` records its ``compressions``; a compressed
+factor cannot serve the exact H2 error's error-Gramian route, which then runs its own LR-ADI),
 ``adi_iterations``, ``residual_history``, ``factor_ranks``,
 ``lu_count`` (the LR-ADI's LUs when this call ran it, else 0), ``lu_count_shared`` (the
 LR-ADI's LUs, whoever paid them), ``time_breakdown`` (adi, of which lu, solves, shifts; svd;
@@ -146,6 +147,26 @@ class SquareRootBT(Reducer):
         """Largest admissible r: :math:`2(n_1 - n_2)` states for ``form="first-order"``, else :math:`n_1 - n_2`."""
         order = self.fom.order
         return 2 * order if self.options["form"] == "first-order" else order
+
+    def states_per_order(self) -> int:
+        """1 for ``form="first-order"`` (r counts states), else 2 (a second-order model of order r)."""
+        return 1 if self.options["form"] == "first-order" else 2
+
+    def order_guess(self, tol: float, *, measure: str, scale: float) -> int | None:
+        r"""The smallest order whose first discarded Hankel singular value is at most ``tol * scale``:
+        :math:`N = \min\{N : \sigma_{N+1} \le \text{tol}\cdot\text{scale}\}` states (r = N, or
+        :math:`\lceil N/2\rceil` for a second-order level). A guess, not a bound (the first-order
+        bound is :math:`2\sum_{k>N}\sigma_k`). Cost: the Gramian factors when they do not exist yet (what
+        the first reduction pays anyway; it then reports them as reused shared work)."""
+        if getattr(self, "_gram", None) is None:
+            self._gramians()
+        hsv = np.asarray(self._svd("fo")[1])
+        if hsv.size == 0 or not (scale > 0):
+            return None
+        above = np.flatnonzero(hsv > tol * scale)
+        n = int(above[-1]) + 1 if above.size else 1
+        n = max(1, min(n, hsv.size))
+        return n if self.options["form"] == "first-order" else max(1, -(-n // 2))
 
     def _validate_r(self, r):
         if self.options["form"] == "first-order" and isinstance(r, Integral) and not isinstance(r, bool) \
@@ -330,8 +351,8 @@ class BT(SquareRootBT):
                                "directions below compress_tol times the factor's largest singular value are "
                                "dropped (0: none); None (default): 0 below COMPRESS_MIN_N1 positions (the exact "
                                "H2 error's error-Gramian route shares uncompressed factors), COMPRESS_AUTO_TOL "
-                               "from there on (tcom at n1 = 1e6: about 1300 columns per factor, 42 GB plain); "
-                               "the value used is info['compress_tol']", low=0, high=1, open_high=True,
+                               "from there on (tcom at n1 = 1e6: about 1300 columns per factor, 42 GB plain), "
+                               "applied once a factor exceeds 1024 MiB; the value used is info['compress_tol']", low=0, high=1, open_high=True,
                                nullable=True),
         "gramian_cache": Option("model", "choice", "where the LR-ADI factors are kept: in the model's cache, "
                                 "shared with every bt reducer and analysis.h2_norm / h2_error on the same model "

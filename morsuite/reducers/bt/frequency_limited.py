@@ -81,8 +81,12 @@ quadrature plus bt's LR-ADI (lock-step, both equations).
 change; None with fixed nodes), ``quad_tol``, ``lu_count`` (the LUs this call paid:
 ``nodes_evaluated``, plus the LR-ADI's with ``limited="controllability"``, on the first
 call, 0 after), ``lu_count_shared`` (the same count, whoever paid it),
-``factor_ranks`` (after compression), ``factor_columns`` (before), ``hsv`` (band Hankel
-singular values), ``time_breakdown`` (quadrature, with the LR-ADI if any, of which lu,
+``factor_ranks`` (after compression), ``factor_columns`` (before), ``hsv`` (the singular
+values of the pair balanced: with ``limited="controllability"``, the default, those of the
+band controllability Gramian and the full observability one, Enns' one-sided weighted
+values :math:`\sqrt{\lambda_i(P_\Omega Q)}`; with ``"both"`` the band Hankel singular values
+:math:`\sqrt{\lambda_i(P_\Omega Q_\Omega)}`, which the doubling test measures in either case),
+``time_breakdown`` (quadrature, with the LR-ADI if any, of which lu,
 solves, compression and products, over every level; svd; projection), ``setup_reused``, ``setup_cost`` (quadrature, svd).
 """
 

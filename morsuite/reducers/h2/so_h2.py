@@ -100,6 +100,7 @@ class SOH2(Reducer):
     :class:`~morsuite.rom.SecondOrderROM` of order r (2r states) with :math:`\\hat M = I`."""
 
     name = "so-h2"
+    costly_orders = True  # each order is a descent of its own: a tolerance search steers it by a proxy
 
     OPTIONS = {
         "start": Option("best", "choice", "start model: the best by exact H2 error of the candidates, or one "

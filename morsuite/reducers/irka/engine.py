@@ -59,12 +59,13 @@ from ...errors import (ConvergenceWarning, InputError, MorsuiteWarning, RankWarn
 from ...linalg.dense import shift_distance, sigma_max
 from ...rom import SecondOrderROM
 from ..base import Option, Reducer
+from .continuation import Continuation
 from .safeguards import (GUARD_CYCLES, GUARD_OPTIONS, ITERATE_CYCLE, CycleGuard, Shortlist, ban_culprit, ill_conditioned,
                          is_cycle, oblique_selection, orthonormal_basis, perturb_shifts, zero_transfer_error)
 from .score import iterate_scorer, score_cost
 from .shift_solves import raw_bases
-from .shift_update import (COMPLEX_TOL, UpdateSchedule, bt_rule, initial_shifts, relaxed_update, residue_rule,
-                           resolve_stage_stall, shifts_from_poles)
+from .shift_update import (UpdateSchedule, bt_rule, initial_shifts, relaxed_update, residue_rule, resolve_stage_stall,
+                           shifts_from_poles)
 
 __all__ = ["IRKABase"]
 
@@ -73,9 +74,9 @@ _HISTORY_KEYS = ("measure", "shift_change", "response_change", "criterion", "n_s
                  "refined", "gram_schmidt", "stable", "max_pole_real", "update", "mirrored", "step", "shifts")
 
 
-class IRKABase(Reducer):
+class IRKABase(Continuation, Reducer):
     """Shared IRKA iteration; subclasses say how V and W are computed and projected."""
-
+    costly_orders = True
     OPTIONS = {
         "tol": Option(1e-6, "float", "relative change of the matched shifts that counts as converged",
                       low=0, high=1, open_low=True, open_high=True),
@@ -312,6 +313,8 @@ class IRKABase(Reducer):
 
     def _initial(self, r):
         o, fom = self.options, self.fom
+        if (warm := self._take_warm()) is not None:
+            return self._continued(warm, r, lambda k: initial_shifts(k, fom.band, fom.m, fom.p))
         return initial_shifts(r, fom.band, fom.m, fom.p, init=o["init"], seed=o["seed"], shifts=o["init_shifts"],
                               b=o["init_b"], c=o["init_c"])
 

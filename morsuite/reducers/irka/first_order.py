@@ -259,6 +259,26 @@ class IRKAFO(SurrogatePhase, IRKA):
             self._bt = make("bt", self.fom)
         return self._bt
 
+    def states_per_order(self) -> int:
+        """1: r counts the first-order reduced model's states."""
+        return 1
+
+    def order_guess(self, tol: float, *, measure: str, scale: float) -> int | None:
+        """The start's BT guess (:meth:`~morsuite.reducers.bt.balanced.SquareRootBT.order_guess`; its Gramian
+        factors computed if needed, which the start pays anyway) with ``init="bt"``; None otherwise."""
+        if self.options["init"] != "bt":
+            return None
+        return self._bt_reducer().order_guess(tol, measure=measure, scale=scale)
+
+    #: its orders are steered by its BT start's Hankel singular values (order_guess), not a proxy
+    costly_orders = False
+
+    def continue_from(self, rom) -> bool:
+        """No continuation: the start at every order is the BT model of that order from the cached Gramian
+        factors (r-independent work, paid once), which measured the better start (the earlier model's poles
+        completed by BT's cycled where BT's converged: ``docs/design/tolerance.md``). Returns False."""
+        return False
+
     def _initial(self, r):
         o = self.options
         self._start = {"init": o["init"]}
