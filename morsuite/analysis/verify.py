@@ -13,8 +13,8 @@ band errors
     :func:`morsuite.analysis.errors`: the largest :math:`\sigma_{\max}(T - T_r)` (``band max
     error``), the largest :math:`\sigma_{\max}(T)` (``band peak``) and the largest pointwise
     relative error. The full model's response is sampled by
-    :func:`~morsuite.analysis.band_response` (one LU per frequency, the LU's value, as the
-    recorded one was) and refined in extended precision (:class:`~morsuite.norms._fom.FomResponse`):
+    :func:`~morsuite.analysis.band_response` (one LU per frequency; the LU's value, as the
+    recorded one was until 2026-12-02, kept in the model's memo) and refined in extended precision (:class:`~morsuite.norms._fom.FomResponse`):
     the refined :math:`T` is the reference, and :math:`\delta(\omega) = \sigma_{\max}(T_0 - T)`,
     the LU value's measured error, gives its level :math:`\rho = \max_\omega \delta(\omega) /
     \sigma_{\max}(T(j\omega))`. The recorded value came from an LU of another run (another
@@ -101,9 +101,11 @@ def _level(dH, s) -> float:
 
 def _band_rows(fom, rom, band) -> tuple[list, int]:
     omega = grid_omega(band["grid"])
-    H0, lus = band_response(fom, omega)  # the LU's values; refined ones kept in the model's memo
+    _, lus = band_response(fom, omega)  # the LUs; the LU's and the refined values kept in the model's memo
     ev = FomResponse(fom, refine=1, memo=True)
-    T = np.stack([np.asarray(ev.sample(1j * w)[1], dtype=complex) for w in omega])
+    samples = [ev.sample(1j * w) for w in omega]
+    H0 = np.stack([np.asarray(t[0], dtype=complex) for t in samples])  # the LU's values
+    T = np.stack([np.asarray(t[1], dtype=complex) for t in samples])
     rr = RomResponse(*first_order_arrays(fom, rom), refine=1)
     Tr = np.stack([np.asarray(rr.transfer(1j * w), dtype=complex) for w in omega])
     df = errors(fom, rom, omega, H_full=T)
