@@ -116,7 +116,7 @@ def product(ptr, idx, order, sr_h, sr_l, si_h, si_l, xr_h, xr_l, xi_h, xi_l, yr_
 @njit(inline="always")
 def dot2(s, c, a, x, sign):
     """One step of Ogita, Rump and Oishi's Dot2: ``(s', c')`` with :math:`s' + c'` carrying
-    :math:`s + \mathrm{sign}\,ax`, the product exact (TwoProd by ``fma``), the sum by ``two_sum``, both
+    :math:`s + \\mathrm{sign}\\,ax`, the product exact (TwoProd by ``fma``), the sum by ``two_sum``, both
     errors into ``c``."""
     p = a * x
     s, q = two_sum(s, sign * p)
