@@ -1,4 +1,4 @@
-"""Command line: ``morsuite run | compare | reduce | simulate | list | info | bench``."""
+"""Command line: ``morsuite run | compare | reduce | verify | simulate | list | info | bench``."""
 
 from __future__ import annotations
 
@@ -21,12 +21,8 @@ def _option_value(text):
     return _value(text)
 
 
-def _reduced(args):
-    """(fom, Reduction) of ``--model``, ``--method``, ``--r``, ``--option``; the reducer's warnings are
-    recorded in ``info["warnings"]`` (and not printed under ``--json``)."""
-    from . import models, reducers
-
-    fom = models.parse(args.model)
+def _options(args) -> dict:
+    """The reducer options of ``--option KEY=VALUE`` (repeatable)."""
     opts = {}
     for item in args.option or []:
         key, eq, val = item.partition("=")
@@ -37,6 +33,16 @@ def _reduced(args):
             opts.setdefault(group, {})[sub] = _option_value(val)
         else:
             opts[key] = _option_value(val)
+    return opts
+
+
+def _reduced(args):
+    """(fom, Reduction) of ``--model``, ``--method``, ``--r``, ``--option``; the reducer's warnings are
+    recorded in ``info["warnings"]`` (and not printed under ``--json``)."""
+    from . import models, reducers
+
+    fom = models.parse(args.model)
+    opts = _options(args)
     with warnings.catch_warnings():
         if args.json:
             warnings.simplefilter("ignore")  # they are recorded in info["warnings"]
@@ -94,7 +100,49 @@ def cmd_reduce(args) -> int:
         band=(out["max_abs_error"], float(df.sigma_full.max())),
         h2=(out["h2_rel_error"], 1.0), hinf=(out["hinf_rel_error"], 1.0))
     out["warnings"] = warned
+    if args.save:
+        out["saved"] = _save(args, fom, res, out, None if args.no_norms else norms, float(df.sigma_full.max()))
     _print(out, args.json)
+    return 0
+
+
+def _save(args, fom, res, out, norms, peak) -> list[str]:
+    """``reduce --save``: the reduced model's files and sidecar, with the errors as the command computed them."""
+    from .romfiles import ERROR_KEYS, provenance_of, save_rom
+
+    errs = {"max_abs_error": out["max_abs_error"], "max_rel_error": out["max_rel_error"], "band_peak": peak}
+    if norms is None:
+        errs["norms"] = "not computed (--no-norms)"
+    else:
+        errs.update({k: v for k, v in norms.items() if k in ERROR_KEYS})
+    prov = provenance_of(fom, args.method, _options(args), res.info, errs, grid=tuple(out["omega"]), source=args.model)
+    return [str(p) for p in save_rom(res.rom, args.save, provenance=prov)]
+
+
+def cmd_verify(args) -> int:
+    """``morsuite verify MODEL ROMFILE``: compute again the errors recorded in a saved reduced model's sidecar
+    (:func:`morsuite.analysis.verify.verify_rom`); print a table (or one JSON object with ``--json``);
+    exit 0 when every recorded value agrees within its stated accuracy, 1 when one does not (named)."""
+    from . import models
+    from .analysis.verify import table_lines, verify_rom
+    from .romfiles import load_rom
+
+    rom = load_rom(args.romfile)
+    fom = models.parse(args.model)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = verify_rom(fom, rom, norms=not args.no_norms)
+    result["warnings"] = [f"{w.category.__name__}: {w.message}" for w in caught] + result.pop("norm_warnings")
+    result.update(model=args.model, romfile=args.romfile)
+    if args.json:
+        _print(result, True)
+    else:
+        for w in result["warnings"]:
+            print(f"warning: {w}", file=sys.stderr)
+        print("\n".join(table_lines(result)))
+    if not result["agrees"]:
+        print(f"morsuite verify: {', '.join(result['failed'])} disagree", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -239,19 +287,26 @@ def _add_run_parser(sub):
         from .studies.batch import shared_compute
         from .studies.cache import Cache
         from .studies.memo import SpecMemo
-        from .studies.workers import sigterm_exits, usable_cores
+        from .studies.workers import default_jobs, sigterm_exits
 
         cache = Cache(args.cache or Path(args.out) / ".cache", read=not args.no_cache)
         memo = SpecMemo(cache)  # validated models/methods: a cached study builds no model
         studies = [load_spec(path, memo=memo) for path in args.specs]  # every spec is valid before anything runs
-        jobs = args.jobs if args.jobs is not None else 1 if args.scheduler else min(2, len(usable_cores()))
+        rule = None
+        if args.jobs is not None:
+            jobs = args.jobs
+        elif args.scheduler:
+            jobs = 1
+        else:  # the usable cores, bounded by memory (studies.workers.default_jobs)
+            rule = default_jobs(max((m.n1 for s in studies for m in s.models.values()), default=0))
+            jobs = rule["jobs"]
         if not args.dry_run and jobs > 1 and args.scheduler is None and not args.no_cache:
             # what any of the studies lacks computed once, then each study's report, on pinned workers
             memo.flush()
             with sigterm_exits():  # stopped, the run stops its workers (studies.workers)
                 shared_compute(studies, cache, jobs, out=args.out, quiet=args.quiet,
                                run_kwargs={"out": args.out, "cache_dir": args.cache, "quiet": args.quiet,
-                                           "rerender": args.rerender})
+                                           "rerender": args.rerender}, jobs_rule=rule)
             return 0
         for study in studies:
             if args.dry_run:
@@ -267,7 +322,8 @@ def _add_run_parser(sub):
     p.add_argument("specs", nargs="+", metavar="SPEC", help="study spec files, e.g. studies/paper_*.toml")
     p.add_argument("--out", default="results", metavar="DIR", help="results root (default: results)")
     p.add_argument("--jobs", type=int, default=None, metavar="N",
-                   help="worker processes, each pinned to a core (default: the usable cores, at most 2); "
+                   help="worker processes, each pinned to a core (default: the usable cores, as many as the "
+                        "available memory holds: morsuite.studies.workers.default_jobs); "
                         "with N > 1 what the studies lack is computed once, side by side, before their reports "
                         "(morsuite.studies.batch); 1: one study after the other on Dask's synchronous scheduler")
     p.add_argument("--scheduler", metavar="ADDRESS", help="dask.distributed scheduler, e.g. tcp://HOST:8786")
@@ -386,8 +442,18 @@ def build_parser():
     p.add_argument("--no-norms", action="store_true",
                    help="skip the H2 and Hinf errors (printed as null); they cost the model's Gramian "
                         "factors once and up to a few hundred sparse LUs")
+    p.add_argument("--save", metavar="PATH",
+                   help="write the reduced model as PATH.npz, PATH.mat and the sidecar PATH.json (morsuite.romfiles)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_reduce)
+    p = sub.add_parser("verify", help="compute again the errors recorded with a saved reduced model; exit 1 "
+                                      "when one disagrees")
+    p.add_argument("model", help=MODEL_HELP)
+    p.add_argument("romfile", help="the saved reduced model: STEM.npz, STEM.mat, STEM.json or STEM")
+    p.add_argument("--no-norms", action="store_true", help="check the band errors only (the H2 and Hinf "
+                                                             "errors cost the Gramian factors and up to a few hundred LUs)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_verify)
     _add_simulate_parser(sub)
     _add_bench_parser(sub)
     _add_run_parser(sub)

@@ -190,3 +190,21 @@ def test_partial_convergence_of_the_modes_is_a_status(monkeypatch):
         capped = ms.reducers.make("modal", fom, maxiter=1).reduce(8)
     assert capped.info["status"] == "partial" and not capped.info["converged"] and capped.info["warnings"]
     assert capped.info["options"]["maxiter"] == 1
+
+
+def test_cutoff_selection_keeps_every_mode_up_to_the_factor():
+    """selection='cutoff' (the engineers' rule): the modes below cutoff x the band's upper end, no more; r caps them."""
+    fom = ms.models.tcom(nc=30)
+    w_ref, _ = dense_modes(fom)
+    w2 = 0.4
+    for c in (1.0, 2.5):
+        expect = np.sort(w_ref[(w_ref > 0) & (w_ref <= c * w2)])
+        red = ms.reducers.make("modal", fom, selection="cutoff", cutoff=c, band=[0.01, w2], static_correction=False)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = red.reduce(fom.order - 1)
+        assert_sets_close(np.asarray(res.info["omega"]), expect, rtol=1e-8, what="modes below the cutoff")
+        assert res.rom.order == expect.size
+    capped = ms.reducers.make("modal", fom, selection="cutoff", cutoff=2.5, band=[0.01, w2],
+                              static_correction=False).reduce(3)
+    assert capped.rom.order == 3 and np.allclose(np.asarray(capped.info["omega"]), expect[:3], rtol=1e-8)

@@ -11,6 +11,7 @@ References, independent of the code under test:
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import warnings
@@ -90,7 +91,8 @@ def test_band_tolerance_met_and_the_next_smaller_misses_against_a_dense_referenc
     assert outcomes[1].chosen.states >= outcomes[0].chosen.states
     # the counts: every evaluated order once, the method's LUs and the errors' apart
     cands = sorted(search.candidates.values(), key=lambda c: c.index)
-    assert [c.cum_lus for c in cands] == list(np.cumsum([c.lus for c in cands]))
+    proxy = 0 if search.proxy is None else search.proxy._cum_lus  # the proxy's LU is the method's too
+    assert [c.cum_lus for c in cands] == list(proxy + np.cumsum([c.lus for c in cands]))
     assert all(c.eval_lus == 0 for c in cands)  # a band error costs no LU beyond the reference response
 
 
@@ -105,14 +107,18 @@ def test_h2_tolerance_against_dense_lyapunov(tcom):
     assert _error_h2(tcom, o.smaller.rom) / norm > 1e-3
 
 
-def test_bt_guess_comes_from_its_hankel_singular_values(tcom):
-    s = ToleranceSearch(tcom, "bt", measure="band")
+@pytest.mark.parametrize("method", ["bt", "irka-fo"])
+def test_bt_guess_comes_from_its_hankel_singular_values_and_the_gramians_are_counted_once(tcom, method):
+    s = ToleranceSearch(tcom, method, measure="band")
     s.run([1e-3])
-    # the first order tried is the start (2 states); the next is the Hankel singular values' guess
-    order = [c.r for c in sorted(s.candidates.values(), key=lambda c: c.index)]
-    hsv = np.asarray(s.candidates[order[0]].info["hsv"])
-    guess = int(np.flatnonzero(hsv > 1e-3 * s.scale)[-1]) + 1
-    assert order[1] == guess
+    # the first order tried is the Hankel singular values' guess (the Gramian factors computed for it)
+    cands = sorted(s.candidates.values(), key=lambda c: c.index)
+    bt = ms.reducers.make("bt", ms.models.tcom(nc=20)).reduce(2).info  # a fresh model: its own LR-ADI
+    hsv = np.asarray(bt["hsv"])
+    assert cands[0].r == int(np.flatnonzero(hsv > 1e-3 * s.scale)[-1]) + 1
+    # the Gramian factors' LUs are the search's once, at the first order (reused by the later ones)
+    assert cands[0].lus >= bt["lu_count"] > 0
+    assert all(c.info["setup_reused"] for c in cands)
 
 
 def test_budget_stops_with_the_best_model(tcom):
@@ -130,11 +136,19 @@ def test_cap_and_untrusted_say_so(tcom):
     assert set(OUTCOMES) >= {"met", "budget", "cap", "untrusted", "failed"}
 
 
-def test_irka_continues_from_the_nearest_model(tcom):
-    _, search = reach_tolerance(tcom, "irka", 1e-3, measure="band")
+def test_irka_is_steered_by_its_proxy_and_continues_from_the_nearest_model(tcom):
+    outcomes, search = reach_tolerance(tcom, "irka", 1e-3, measure="band")
+    assert search.proxy_method == "krylov" and search.proxy is not None
+    proxy_met = search.proxy.candidates[next(c.r for c in search.proxy.candidates.values()
+                                             if c.meets(1e-3) and c.r - 1 in search.proxy.candidates)]
     cands = sorted(search.candidates.values(), key=lambda c: c.index)
-    assert cands[0].info.get("continued_from") is None
+    # the first order is the proxy's (or a quarter of it, to calibrate), started from the proxy's model
+    assert cands[0].states in (proxy_met.states, max(2, proxy_met.states // 4 // 2 * 2))
+    assert cands[0].info["continued_from"] is not None
     assert all(c.info.get("continued_from") is not None for c in cands[1:] if c.error is None)
+    # the proxy's LU is the method's too
+    assert outcomes[0].lus == search.proxy._cum_lus + sum(c.lus for c in cands)
+    assert reach_tolerance(tcom, "irka", 1e-3, measure="band", proxy=None)[1].proxy is None
 
 
 def test_bad_arguments_are_named(tcom):
@@ -258,3 +272,28 @@ def test_compare_tol_prints_the_table_and_writes_the_study(tmp_path, capsys):
     assert 'kind = "tolerance"' in toml and 'error = "h2"' in toml
     assert main(["compare", "tcom:nc=20", "--out", str(tmp_path / "x"), "--quiet"]) == 2
     assert "--tol" in capsys.readouterr().err
+
+
+def test_saved_models_load_bit_identical_and_verify_reproduces_their_errors(tmp_path, capsys):
+    from morsuite.cli import main
+    from morsuite.studies.tolerance import entry_from_cache
+
+    assert main(["compare", "tcom:nc=20", "--tol", "1e-2", "--error", "h2", "--methods", "bt", "--out", str(tmp_path),
+                 "--quiet", "--jobs", "1", "--save-roms"]) == 0
+    out = capsys.readouterr().out
+    stem = tmp_path / "compare_tcom_nc20" / "roms" / "to_reach_bt_tol0p01"
+    assert str(stem) + ".npz" in out
+    # the saved model is the search's, to the bit (its arrays in the study's cache)
+    from morsuite.studies.cache import Cache
+    arts = json.loads((tmp_path / "compare_tcom_nc20" / "manifest.json").read_text())["artifacts"]
+    key = next(a["key"] for a in arts if a["kind"] == "tolerance")
+    entry = entry_from_cache(*Cache(tmp_path / ".cache").get("tolerance", key))
+    chosen = entry["search"]["outcomes"][0]["chosen"]
+    for ext in ("npz", "mat"):
+        rom = ms.load_rom(f"{stem}.{ext}")
+        for f, arr in entry["roms"][chosen]["arrays"].items():
+            if f != "basis":
+                assert np.array_equal(getattr(rom, f), arr)
+        assert rom.provenance["provenance"]["tolerance"]["status"] == "met"
+    assert main(["verify", "tcom:nc=20", f"{stem}.mat"]) == 0
+    assert "verified: every recorded value agrees" in capsys.readouterr().out

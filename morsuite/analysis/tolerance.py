@@ -63,6 +63,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError, MorsuiteError, OptionError
+from . import _tolerance_route as route
+from ._tolerance_error import BAND_FLOOR, Reference
 
 __all__ = ["MEASURES", "OUTCOMES", "BAND_FLOOR", "Candidate", "Outcome", "ToleranceSearch", "reach_tolerance"]
 
@@ -78,10 +80,6 @@ OUTCOMES = {
                  "not certified)",
     "failed": "the reductions failed",
 }
-
-#: relative level below which a sampled band error is not trusted: the refined full response and the
-#: dense reduced one carry rounding of about this relative size (an estimate, docs/design/tolerance.md)
-BAND_FLOOR = 1e-12
 
 #: consecutive failed reductions after which a search gives up
 MAX_FAILURES = 2
@@ -205,6 +203,14 @@ class ToleranceSearch:
         Largest factor between two orders of the growing phase (default 2).
     reducer : Reducer, optional
         A reducer instance to use instead of ``make(method, fom, **options)`` (its state is reused).
+    proxy : str or None
+        A cheap method whose search on the same error steers this one (its order the first guess, a
+        quarter of it first when large, its model the first start; ``_tolerance_route``): ``"auto"``
+        (default) takes :data:`PROXY` for a reducer with ``costly_orders`` (the IRKA family, so-h2) and
+        none otherwise; its LUs and time are this search's.
+    reference : Reference, optional
+        Another search's reference (:class:`~morsuite.analysis._tolerance_error.Reference`), shared instead
+        of computing the band response or norm again.
 
     Attributes
     ----------
@@ -217,7 +223,7 @@ class ToleranceSearch:
 
     def __init__(self, fom, method: str, *, options=None, measure: str = "band", omega=None, H_full=None,
                  norm_options=None, budget_lus=None, budget_s=None, max_states=None, start_states=None,
-                 growth: float = 2.0, reducer=None):
+                 growth: float = 2.0, reducer=None, proxy: str | None = "auto", reference=None):
         from .. import reducers
 
         if measure not in MEASURES:
@@ -241,64 +247,17 @@ class ToleranceSearch:
         self._cum_lus, self._cum_eval, self._cum_time = 0, 0, 0.0
         self._shared_counted = False
         self._failures = 0
-        self.reference_lus, self.reference_time_s = 0, 0.0
-        self.model_norm = None
-        self._setup_reference(omega, H_full)
-
-    # -- the reference: band response or model norm ------------------------------
-    def _setup_reference(self, omega, H_full):
-        from .compare import model_norm
-        from .response import band_response, freq_grid, sigma_max
-
-        t0 = time.perf_counter()
-        if self.measure == "band":
-            self.omega = freq_grid(self.fom.band) if omega is None else np.asarray(omega, dtype=float).ravel()
-            if H_full is None:
-                H_full, self.reference_lus = band_response(self.fom, self.omega)
-            self.H_full = np.asarray(H_full)
-            if self.H_full.shape != (self.omega.size, self.fom.p, self.fom.m):
-                raise InputError(f"H_full has shape {self.H_full.shape}; expected "
-                                 f"{(self.omega.size, self.fom.p, self.fom.m)} (omega, p, m)")
-            self.scale = float(np.max(sigma_max(self.H_full)))
-        else:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")  # recorded in the norm's record
-                self.model_norm = model_norm(self.fom, self.measure, self.norm_options.get(self.measure))
-            self.scale = float(self.model_norm["value"])
-            self.reference_lus = int(self.model_norm["lu_count"])
-        self.reference_time_s = time.perf_counter() - t0
-        if not (self.scale > 0 and np.isfinite(self.scale)):
-            raise InputError(f"the full model's {self.measure} scale is {self.scale!r}: a relative tolerance needs a "
-                             "positive finite norm")
-
-    # -- one order -----------------------------------------------------------------
-    def _error(self, rom) -> dict:
-        """The relative error of ``rom`` with its floor and trust (and the record behind it)."""
-        from .compare import error_norm
-        from .response import sigma_max
-
-        if self.measure == "band":
-            e = sigma_max(self.H_full - rom.freqresp(self.omega))
-            k = int(np.argmax(e))
-            value = float(e[k]) / self.scale
-            return {"value": value, "floor": BAND_FLOOR, "trusted": bool(np.isfinite(value) and value > BAND_FLOOR),
-                    "lus": 0, "record": {"max_abs_error": float(e[k]), "omega_max": float(self.omega[k]),
-                                         "grid": [float(self.omega[0]), float(self.omega[-1]), int(self.omega.size)]}}
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # recorded in the record's warnings
-            rec = error_norm(self.fom, rom, self.measure, self.norm_options.get(self.measure))
-        keep = {k: rec.get(k) for k in ("value", "route", "floor", "trusted", "lower_bound", "upper_bound",
-                                        "certified", "peak_frequency", "reason") if k in rec}
-        if self.measure == "h2":
-            value = rec["value"] / self.scale
-            floor = (rec.get("floor") or 0.0) / self.scale
-            trusted = bool(rec.get("trusted")) and bool(self.model_norm.get("trusted"))
-        else:
-            certified = bool(rec.get("certified")) and rec.get("upper_bound") is not None
-            value = (rec["upper_bound"] if certified else rec["value"]) / self.scale
-            floor, trusted = 0.0, certified  # the upper bound is the value: nothing to add
-        return {"value": float(value), "floor": float(floor), "trusted": trusted, "lus": int(rec.get("lu_count") or 0),
-                "record": keep}
+        # what the errors are relative to; a proxy shares its caller's (nothing computed again)
+        self.ref = reference if reference is not None else \
+            Reference(fom, measure, omega=omega, H_full=H_full, norm_options=self.norm_options)
+        self.scale, self.model_norm = self.ref.scale, self.ref.model_norm
+        self.reference_lus, self.reference_time_s = (0, 0.0) if reference is not None else (self.ref.lus,
+                                                                                           self.ref.time_s)
+        if proxy == "auto":
+            proxy = PROXY if getattr(self.red, "costly_orders", False) else None
+        if proxy is not None and proxy == method:
+            proxy = None
+        self.proxy_method, self.proxy, self._proxy_outcomes = proxy, None, []
 
     def _cost(self, info, wall) -> tuple[int, float]:
         """(LUs, seconds) of one reduction in the search: its own, plus the shared work it relied on the
@@ -318,8 +277,10 @@ class ToleranceSearch:
         if r in self.candidates:
             return self.candidates[r]
         near = [c for c in self.candidates.values() if c.rom is not None and c.error is None and np.isfinite(c.value)]
+        if not near and self.proxy is not None:  # the first order: from the proxy's model of about these states
+            near = [c for c in self.proxy.candidates.values() if c.rom is not None and c.error is None]
         if near:
-            self.red.continue_from(min(near, key=lambda c: (abs(c.r - r), c.r > r)).rom)
+            self.red.continue_from(min(near, key=lambda c: (abs(c.states - r * self.spo), c.states > r * self.spo)).rom)
         cand = Candidate(r=int(r), index=len(self.candidates))
         t0 = time.perf_counter()
         try:
@@ -339,7 +300,7 @@ class ToleranceSearch:
             cand.stable = bool(info.get("stable", res.rom.is_stable()))
             cand.lus, cand.time_s = self._cost(info, time.perf_counter() - t0)
             t1 = time.perf_counter()
-            err = self._error(res.rom)
+            err = self.ref.error(res.rom)
             cand.eval_time_s = time.perf_counter() - t1
             cand.value, cand.floor, cand.trusted = err["value"], err["floor"], err["trusted"]
             cand.eval_lus, cand.record = err["lus"], err["record"]
@@ -362,45 +323,42 @@ class ToleranceSearch:
         done = [c for c in self.candidates.values() if c.error is None and np.isfinite(c.value) and c.stable]
         return min(done, key=lambda c: (c.value, c.r)) if done else None
 
+    def _run_proxy(self, tol):
+        """The proxy's search for ``tol`` (once per tolerance), its LUs and time added to this search's."""
+        if self.proxy_method is None:
+            return None
+        if self.proxy is None:
+            self.proxy = ToleranceSearch(self.fom, self.proxy_method, measure=self.measure, norm_options=self.norm_options,
+                                         max_states=self.r_max * self.spo, proxy=None, reference=self.ref)
+        before = (self.proxy._cum_lus, self.proxy._cum_eval, self.proxy._cum_time)
+        out = self.proxy.run([tol])[0]
+        self._cum_lus += self.proxy._cum_lus - before[0]
+        self._cum_eval += self.proxy._cum_eval - before[1]
+        self._cum_time += self.proxy._cum_time - before[2]
+        return out
+
     def _guess(self, tol):
+        if self.proxy is not None:  # the proxy's order that met the tolerance, in this method's orders
+            out = next((o for o in self._proxy_outcomes if o.tol == tol), None)
+            if out is not None and out.status == "met":
+                return int(min(max(1, -(-out.chosen.states // self.spo)), self.r_max))
         try:
             g = self.red.order_guess(tol, measure=self.measure, scale=self.scale)
         except (MorsuiteError, ValueError, ArithmeticError, np.linalg.LinAlgError):
             return None
         return None if g is None else int(min(max(1, g), self.r_max))
 
-    def _grow(self, lo: int) -> int:
-        """The next order above the largest miss ``lo``: extrapolated from the two largest misses
-        (log error linear in r), between 1.25 lo and ``growth`` lo."""
-        lo_c = self.candidates[lo]
-        step_max = max(lo + 1, math.floor(lo * self.growth))
-        nxt = step_max
-        misses = sorted(r for r, c in self.candidates.items() if r < lo and c.error is None and
-                        np.isfinite(c.value) and c.value > lo_c.value > 0)
-        if misses and np.isfinite(lo_c.value) and lo_c.value > 0:
-            r0 = misses[-1]
-            slope = (math.log(lo_c.value) - math.log(self.candidates[r0].value)) / (lo - r0)
-            if slope < 0:
-                target = lo + (math.log(self._tol) - math.log(lo_c.value)) / slope
-                nxt = int(math.ceil(1.1 * target))
-        nxt = min(max(nxt, lo + max(1, math.ceil(0.25 * lo))), step_max)
-        return min(nxt, self.r_max)
+    def _points(self):
+        """(states, value) of every evaluated order with a finite value."""
+        return [(c.states, c.value) for c in self.candidates.values() if c.error is None and np.isfinite(c.value)]
 
-    def _between(self, lo: int, hi: int, bisect: bool) -> int:
-        """An order strictly between the miss ``lo`` and the meet ``hi`` (log-linear interpolation of the
-        errors, or the midpoint when ``bisect`` or the errors do not allow it); near ``hi`` it is hi - 1."""
-        mid = (lo + hi) // 2
-        a, b = self.candidates[lo].value, self.candidates[hi].value
-        nxt = mid
-        if not bisect and np.isfinite(a) and a > self._tol > 0 and 0 < b < a:
-            t = (math.log(a) - math.log(self._tol)) / (math.log(a) - math.log(b))
-            nxt = int(math.ceil(lo + t * (hi - lo)))
-        if nxt >= hi - 1 or hi - lo <= 2:
-            nxt = hi - 1
-        return min(max(nxt, lo + 1), hi - 1)
+    def _proxy_points(self, tol):
+        return None if self.proxy is None else [(c.states, c.value) for c in self.proxy.candidates.values()
+                                                if c.error is None and np.isfinite(c.value)]
 
     def _settle(self, tol) -> Outcome:
-        self._tol = tol
+        if self.proxy_method is not None:
+            self._proxy_outcomes.append(self._run_proxy(tol))
         guessed, widths = False, []
         while True:
             evald = self.candidates
@@ -422,12 +380,17 @@ class ToleranceSearch:
             if not guessed and (g := self._guess(tol)) is not None and g not in evald \
                     and (lo is None or g > lo) and (hi is None or g < hi):
                 guessed = True
-                self.evaluate(g)
+                if self.proxy is not None and not evald and g >= 4 * CALIBRATE:
+                    # a costly method's first run is a small one: it calibrates the proxy's curve to this
+                    # method's before the run near the tolerance (grow below predicts from both)
+                    self.evaluate(max(1, g // CALIBRATE))
+                else:
+                    self.evaluate(g)
                 continue
-            if lo is None:
-                nxt = self.r_start if hi is None else max(1, hi // 2) if hi > 1 else None
-                if hi is not None and nxt == hi:
-                    nxt = hi - 1
+            if lo is None and hi is None:
+                nxt = self.r_start
+            elif lo is None:  # only meets so far: towards the boundary below the smallest one
+                nxt = route.between(self._points(), 0, hi, tol, self.spo, False, self._proxy_points(tol))
             elif hi is None:
                 c = evald[lo]
                 if lo >= self.r_max:
@@ -439,11 +402,12 @@ class ToleranceSearch:
                 if self._untrusted_below(tol):
                     return self._stop(tol, "untrusted", "errors below the tolerance could not be trusted (below "
                                                         "their floor or not certified)")
-                nxt = self._grow(lo)
+                nxt = route.grow(self._points(), lo, tol, self.spo, self.growth, self.r_max,
+                                 self._proxy_points(tol))
             else:
                 widths.append(hi - lo)
                 bisect = len(widths) >= 3 and widths[-1] > widths[-3] / 2  # no halving in two steps
-                nxt = self._between(lo, hi, bisect)
+                nxt = route.between(self._points(), lo, hi, tol, self.spo, bisect, self._proxy_points(tol))
             self.evaluate(nxt)
 
     def _untrusted_below(self, tol) -> bool:
@@ -469,7 +433,12 @@ class ToleranceSearch:
 
     def record(self, outcomes) -> dict:
         """The search as plain data: method, measure, scale, reference cost, every candidate, the outcomes."""
-        return {"method": self.method, "measure": self.measure, "scale": self.scale,
+        px = None if self.proxy is None else {"method": self.proxy_method, "lus": int(self.proxy._cum_lus),
+                                              "candidates": [c.plain() for c in sorted(self.proxy.candidates.values(),
+                                                                                       key=lambda c: c.index)]}
+        norm = None if self.model_norm is None else {k: self.model_norm.get(k) for k in (
+            "value", "route", "floor", "rel_floor", "trusted", "lower_bound", "upper_bound", "certified", "options")}
+        return {"method": self.method, "measure": self.measure, "scale": self.scale, "norm": norm, "proxy": px,
                 "states_per_order": self.spo, "r_max": self.r_max, "budget_lus": self.budget_lus,
                 "budget_s": self.budget_s, "reference_lus": int(self.reference_lus),
                 "reference_time_s": float(self.reference_time_s),
@@ -480,6 +449,13 @@ class ToleranceSearch:
 
 #: default largest number of first-order states a search tries
 MAX_STATES_DEFAULT = 400
+
+#: the proxy of methods whose orders are costly (``costly_orders``): one-point Krylov, one LU in all
+PROXY = "krylov"
+
+#: a proxy-steered search first runs the costly method at 1 / CALIBRATE of the proxy's order (when that
+#: order is at least 4 CALIBRATE): its error against the proxy's calibrates the prediction of the next
+CALIBRATE = 4
 
 
 def reach_tolerance(fom, method: str, tol, **kwargs):

@@ -1,9 +1,13 @@
 r"""The full model's transfer function at single shifts, to extended precision, counting LUs.
 
 :math:`T(s)\,b = L x` with :math:`S(s)[x; z] = [Fb; 0]`, one sparse LU of
-:math:`S(s)` per shift (a conjugate shift reuses it), then ``refine`` steps of
+:math:`S(s)` per shift (a conjugate shift reuses it; its solves reach the backward-error target of
+:mod:`morsuite.linalg.accuracy`), then ``refine`` steps of
 iterative refinement whose residual :math:`[Fb; 0] - S(s)[x; z]` is formed beyond
-double (double-double, :mod:`morsuite.linalg.refine`) with the same LU, the solution kept in long double and
+double (double-double, :mod:`morsuite.linalg.refine`) with the same LU, and more (at most
+:data:`~morsuite.linalg.accuracy.FORWARD_MAX_STEPS` in all) until the estimated relative error of the solution is below
+:data:`~morsuite.linalg.accuracy.FORWARD_TOL` (near a lightly damped resonance, where the
+condition of :math:`S(s)` multiplies the LU's rounding), the solution kept in long double and
 :math:`Lx` summed in long double. Where :math:`T - T_r` is 1e-12 of :math:`T`,
 a response rounded to double has lost all but four digits of the difference
 (its error is :math:`\varepsilon|T|`); refined, the difference keeps
@@ -18,6 +22,7 @@ import time
 
 import numpy as np
 
+from ..linalg.accuracy import FORWARD_MAX_STEPS, forward_tol
 from ..linalg.refine import SaddleOperator, refine_columns, refined_unit
 from ..linalg.warmup import warm_kernels
 
@@ -37,7 +42,8 @@ class FomResponse:
     fom : Index3Model
     refine : int
         Steps of extended-precision iterative refinement of each solve (0: the
-        LU's solution, rounded to double).
+        LU's solution, rounded to double); more, up to :data:`~morsuite.linalg.accuracy.FORWARD_MAX_STEPS`, while the estimated
+        error is above :data:`~morsuite.linalg.accuracy.FORWARD_TOL`.
     cache_size : int
         LUs kept by the solver (2: a shift and its conjugate, or the value and
         the derivative at one shift, share one LU).
@@ -90,9 +96,11 @@ class FomResponse:
         """``refine`` steps from the LU solution ``x`` (n1 + n2 rows): the primal block in clongdouble."""
         if self._op is None:
             self._op = SaddleOperator(self.solver.pattern)
-        xr, xi, rho = refine_columns(lu, rhs, x, False, s, self._op, steps=self.refine)
+        taken = {}
+        xr, xi, rho = refine_columns(lu, rhs, x, False, s, self._op, steps=self.refine, tol=forward_tol(),
+                                     max_steps=FORWARD_MAX_STEPS, record=taken)
         n1 = self.fom.n1
-        self.last_unit = refined_unit(rho, self.refine)
+        self.last_unit = max(refined_unit(rho, taken["steps"]), 4.0 * taken["estimate"])
         out = xr[:n1].astype(CLD)
         if xi is not None:
             out = out + 1j * xi[:n1].astype(CLD)

@@ -22,7 +22,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ..errors import ConvergenceWarning, InputError
+from ..errors import AccuracyWarning, ConvergenceWarning, InputError
+from ..linalg import accuracy
 from ..linalg.warmup import warm_kernels
 from ..utils import blas_threads, to_plain
 from .options import Group, Option, expand_options
@@ -108,6 +109,10 @@ class Reducer:
         """Hook: cross-option checks."""
 
     # -- what the reducer says of itself and its route to a tolerance (analysis.tolerance) --------
+    #: True for a method whose every order costs a run of its own (an iteration of LUs): a tolerance
+    #: search steers it by a cheap proxy's error curve (analysis.tolerance.PROXY) instead of trying orders
+    costly_orders: ClassVar[bool] = False
+
     @classmethod
     def states_for(cls, options: dict) -> int:
         """First-order states per unit of ``r`` with ``options`` (every declared option, validated): 2 for
@@ -126,7 +131,7 @@ class Reducer:
         absolute norm it is relative to, ``measure`` one of "band", "h2", "hinf"), from what this
         reducer has already computed (e.g. Hankel singular values), or None (default: no guess).
         A guess only steers :class:`~morsuite.analysis.tolerance.ToleranceSearch`; every order it
-        returns is verified. Cost: none (no LU)."""
+        returns is verified. Cost: at most the r-independent work the first reduction pays anyway."""
         return None
 
     def continue_from(self, rom) -> bool:
@@ -173,7 +178,11 @@ class Reducer:
 
         Every ``info`` carries ``status`` and ``converged`` (consistent: checked), ``lu_count``,
         ``lu_count_shared`` (:mod:`morsuite.reducers.outcome`), ``time_s``, ``r``, ``states``,
-        ``stable``, ``warnings`` and ``options``.
+        ``stable``, ``warnings``, ``options``, and what the checked saddle-point solves of the call
+        reached (:mod:`morsuite.linalg.accuracy`): ``solve_backward_error`` (the worst certified
+        backward error; None if none was checked) and ``solve_accuracy`` (``backward_error``,
+        ``target``, ``met``, ``checked``, ``above_target``, ``refinement_steps``, ``fallback_lus``);
+        a call with a solve above its target also gets an :class:`~morsuite.errors.AccuracyWarning`.
 
         On a model with k rigid-body modes (:mod:`morsuite.models.rigid`) the method reduces the
         flexible part to order r and the result is that model with the rigid part added back:
@@ -192,7 +201,7 @@ class Reducer:
         # matrices, where BLAS threads only add synchronisation (10x slower on a
         # loaded 2-core machine, measured): pin BLAS to BLAS_THREADS for the run
         warm_kernels()  # numba's compile (or cache load) is not the reduction's time
-        with blas_threads(BLAS_THREADS):
+        with blas_threads(BLAS_THREADS), accuracy.recording() as solves:
             t0 = time.perf_counter()
             rom, info = self._reduce(r)
             elapsed = time.perf_counter() - t0
@@ -224,6 +233,10 @@ class Reducer:
         if "stable" not in base:
             base["stable"] = bool(rom.is_stable())
         base["blas_threads"] = BLAS_THREADS
+        base["solve_accuracy"] = solves.as_info()
+        base["solve_backward_error"] = solves.worst
+        if not solves.met:
+            self.warn(solves.message(), AccuracyWarning)
         if self.saddle_lu and hasattr(self.fom, "lu_analysis"):  # the sparse LU backend of the model's solvers
             base["lu_backend"] = self.fom.lu_analysis()
         base["continued_from"] = self._continued_record()

@@ -32,9 +32,11 @@ __all__ = ["Curve", "FigureData", "CsvSource", "plot", "render", "save", "pgfplo
 STYLES = ("line", "points", "paper", "full", "flagged", "level", "chosen", "steps")
 
 #: Bump when the look of the figures changes in a way their data and :func:`style` do not show.
-STYLE_VERSION = 3  # 3 (2026-12-02): long titles wrapped to TITLE_WIDTH characters; 2: plain log-axis tick labels
+STYLE_VERSION = 3  # 3 (2026-12-02): titles wrapped (TITLE_WIDTH), point labels thinned (MAX_LABELS); 2: plain ticks
 #: titles longer than this many characters are wrapped (a title wider than the axes was cut)
 TITLE_WIDTH = 64
+#: a curve's point labels (``annotate``) are drawn at most this many times, evenly spread
+MAX_LABELS = 5
 #: rc settings on top of matplotlib's defaults; the SVG salt fixes the ids that would be random.
 STYLE_RC = {"svg.hashsalt": "morsuite"}
 FIGSIZE = (6.4, 4.2)
@@ -47,7 +49,7 @@ METADATA = {"pdf": {"CreationDate": None}, "svg": {"Date": None}}
 def style() -> dict:
     """Everything besides the data and matplotlib's version that decides a figure's pixels."""
     return {"version": STYLE_VERSION, "rc": STYLE_RC, "figsize": FIGSIZE, "margins": MARGINS, "dpi": DPI,
-            "title_width": TITLE_WIDTH,
+            "title_width": TITLE_WIDTH, "max_labels": MAX_LABELS,
             "metadata": {k: sorted(v) for k, v in METADATA.items()}}
 
 
@@ -153,6 +155,8 @@ class FigureData:
     xscale: str = "log"
     yscale: str = "log"
     notes: list = field(default_factory=list)
+    #: a log x axis of whole numbers (states): ticks labelled 2, 5, 10, 20 instead of 2×10⁰
+    xplain: bool = False
 
 
 def _positive(y):
@@ -175,6 +179,11 @@ def plot(figdata: FigureData, *, ax=None):
             fig.subplots_adjust(**MARGINS)
             fig, ax = _draw(figdata, fig, fig.subplots())
             _plain_log_ticks(ax)
+            if figdata.xplain and figdata.xscale == "log":
+                from matplotlib.ticker import FuncFormatter, LogLocator
+                ax.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+                ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+                ax.xaxis.set_minor_formatter(FuncFormatter(lambda v, _: ""))
             wrapped = ax.get_title().count("\n")
             if wrapped:  # room for the title's extra lines
                 fig.subplots_adjust(top=MARGINS["top"] - 0.045 * wrapped)
@@ -228,11 +237,13 @@ def _draw(figdata, fig, ax):
         elif c.style == "points":
             (line,) = ax.plot(x, y, marker="o", markersize=4, linewidth=0.8, label=c.label)
             colors[c.name] = line.get_color()
-            if c.annotate:
-                for xi, yi, t in zip(x, y, c.data[c.annotate]):
-                    if np.isfinite(xi) and np.isfinite(yi):
-                        ax.annotate(f"{c.annotate}={t}", (xi, yi), textcoords="offset points", xytext=(3, 3),
-                                    fontsize=6, color=line.get_color())
+            if c.annotate:  # at most MAX_LABELS labels a curve, its ends among them: labels must not overlap
+                pts = [(xi, yi, t) for xi, yi, t in zip(x, y, c.data[c.annotate]) if np.isfinite(xi) and np.isfinite(yi)]
+                keep = sorted(set(np.linspace(0, len(pts) - 1, min(MAX_LABELS, len(pts))).round().astype(int)))
+                for i in keep:
+                    xi, yi, t = pts[i]
+                    ax.annotate(f"{c.annotate}={t}", (xi, yi), textcoords="offset points", xytext=(3, 3),
+                                fontsize=6, color=line.get_color())
         elif c.style == "level":  # a tolerance: across the axes, whatever their x range
             ax.axhline(float(y[0]), color="0.4", linestyle=":", linewidth=1.2, label=c.label)
         elif c.style == "chosen":  # stars on the points of the curve they mark, in its colour
@@ -332,7 +343,10 @@ def pgfplots_tex(figdata: FigureData, csv_files: dict) -> str:
         marks = c.style in ("points", "flagged", "chosen", "steps")
         lines.append(rf"\addplot+[{style}{'' if marks else ', no markers'}] "
                      rf"table[x={c.x}, y=value{meta}, col sep=comma] {{\morsuitedir {csv_files[c.name]}}};")
-        lines.append(rf"\addlegendentry{{{_tex_text(c.label)}}}")
+        if not c.label.startswith("_"):  # matplotlib's rule: a label starting with "_" has no legend entry
+            lines.append(rf"\addlegendentry{{{_tex_text(c.label)}}}")
+        else:
+            lines[-1] = lines[-1].replace(r"\addplot+[", r"\addplot+[forget plot, ", 1)
     lines += [r"\end{axis}", r"\end{tikzpicture}", ""]
     return "\n".join(lines)
 

@@ -36,9 +36,9 @@ from morsuite.linalg.eigen import constrained_modes
 
 from ..errors import (FileFormatError, InputError, MemoryBudgetError, ModelError, OptionError, ShapeError,
                       SingularShiftError, SpecError)
-from .refused_inputs import (DATA_FILE, _hdf5, _irka, _lradi, _modal, _mat_without, _model, _mtx_set, _nan_rom,
-                             _npz_without, _other_io_rom, _parts, _pole_model, _rom, _sim, _small, _spec,
-                             _time_spec, _write)
+from .refused_inputs import (DATA_FILE, _changed_rom_file, _hdf5, _irka, _lradi, _modal, _mat_without, _model,
+                             _mtx_set, _nan_rom, _npz_without, _other_io_rom, _parts, _pole_model, _rom, _sim, _small,
+                             _spec, _time_spec, _write)
 
 __all__ = ["Refusal", "CASES", "DATA_FILE", "default_data_dir", "table_rows", "markdown_table"]
 
@@ -211,6 +211,11 @@ _ROWS = [
     ("rom-kind", "file", "ROM .npz without 'kind'",
      lambda t, d: ms.rom.load_rom((np.savez(t / "r.npz", M=np.eye(1)), t / "r.npz")[1]),
      FileFormatError, r"entry 'kind' missing or unknown"),
+    ("rom-changed", "file", "load_rom of a .npz changed after save_rom", lambda t, d: _changed_rom_file(t),
+     FileFormatError, r"c\.npz'?: SHA-256 .* differs from .* recorded in .*c\.json"),
+    ("rom-formats", "argument", "save_rom(formats=('npz', 'hdf5'))",
+     lambda t, d: ms.romfiles.save_rom(_rom(), t / "r", formats=("npz", "hdf5")), InputError,
+     r"formats must be distinct names out of npz, mat; got \['npz', 'hdf5'\]"),
     ("rom-extension", "argument", "rom.save('rom.txt')",
      lambda t, d: ms.rom.SecondOrderROM(np.eye(1), np.eye(1), np.eye(1), np.ones(1), np.ones(1)).save(t / "r.txt"),
      InputError, r"extension must be \.npz or \.mat"),

@@ -1,7 +1,8 @@
 """Several studies computed together on worker processes, one core each, before their reports.
 
-``morsuite run A.toml B.toml ... --jobs 2`` (the command line's default on two or more
-cores) first computes what any of the studies lacks, all at once, with :func:`shared_compute`:
+``morsuite run A.toml B.toml ... --jobs N`` (N > 1; by default the usable cores as far as
+memory holds them, :func:`~morsuite.studies.workers.default_jobs`) first computes what any of
+the studies lacks, all at once, with :func:`shared_compute`:
 
 - every artifact is planned per study (:func:`~morsuite.studies.plan.build_plan`) and keyed by
   content, so what several studies or scenes share (a reduced model of the same model,
@@ -9,8 +10,8 @@ cores) first computes what any of the studies lacks, all at once, with :func:`sh
   full-model simulation) is one unit of work, done once;
 - units run on ``jobs`` worker processes, each pinned to a core of its own (so the
   reducers' automatic thread counts, e.g. IRKA's ``solver_threads``, resolve to 1: every
-  timing of such a run is a single-threaded run on a core of its own, the other core
-  running another single-threaded unit; the manifest records this as ``shared_compute``);
+  timing of such a run is a single-threaded run on a core of its own, the other cores
+  running other single-threaded units; the manifest records this as ``shared_compute``);
 - a reducer group's orders run in increasing order on one reducer instance, as in a study's
   own graph, except for reducers with no r-independent work (``irka``) or a small one
   (``irka-projected``: its projector), whose orders are split into chunks
@@ -301,7 +302,8 @@ def _store(cache, shared, u, value):
         shared.fresh.add((u.kind, key))
 
 
-def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, run_kwargs=None) -> Shared:
+def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, run_kwargs=None,
+                   jobs_rule=None) -> Shared:
     """Compute what ``studies`` lack, all at once, on ``jobs`` pinned worker processes (module docstring).
 
     Parameters
@@ -318,6 +320,9 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, 
         (figures and tables while other units still compute), with its share of what was
         computed (:func:`split_claims`); the results folder's index and ``run.json`` (the run's
         record below) are written at the end.
+    jobs_rule : dict or None
+        How ``jobs`` was chosen (:func:`~morsuite.studies.workers.default_jobs`' record), kept in the
+        record; None: given by the caller.
 
     Returns
     -------
@@ -331,7 +336,8 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, 
     n_units = len(units)
     shared = Shared(jobs)
     cores = usable_cores()
-    shared.record = {"jobs": jobs, "cores": cores, "pinned": True, "units": n_units, "run_by": RUN_BY}
+    shared.record = {"jobs": jobs, "cores": cores, "pinned": True, "units": n_units, "run_by": RUN_BY,
+                     "jobs_rule": jobs_rule if jobs_rule is not None else "given"}
     log, owners = [], {}
     if run_kwargs is not None and not units:  # all cached: the reports in this process, as without workers
         from .runner import run

@@ -29,7 +29,7 @@ choices. Example::
     r = 30                               # int, list, or { from = 2, to = 40, step = 2 }
     # r_by_method = { irka_fo = 60 }     # other orders for some methods (first-order ROMs at 2r states)
     error = "abs"
-    paper_csv = "../shared/paper_figures/dsms_r30_abs_error_irka.csv"
+    paper_csv = "studies/paper_figures/dsms_r30_abs_error_irka.csv"
 
 Exact error norms (:mod:`morsuite.studies.norms`) are computed only where asked: the
 top-level ``norms = ["h2", "hinf"]`` (every reduction of the study; summary columns),

@@ -51,7 +51,7 @@ CHEAP_TIE = 1.2
 
 
 def _pct(tol: float) -> str:
-    return f"{tol * 100:g}%" if tol >= 1e-4 else f"{tol:.0e}"
+    return f"{tol * 100:g}%"
 
 
 def _search(res, scene, m):
@@ -142,14 +142,15 @@ def _states_figure(scene, study, res, notes):
                                                   "trusted": [c["trusted"] for c in pts]}, x="states", style="points"))
         chosen = {o["chosen"] for o in s["outcomes"] if o["status"] == "met"}
         star = [c for c in pts if c["r"] in chosen]
-        if star:
-            curves.append(Curve(f"chosen_{m}", f"{_label(study, m)}: chosen", {"states": [c["states"] for c in star],
-                                                                             "value": [c["value"] for c in star]},
-                                x="states", style="chosen"))
+        if star:  # one legend entry for every method's stars
+            label = "_chosen" if any(c.style == "chosen" for c in curves) else "chosen: meets it, one order fewer misses"
+            curves.append(Curve(f"chosen_{m}", label, {"states": [c["states"] for c in star],
+                                                       "value": [c["value"] for c in star]}, x="states", style="chosen"))
     curves += _levels(scene, xs)
     model = study.models[scene.model].name
     return FigureData(f"{scene.name}_states", scene.title or f"{model}: error against states, tolerances dotted",
-                      "first-order states of the reduced model", _YLABEL[measure], curves, xscale="log", notes=notes)
+                      "first-order states of the reduced model", _YLABEL[measure], curves, xscale="log", notes=notes,
+                      xplain=True)
 
 
 def _levels(scene, xs):
@@ -249,10 +250,27 @@ def _slug(x: float) -> str:
     return f"{x:g}".replace(".", "p").replace("-", "m").replace("+", "")
 
 
+def _errors(measure, cand, search) -> dict:
+    """The chosen model's error in the flat names of :func:`morsuite.romfiles.provenance_of`."""
+    rec, scale, norm = cand.get("record") or {}, search["scale"], search.get("norm") or {}
+    if measure == "band":
+        return {"max_abs_error": rec.get("max_abs_error"), "band_peak": scale}  # value = max_abs_error / band_peak
+    if measure == "h2":
+        return {"h2_error": rec.get("value"), "h2_rel_error": cand["value"], "h2_norm": scale,
+                "h2_floor": rec.get("floor"), "h2_trusted": cand["trusted"],
+                "h2_norm_floor": norm["floor"] if norm.get("floor") is not None else (norm.get("rel_floor") or 0.0) * scale,
+                "h2_route": rec.get("route"), "norm_options": {"h2": norm.get("options")}}
+    return {"hinf_error": rec.get("lower_bound", rec.get("value")), "hinf_upper_bound": rec.get("upper_bound"),
+            "hinf_certified": bool(rec.get("certified")), "hinf_rel_error": cand["value"], "hinf_norm": scale,
+            "hinf_norm_upper_bound": norm.get("upper_bound"), "hinf_peak_frequency": rec.get("peak_frequency"),
+            "norm_options": {"hinf": norm.get("options")}}
+
+
 def save_roms(study, res, outdir) -> list:
     """Write each chosen model of the tolerance scenes with ``save_roms = true`` into ``outdir/roms/`` as
-    ``SCENE_METHOD_tolTOL.npz``, ``.mat`` and ``.json`` (provenance: :func:`morsuite.romfiles.provenance_of`);
-    returns the paths written."""
+    ``SCENE_METHOD_tolTOL.npz``, ``.mat`` and ``.json`` (:func:`morsuite.romfiles.save_rom`; provenance by
+    :func:`morsuite.romfiles.provenance_of`, so that ``morsuite verify`` recomputes its errors); returns the
+    paths written. Cost: building the model in this process (its hash) once per scene."""
     from pathlib import Path
 
     from .task_common import model_of, rom_from_payload
@@ -261,8 +279,12 @@ def save_roms(study, res, outdir) -> list:
     for scene in study.scenes:
         if scene.kind != "tolerance" or not scene.params.get("save_roms"):
             continue
-        model = study.models[scene.model]
-        digest = None
+        from ..romfiles import provenance_of, save_rom
+        model, measure = study.models[scene.model], scene.params["error"]
+        fom = model_of(model.source)
+        fom_entry = res.fom(scene.model, scene.grid) if scene.grid else None
+        grid = None if fom_entry is None else (float(fom_entry["omega"][0]), float(fom_entry["omega"][-1]),
+                                               int(np.size(fom_entry["omega"])))
         for m in scene.methods:
             e, s = _search(res, scene, m)
             if s is None:
@@ -272,27 +294,14 @@ def save_roms(study, res, outdir) -> list:
                 payload = (e.get("roms") or {}).get(o["chosen"])
                 if o["status"] != "met" or payload is None:
                     continue
-                from ..romfiles import model_hash, save_rom
-                if digest is None:
-                    digest = model_hash(model_of(model.source))
-                c = cands[o["chosen"]]
-                method = study.methods[m]
-                fom_entry = res.fom(scene.model, scene.grid) if scene.grid else None
-                prov = {"model": model.name, "model_spec": model.spec, "model_id": model.model_id,
-                        "model_hash": digest, "method": m, "reducer": method.reducer, "label": method.label,
-                        "options": method.full_options, "r": c["r"], "states": c["states"],
-                        "tolerance": {"tol": o["tol"], "measure": scene.params["error"], "status": o["status"],
-                                      "reason": o["reason"]},
-                        "errors": {scene.params["error"]: {"value": c["value"], "floor": c["floor"],
-                                                           "trusted": c["trusted"], **(c.get("record") or {})}},
-                        "band": list(model.band) if fom_entry is None else
-                        [float(fom_entry["omega"][0]), float(fom_entry["omega"][-1])],
-                        "grid": None if fom_entry is None else [float(fom_entry["omega"][0]),
-                                                                float(fom_entry["omega"][-1]),
-                                                                int(np.size(fom_entry["omega"]))],
-                        "cost": {"search_lu_count": o["lus"], "search_time_s": o["time_s"]},
-                        "info": (e.get("infos") or {}).get(str(o["chosen"])), "study": study.name,
-                        "scene": scene.name}
+                c, method = cands[o["chosen"]], study.methods[m]
+                prov = provenance_of(fom, method.reducer, method.options, (e.get("infos") or {}).get(str(o["chosen"]), {}),
+                                     errors=_errors(measure, c, s), band=grid[:2] if grid else None, grid=grid,
+                                     source=model.spec, cost={"search_lu_count": o["lus"], "search_time_s": o["time_s"]},
+                                     extra={"tolerance": {"tol": o["tol"], "measure": measure, "status": o["status"],
+                                                          "reason": o["reason"], "value": c["value"],
+                                                          "floor": c["floor"], "trusted": c["trusted"]},
+                                            "study": study.name, "scene": scene.name, "alias": m})
                 stem = Path(outdir) / "roms" / f"{scene.name}_{m}_tol{_slug(o['tol'])}"
                 paths += save_rom(rom_from_payload(payload), stem, provenance=prov)
     return paths

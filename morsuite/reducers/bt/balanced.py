@@ -83,8 +83,9 @@ shifts, rank, columns, LUs reused and dropped, ``shift_reuse``, ``lu_pool_mib``,
 ``compress_tol``),
 ``compress_tol`` (the column compression used: option ``compress_tol``, by default 0 below
 :attr:`BT.COMPRESS_MIN_N1` positions and :attr:`BT.COMPRESS_AUTO_TOL` from there on, where the
-plain factors no longer fit in memory; a compressed factor cannot serve the exact H2 error's
-error-Gramian route, which then runs its own LR-ADI),
+plain factors may no longer fit in memory; a factor is compressed only once it exceeds lradi's
+``compress_from_mib``, 1024 MiB, and ``info["adi"]`` records its ``compressions``; a compressed
+factor cannot serve the exact H2 error's error-Gramian route, which then runs its own LR-ADI),
 ``adi_iterations``, ``residual_history``, ``factor_ranks``,
 ``lu_count`` (the LR-ADI's LUs when this call ran it, else 0), ``lu_count_shared`` (the
 LR-ADI's LUs, whoever paid them), ``time_breakdown`` (adi, of which lu, solves, shifts; svd;
@@ -158,10 +159,10 @@ class SquareRootBT(Reducer):
         r"""The smallest order whose first discarded Hankel singular value is at most ``tol * scale``:
         :math:`N = \min\{N : \sigma_{N+1} \le \text{tol}\cdot\text{scale}\}` states (r = N, or
         :math:`\lceil N/2\rceil` for a second-order level). A guess, not a bound (the first-order
-        bound is :math:`2\sum_{k>N}\sigma_k`); None until the Gramian factors exist (no LU here)."""
-        g = getattr(self, "_gram", None)
-        if not g or "c" not in g:
-            return None
+        bound is :math:`2\sum_{k>N}\sigma_k`). Cost: the Gramian factors when they do not exist yet (what
+        the first reduction pays anyway; it then reports them as reused shared work)."""
+        if getattr(self, "_gram", None) is None:
+            self._gramians()
         hsv = np.asarray(self._svd("fo")[1])
         if hsv.size == 0 or not (scale > 0):
             return None
@@ -360,8 +361,8 @@ class BT(SquareRootBT):
                                "directions below compress_tol times the factor's largest singular value are "
                                "dropped (0: none); None (default): 0 below COMPRESS_MIN_N1 positions (the exact "
                                "H2 error's error-Gramian route shares uncompressed factors), COMPRESS_AUTO_TOL "
-                               "from there on (tcom at n1 = 1e6: about 1300 columns per factor, 42 GB plain); "
-                               "the value used is info['compress_tol']", low=0, high=1, open_high=True,
+                               "from there on (tcom at n1 = 1e6: about 1300 columns per factor, 42 GB plain), "
+                               "applied once a factor exceeds 1024 MiB; the value used is info['compress_tol']", low=0, high=1, open_high=True,
                                nullable=True),
         "gramian_cache": Option("model", "choice", "where the LR-ADI factors are kept: in the model's cache, "
                                 "shared with every bt reducer and analysis.h2_norm / h2_error on the same model "

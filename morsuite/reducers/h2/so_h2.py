@@ -106,6 +106,7 @@ class SOH2(Reducer):
         targets="minimum H2 error among second-order models", cost="Gramians, then tens to hundreds",
         use_for="second-order structure with the smallest H2 error",
         options=("start", "descent", "gtol", "maxit", "starts"), default=True, gramians="reads", page="so_h2", order=30)
+    costly_orders = True  # each order is a descent of its own: a tolerance search steers it by a proxy
 
     OPTIONS = {
         "start": Option("best", "choice", "start model: the best by exact H2 error of the candidates, or one "

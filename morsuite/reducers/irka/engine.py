@@ -74,7 +74,7 @@ _HISTORY_KEYS = ("measure", "shift_change", "response_change", "criterion", "n_s
 
 class IRKABase(Continuation, Reducer):
     """Shared IRKA iteration; subclasses say how V and W are computed and projected."""
-
+    costly_orders = True
     OPTIONS = {
         "tol": Option(1e-6, "float", "relative change of the matched shifts that counts as converged",
                       low=0, high=1, open_low=True, open_high=True),

@@ -274,9 +274,14 @@ class IRKAFO(SurrogatePhase, IRKA):
         return self._bt
 
     def order_guess(self, tol: float, *, measure: str, scale: float) -> int | None:
-        """The start's BT guess (:meth:`~morsuite.reducers.bt.balanced.SquareRootBT.order_guess`) once its
-        Gramian factors exist; None before (no LU here)."""
-        return None if self._bt is None else self._bt.order_guess(tol, measure=measure, scale=scale)
+        """The start's BT guess (:meth:`~morsuite.reducers.bt.balanced.SquareRootBT.order_guess`; its Gramian
+        factors computed if needed, which the start pays anyway) with ``init="bt"``; None otherwise."""
+        if self.options["init"] != "bt":
+            return None
+        return self._bt_reducer().order_guess(tol, measure=measure, scale=scale)
+
+    #: its orders are steered by its BT start's Hankel singular values (order_guess), not a proxy
+    costly_orders = False
 
     def continue_from(self, rom) -> bool:
         """No continuation: the start at every order is the BT model of that order from the cached Gramian

@@ -4,7 +4,8 @@ The undamped constrained modes :math:`K\varphi + G^T\mu = \omega^2M\varphi`, :ma
 come from shift-invert Lanczos with the saddle matrix :math:`[[K - \sigma M, G^T], [G, 0]]`
 factored once (:func:`morsuite.linalg.eigen.constrained_modes`); :math:`\Pi` is never formed.
 ``selection`` chooses k of them (:mod:`morsuite.reducers.modal.selection`): the lowest, those
-in a band, or the most dominant. The basis is
+in a band, the most dominant, or (``"cutoff"``, the engineers' rule) every mode up to ``cutoff``
+times the band's upper end, r capping their number. The basis is
 
 .. math::
 
@@ -68,7 +69,7 @@ from .selection import band_order, dominance, dominance_order, lowest_order
 
 __all__ = ["Modal", "SELECTIONS"]
 
-SELECTIONS = ("lowest", "band", "dominance")
+SELECTIONS = ("lowest", "band", "dominance", "cutoff")
 
 
 class Modal(Reducer):
@@ -83,7 +84,11 @@ class Modal(Reducer):
 
     OPTIONS = {
         "selection": Option("lowest", "choice", "which modes: the lowest, those in the band (then its nearest), "
-                            "or the most dominant in the band (largest modal-term gain)", choices=SELECTIONS),
+                            "the most dominant in the band (largest modal-term gain), or every mode up to cutoff "
+                            "times the band's upper end (the engineers' rule; r caps their number)",
+                            choices=SELECTIONS),
+        "cutoff": Option(2.0, "float", "'cutoff': keep the modes below cutoff times the band's upper end",
+                         low=1.0),
         "band": Option(None, "array", "band (w1, w2) in rad/s of 'band' and 'dominance' (default: the model's band)",
                        nullable=True),
         "sigma": Option(None, "float", "shift (rad^2/s^2) of the one LU of K - sigma M; default 0 for 'lowest' and "
@@ -165,6 +170,8 @@ class Modal(Reducer):
         kw = {"sigma": sigma, "tol": self.options["tol"], "maxiter": self.options["maxiter"], "factorization": lu}
         if sel == "band":
             kw.update(band=self._band(), within_band=False)
+        elif sel == "cutoff":  # every mode from 0 to cutoff * w2 (k grows until they are covered)
+            kw.update(band=(0.0, self.options["cutoff"] * self._band()[1]), within_band=False)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)  # said by _reduce on every call that uses them
             res = constrained_modes(fom, k=max(k, 1), **kw)
@@ -191,6 +198,9 @@ class Modal(Reducer):
         sel = self.options["selection"]
         if sel == "lowest":
             return lowest_order(modes["omega"])
+        if sel == "cutoff":
+            low = lowest_order(modes["omega"])
+            return low[modes["omega"][low] <= self.options["cutoff"] * self._band()[1]]
         if sel == "band":
             return band_order(modes["omega"], self._band(), modes["sigma"])
         pool = min(modes["omega"].size, math.ceil(self.options["pool"] * r))
