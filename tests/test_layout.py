@@ -1,6 +1,7 @@
 """docs/design/layout.md places every module of the package (issue 47, item 3): each module under
 ``morsuite/`` (private ones included; a package's ``__init__`` is its row) is named in its package's
-row of the table, and every name listed there is a module of that package."""
+row of the table, and every name listed there is a module of that package. A reducer family folder the
+registry discovers needs no row: the generated reducer table (docs/design/reducers.md) places it."""
 
 from __future__ import annotations
 
@@ -37,10 +38,19 @@ def _modules() -> dict:
     return out
 
 
+def _families() -> set:
+    """package paths of the reducer family folders the registry discovers: the generated reducer table of
+    docs/design/reducers.md places them (a new method is one folder, its test and its page: nothing else edited)."""
+    from morsuite.reducers.registry import families
+
+    return {f"morsuite/reducers/{f}" for f in families()}
+
+
 def test_every_module_is_placed_in_the_layout():
     table, modules = _table(), _modules()
     assert "morsuite/linalg" in table and "lradi" in table["morsuite/linalg"]  # the parser reads the table
-    missing = {pkg: sorted(mods - table.get(pkg, set())) for pkg, mods in modules.items()}
+    placed = _families() - set(table)  # a family without a row of its own here: placed by the reducer table
+    missing = {pkg: sorted(mods - table.get(pkg, set())) for pkg, mods in modules.items() if pkg not in placed}
     missing = {k: v for k, v in missing.items() if v}
     assert not missing, f"modules not placed in docs/design/layout.md (add them to their package's row): {missing}"
 
