@@ -83,7 +83,13 @@ def grow(own, lo, tol, spo, growth, r_max, proxy=None):
 
 
 def between(own, lo, hi, tol, spo, bisect, proxy=None):
-    """An order strictly between the miss ``lo`` and the meet ``hi`` (module docstring)."""
+    """An order strictly between the miss ``lo`` and the meet ``hi`` (module docstring); ``lo = 0`` (only
+    meets so far): a quarter of ``hi`` below it (at least one order), or where the proxy's curve says."""
+    if lo == 0:
+        pred = proxy_prediction(own, proxy, hi * spo)
+        cross = _crossing(*pred, tol, 0) if pred is not None and not bisect else None
+        step = hi - max(1, math.ceil(0.25 * hi))
+        return max(1, min(hi - 1, int(math.ceil(cross / spo)) if cross is not None else step))
     nxt = (lo + hi) // 2
     if not bisect:
         pred = proxy_prediction(own, proxy, hi * spo)
