@@ -109,9 +109,15 @@ def headline(rows, labels=None) -> str:
         least = min(r["time_s"] for r in met)
         cheapest = min((r for r in met if r["time_s"] <= CHEAP_TIE * least),
                        key=lambda r: (r["lu_count"], r["time_s"], r["states"]))
-        smallest = min(met, key=lambda r: (r["states"], r["time_s"]))
+        fewest = min(r["states"] for r in met)
+        smallest = [r for r in met if r["states"] == fewest]  # equal states are equally small: all named
         text = f"{head}: cheapest {said(cheapest)}"
-        text += ("; it is also the smallest" if smallest is cheapest else f"; smallest {said(smallest)}")
+        if smallest == [cheapest]:
+            text += "; it is also the smallest"
+        elif len(smallest) == 1:
+            text += f"; smallest {said(smallest[0])}"
+        else:
+            text += f"; smallest ({fewest} states): " + ", ".join(said(r) for r in smallest)
         missed = [r for r in at if r["status"] != "met"]
         if missed:
             text += "; not reached by " + ", ".join(f"{labels.get(r['method'], r['method'])} ({r['status']})"
