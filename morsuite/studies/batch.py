@@ -122,15 +122,31 @@ def _pin(counter, cores, store=None):
     warm_kernels(first=i)  # numba's compile or cache load before any unit is timed; each worker its half first
 
 
+def _cpu_seconds(who: str = "both") -> float:
+    """User + system CPU seconds, all threads, of this process (``who = "self"``), of its children that
+    have ended (``"children"``: a study's figure processes, a run's workers once the pool is shut down)
+    or of both (default)."""
+    import resource
+
+    out = 0.0
+    for w, kind in (("self", resource.RUSAGE_SELF), ("children", resource.RUSAGE_CHILDREN)):
+        if who in (w, "both"):
+            use = resource.getrusage(kind)
+            out += use.ru_utime + use.ru_stime
+    return out
+
+
 def _run_unit(fn_name, args, kwargs):
-    """Run one unit in a worker: the task function ``fn_name`` (module:function) and its wall time."""
+    """Run one unit in a worker: the task function ``fn_name`` (module:function), its wall time and its
+    CPU time (``cpu_s``: user + system, the measure that a shared machine's load does not inflate)."""
     import importlib
 
     mod, _, fn = fn_name.partition(":")
-    started, t0 = time.time(), time.perf_counter()
+    started, t0, c0 = time.time(), time.perf_counter(), _cpu_seconds()
     out = getattr(importlib.import_module(mod), fn)(*args, **kwargs)
     cores = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
-    return out, {"wall_s": time.perf_counter() - t0, "pid": os.getpid(), "cores": cores, "started": started}
+    return out, {"wall_s": time.perf_counter() - t0, "cpu_s": _cpu_seconds() - c0, "pid": os.getpid(),
+                 "cores": cores, "started": started}
 
 
 @dataclass
@@ -327,9 +343,13 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, 
     -------
     Shared
         the keys computed (for the studies' manifests), failures, and ``record``: jobs, cores,
-        units, wall time, the workers' summed busy time, and each unit's label, worker and time.
+        units, wall time, the workers' summed busy time (``busy_s``: wall seconds of the computing units),
+        their CPU time (``cpu_s``: user + system seconds of every unit, the study runs' too), the CPU
+        time of this process (``cpu_main_s``: planning, scheduling, storing) and of the worker
+        processes from their start to their end (``cpu_workers_s``: the units, imports, kernel loads),
+        and each unit's label, worker, wall and CPU time.
     """
-    t0 = time.perf_counter()
+    t0, main0, kids0 = time.perf_counter(), _cpu_seconds("self"), _cpu_seconds("children")
     plans = [build_plan(s) for s in studies]
     units = _units(plans, cache, _previous_times(out) if out is not None else {})
     n_units = len(units)
@@ -349,7 +369,10 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, 
         _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0)
     busy = sum(e["wall_s"] for e in log if e["kind"] != "study")
     wall = time.perf_counter() - t0
-    shared.record = {**shared.record, "wall_s": wall, "busy_s": busy, "log": log}
+    cpu = sum(e["cpu_s"] for e in log)
+    shared.record = {**shared.record, "wall_s": wall, "busy_s": busy, "cpu_s": cpu,
+                     "cpu_main_s": _cpu_seconds("self") - main0, "cpu_workers_s": _cpu_seconds("children") - kids0,
+                     "log": log}
     if run_kwargs is not None:
         from .pages import write_index
         write_index(run_kwargs["out"])
@@ -436,7 +459,8 @@ def _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0):
                 rec["start_s"] = rec.pop("started") - wall0
                 log.append({"unit": u.label, "kind": u.kind, **rec})
                 if not quiet:
-                    print(f"  {rec['wall_s']:7.1f} s  core {rec['cores']}  at {rec['start_s']:6.1f} s  {u.label}",
+                    print(f"  {rec['wall_s']:7.1f} s ({rec['cpu_s']:6.1f} s CPU)  core {rec['cores']}  at "
+                          f"{rec['start_s']:6.1f} s  {u.label}",
                           file=sys.stderr)
 
 
