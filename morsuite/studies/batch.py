@@ -59,7 +59,7 @@ from pathlib import Path
 
 from .plan import build_plan
 from .unit_times import previous_times as _previous_times, report_estimate as _report_estimate
-from .workers import terminate_on_exit, usable_cores, watch_parent
+from .workers import cpu_seconds, terminate_on_exit, usable_cores, watch_parent
 
 __all__ = ["Shared", "shared_compute", "split_claims", "SPLIT", "usable_cores"]
 
@@ -122,31 +122,17 @@ def _pin(counter, cores, store=None):
     warm_kernels(first=i)  # numba's compile or cache load before any unit is timed; each worker its half first
 
 
-def _cpu_seconds(who: str = "both") -> float:
-    """User + system CPU seconds, all threads, of this process (``who = "self"``), of its children that
-    have ended (``"children"``: a study's figure processes, a run's workers once the pool is shut down)
-    or of both (default)."""
-    import resource
-
-    out = 0.0
-    for w, kind in (("self", resource.RUSAGE_SELF), ("children", resource.RUSAGE_CHILDREN)):
-        if who in (w, "both"):
-            use = resource.getrusage(kind)
-            out += use.ru_utime + use.ru_stime
-    return out
-
-
 def _run_unit(fn_name, args, kwargs):
     """Run one unit in a worker: the task function ``fn_name`` (module:function), its wall time and its
-    CPU time (``cpu_s``: user + system, the measure that a shared machine's load does not inflate)."""
+    CPU time (``cpu_s``, :func:`~morsuite.studies.workers.cpu_seconds`: far less load-dependent than wall time)."""
     import importlib
 
     mod, _, fn = fn_name.partition(":")
-    started, t0, c0 = time.time(), time.perf_counter(), _cpu_seconds()
+    started, t0, c0 = time.time(), time.perf_counter(), cpu_seconds()
     out = getattr(importlib.import_module(mod), fn)(*args, **kwargs)
     cores = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
-    return out, {"wall_s": time.perf_counter() - t0, "cpu_s": _cpu_seconds() - c0, "pid": os.getpid(),
-                 "cores": cores, "started": started}
+    return out, {"wall_s": time.perf_counter() - t0, "cpu_s": cpu_seconds() - c0, "pid": os.getpid(), "cores": cores,
+                 "started": started}
 
 
 @dataclass
@@ -343,13 +329,11 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, 
     -------
     Shared
         the keys computed (for the studies' manifests), failures, and ``record``: jobs, cores,
-        units, wall time, the workers' summed busy time (``busy_s``: wall seconds of the computing units),
-        their CPU time (``cpu_s``: user + system seconds of every unit, the study runs' too), the CPU
-        time of this process (``cpu_main_s``: planning, scheduling, storing) and of the worker
-        processes from their start to their end (``cpu_workers_s``: the units, imports, kernel loads),
-        and each unit's label, worker, wall and CPU time.
+        units, wall time, the workers' summed busy time (``busy_s``: wall s of the computing units), the CPU
+        time of every unit (``cpu_s``, study runs too), of this process (``cpu_main_s``) and of the workers
+        from spawn to exit (``cpu_workers_s``), and each unit's label, worker, wall and CPU time.
     """
-    t0, main0, kids0 = time.perf_counter(), _cpu_seconds("self"), _cpu_seconds("children")
+    t0, main0, kids0 = time.perf_counter(), cpu_seconds("self"), cpu_seconds("children")
     plans = [build_plan(s) for s in studies]
     units = _units(plans, cache, _previous_times(out) if out is not None else {})
     n_units = len(units)
@@ -369,9 +353,8 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, 
         _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0)
     busy = sum(e["wall_s"] for e in log if e["kind"] != "study")
     wall = time.perf_counter() - t0
-    cpu = sum(e["cpu_s"] for e in log)
-    shared.record = {**shared.record, "wall_s": wall, "busy_s": busy, "cpu_s": cpu,
-                     "cpu_main_s": _cpu_seconds("self") - main0, "cpu_workers_s": _cpu_seconds("children") - kids0,
+    shared.record = {**shared.record, "wall_s": wall, "busy_s": busy, "cpu_s": sum(e["cpu_s"] for e in log),
+                     "cpu_main_s": cpu_seconds("self") - main0, "cpu_workers_s": cpu_seconds("children") - kids0,
                      "log": log}
     if run_kwargs is not None:
         from .pages import write_index
@@ -460,8 +443,7 @@ def _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0):
                 log.append({"unit": u.label, "kind": u.kind, **rec})
                 if not quiet:
                     print(f"  {rec['wall_s']:7.1f} s ({rec['cpu_s']:6.1f} s CPU)  core {rec['cores']}  at "
-                          f"{rec['start_s']:6.1f} s  {u.label}",
-                          file=sys.stderr)
+                          f"{rec['start_s']:6.1f} s  {u.label}", file=sys.stderr)
 
 
 # -- the studies' own runs ---------------------------------------------------------
