@@ -176,6 +176,7 @@ def _dense_modal_hsv(fom):
 
 
 # -- TCOM ---------------------------------------------------------------------------
+@pytest.mark.slow
 def test_tcom_gramians_and_hankel_singular_values(tcom_bt):
     info = tcom_bt.reduce(10).info
     its = info["adi_iterations"]
@@ -193,9 +194,9 @@ def test_tcom_gramians_and_hankel_singular_values(tcom_bt):
     assert_sets_close(hsv[:10], TCOM_HSV, rtol=1e-4, what="HSVs")
 
 
-@pytest.mark.parametrize("model", ["dsms", "tcom"])
-def test_second_order_levels_stable_or_say_why(model, dsms_bt, tcom_bt):
-    base = dsms_bt if model == "dsms" else tcom_bt
+@pytest.mark.parametrize("model", ["dsms", pytest.param("tcom", marks=pytest.mark.slow)])
+def test_second_order_levels_stable_or_say_why(model, request):
+    base = request.getfixturevalue(f"{model}_bt")   # only the model's own fixture (the TCOM's costs 7 s)
     for form in LEVELS:
         red = ms.reducers.make("bt", base.fom, form=form).use_gramians_of(base)
         for r in (10, 20, 30):

@@ -31,6 +31,7 @@ def compared(tmp_path_factory):
     return out, out / "compare_dsms_g60"
 
 
+@pytest.mark.slow
 def test_states_become_orders_and_the_numbers_are_the_reducers(compared, capsys):
     out, folder = compared
     s = pd.read_csv(folder / "summary.csv").drop_duplicates(["method", "r_requested"])
@@ -43,6 +44,7 @@ def test_states_become_orders_and_the_numbers_are_the_reducers(compared, capsys)
         assert row.h2_error == pytest.approx(ref, rel=1e-6)
 
 
+@pytest.mark.slow
 def test_printed_verdict_table_matches_the_summary(tmp_path, capsys):
     rc = main(["compare", "dsms:g=60", "--states", "6", "--methods", "bt", "bt-vv", "--out", str(tmp_path),
                "--quiet"])
@@ -62,6 +64,7 @@ def test_printed_verdict_table_matches_the_summary(tmp_path, capsys):
     assert "Smallest error per measure: 6 states" in text and "index.html" in text
 
 
+@pytest.mark.slow
 def test_written_study_reruns_from_the_cache(compared):
     out, folder = compared
     toml = folder / "compare_dsms_g60.toml"
@@ -107,6 +110,7 @@ def counted(monkeypatch):
     return seen
 
 
+@pytest.mark.slow
 def test_model_file_band_from_its_eigenfrequencies_and_a_time_scene(tmp_path, counted):
     mat = DATA / "mess_msd_ind3_g600.mat"
     rc = main(["compare", str(mat), "--states", "4", "--methods", "bt", "--input", "step", "--out",
@@ -193,6 +197,7 @@ def test_run_failing_in_a_reducer_leaves_nothing_half_written(tmp_path, monkeypa
     assert not list(folder.glob("*.tmp*")) and not list(folder.glob(".*.toml*"))
 
 
+@pytest.mark.slow
 def test_a_run_in_which_every_method_fails_exits_non_zero(tmp_path, monkeypatch, capsys):
     """Every reduction failing (recorded, not raised: a MorsuiteError in each reducer) is a failed
     command: exit 1 and the first reason on stderr, the report still written (issue 34 item 6)."""

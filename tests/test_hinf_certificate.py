@@ -152,6 +152,8 @@ CASES = [
     # the peak search alone stops 16% below the peak here (measured 2026-11-25)
     ("tcom60", lambda: ms.models.tcom(nc=60), [("bt", 30)]),
 ]
+#: cases whose enclosure test takes about 8 s of CPU (the dense references): the slow set
+SLOW_CASES = ("dsms120", "tcom60")
 
 
 # -- the level-set kernel ------------------------------------------------------------------
@@ -177,7 +179,8 @@ def test_hamiltonian_has_j_omega_where_gamma_is_a_singular_value():
 
 
 # -- bounds against the dense reference ------------------------------------------------------
-@pytest.mark.parametrize("name,make,roms", CASES, ids=[c[0] for c in CASES])
+@pytest.mark.parametrize("name,make,roms", [pytest.param(*c, marks=pytest.mark.slow) if c[0] in SLOW_CASES else c
+                                             for c in CASES], ids=[c[0] for c in CASES])
 def test_bounds_enclose_the_dense_peak(name, make, roms):
     fom = make()
     ms.analysis.h2_norm(fom)  # the model's resonances for the start grid, as the studies have them

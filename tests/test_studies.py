@@ -493,6 +493,7 @@ def test_scheduler_arguments_validated(tmp_path):
 
 
 # -- command line and the repository's specs ---------------------------------
+@pytest.mark.slow
 def test_cli_run(tmp_path, capsys):
     from morsuite.cli import main
 

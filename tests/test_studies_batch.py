@@ -86,6 +86,7 @@ def _manifest(root, name):
     return json.loads((root / name / "manifest.json").read_text())
 
 
+@pytest.mark.slow
 def test_shared_run_gives_the_sequential_numbers(two_runs):
     """Summaries of the shared (2 pinned workers) and the sequential run agree to 1e-12."""
     for name in ("sa", "sb"):
@@ -102,6 +103,7 @@ def test_shared_run_gives_the_sequential_numbers(two_runs):
             sorted(p.name for p in (two_runs / "seq" / name).iterdir())
 
 
+@pytest.mark.slow
 def test_shared_artifacts_are_computed_once_and_claimed_by_the_first_study(two_runs):
     """irka r = 4, 6 and bt r = 4, 6 are in both studies: computed in sa, reused in sb, as in
     the sequential run; each unit ran on one core; the record is in both manifests."""
@@ -121,6 +123,7 @@ def test_shared_artifacts_are_computed_once_and_claimed_by_the_first_study(two_r
     assert "shared_compute" not in _manifest(two_runs / "seq", "sb")
 
 
+@pytest.mark.slow
 def test_the_shared_run_writes_its_record(two_runs):
     """OUT/run.json: the studies in command-line order, the wall and busy time, and one log entry per
     unit (the same count as the manifests' record); the sequential run writes none."""
@@ -130,6 +133,7 @@ def test_the_shared_run_writes_its_record(two_runs):
     assert not (two_runs / "seq" / "run.json").exists()
 
 
+@pytest.mark.slow
 def test_a_cached_shared_run_computes_nothing(two_runs, tmp_path):
     """The same command again: no unit of work, every computed artifact taken from the cache. Into a
     copy of the shared run's folder: the module's other tests read its manifests as the first run wrote
@@ -143,6 +147,7 @@ def test_a_cached_shared_run_computes_nothing(two_runs, tmp_path):
     assert computed and all(a["reused"] and a["cached"] for a in computed)
 
 
+@pytest.mark.slow
 def test_default_workers_give_the_numbers_of_two(two_runs, tmp_path, monkeypatch):
     """Without --jobs: as many workers as usable cores (three here, however many the machine has, with the
     usable cores stubbed; the workers are pinned round-robin to the real ones) when the memory holds them; the

@@ -192,6 +192,7 @@ def reached(tmp_path_factory):
     return run(d / "reach.toml", out=d / "out", quiet=True), d
 
 
+@pytest.mark.slow
 def test_scene_table_is_the_search_and_the_dense_reference_agrees(reached):
     import pandas as pd
 
@@ -220,6 +221,7 @@ def test_scene_table_is_the_search_and_the_dense_reference_agrees(reached):
     assert best["method"] in page
 
 
+@pytest.mark.slow
 def test_scene_rerun_is_served_from_the_cache(reached):
     from morsuite.studies import run
 

@@ -59,7 +59,7 @@ from pathlib import Path
 
 from .plan import build_plan
 from .unit_times import previous_times as _previous_times, report_estimate as _report_estimate
-from .workers import terminate_on_exit, usable_cores, watch_parent
+from .workers import cpu_seconds, terminate_on_exit, usable_cores, watch_parent
 
 __all__ = ["Shared", "shared_compute", "split_claims", "SPLIT", "usable_cores"]
 
@@ -124,14 +124,16 @@ def _pin(counter, cores, store=None):
 
 
 def _run_unit(fn_name, args, kwargs):
-    """Run one unit in a worker: the task function ``fn_name`` (module:function) and its wall time."""
+    """Run one unit in a worker: the task function ``fn_name`` (module:function), its wall time and its
+    CPU time (``cpu_s``, :func:`~morsuite.studies.workers.cpu_seconds`: far less load-dependent than wall time)."""
     import importlib
 
     mod, _, fn = fn_name.partition(":")
-    started, t0 = time.time(), time.perf_counter()
+    started, t0, c0 = time.time(), time.perf_counter(), cpu_seconds()
     out = getattr(importlib.import_module(mod), fn)(*args, **kwargs)
     cores = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
-    return out, {"wall_s": time.perf_counter() - t0, "pid": os.getpid(), "cores": cores, "started": started}
+    return out, {"wall_s": time.perf_counter() - t0, "cpu_s": cpu_seconds() - c0, "pid": os.getpid(), "cores": cores,
+                 "started": started}
 
 
 @dataclass
@@ -328,9 +330,11 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, 
     -------
     Shared
         the keys computed (for the studies' manifests), failures, and ``record``: jobs, cores,
-        units, wall time, the workers' summed busy time, and each unit's label, worker and time.
+        units, wall time, the workers' summed busy time (``busy_s``: wall s of the computing units), the CPU
+        time of every unit (``cpu_s``, study runs too), of this process (``cpu_main_s``) and of the workers
+        from spawn to exit (``cpu_workers_s``), and each unit's label, worker, wall and CPU time.
     """
-    t0 = time.perf_counter()
+    t0, main0, kids0 = time.perf_counter(), cpu_seconds("self"), cpu_seconds("children")
     plans = [build_plan(s) for s in studies]
     units = _units(plans, cache, _previous_times(out) if out is not None else {})
     n_units = len(units)
@@ -350,7 +354,9 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, 
         _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0)
     busy = sum(e["wall_s"] for e in log if e["kind"] != "study")
     wall = time.perf_counter() - t0
-    shared.record = {**shared.record, "wall_s": wall, "busy_s": busy, "log": log}
+    shared.record = {**shared.record, "wall_s": wall, "busy_s": busy, "cpu_s": sum(e["cpu_s"] for e in log),
+                     "cpu_main_s": cpu_seconds("self") - main0, "cpu_workers_s": cpu_seconds("children") - kids0,
+                     "log": log}
     if run_kwargs is not None:
         from .pages import write_index
         write_index(run_kwargs["out"])
@@ -437,8 +443,8 @@ def _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0):
                 rec["start_s"] = rec.pop("started") - wall0
                 log.append({"unit": u.label, "kind": u.kind, **rec})
                 if not quiet:
-                    print(f"  {rec['wall_s']:7.1f} s  core {rec['cores']}  at {rec['start_s']:6.1f} s  {u.label}",
-                          file=sys.stderr)
+                    print(f"  {rec['wall_s']:7.1f} s ({rec['cpu_s']:6.1f} s CPU)  core {rec['cores']}  at "
+                          f"{rec['start_s']:6.1f} s  {u.label}", file=sys.stderr)
 
 
 # -- the studies' own runs ---------------------------------------------------------

@@ -34,7 +34,7 @@ import threading
 import time
 
 __all__ = ["terminate_on_exit", "sigterm_exits", "watch_parent", "usable_cores", "available_memory", "default_jobs",
-           "WORKER_BASE_MIB", "WORKER_KIB_PER_POSITION"]
+           "cpu_seconds", "WORKER_BASE_MIB", "WORKER_KIB_PER_POSITION"]
 
 #: exit status of a command stopped by SIGTERM (128 + 15, as a shell reports it)
 SIGTERM_STATUS = 128 + signal.SIGTERM
@@ -162,3 +162,23 @@ def default_jobs(n1_max: int, cores=None, available=None) -> dict:
             "worker_mib": worker, "by_memory": by_memory,
             "rule": f"min(usable cores, available memory / ({WORKER_BASE_MIB:g} MiB + {WORKER_KIB_PER_POSITION:g} KiB "
                     f"x n1 of the largest model)), at least 1"}
+
+
+def cpu_seconds(who: str = "both") -> float:
+    """User + system CPU seconds, all threads, from ``getrusage``.
+
+    ``who``: ``"self"`` (this process), ``"children"`` (its children that have ended and were waited
+    for: a study's figure processes, a run's workers once the pool is shut down) or ``"both"``
+    (default). What ``morsuite run`` records per unit and per run (``run.json``): on a machine shared
+    with other jobs it grows with their load far less than wall time (the main job's units: 296 s of
+    CPU at load 3, 376 s at load 7 to 10, against 235 and 1092 s of wall time;
+    ``docs/design/reports.md``). Cost: two system calls.
+    """
+    import resource
+
+    out = 0.0
+    for name, kind in (("self", resource.RUSAGE_SELF), ("children", resource.RUSAGE_CHILDREN)):
+        if who in (name, "both"):
+            use = resource.getrusage(kind)
+            out += use.ru_utime + use.ru_stime
+    return out
