@@ -19,6 +19,12 @@ BT at the velocity-velocity level ``bt-vv``, first-order ``bt``, ``modal``, ``kr
 ``irka-projected`` (dense, n1 x n1), the other BT levels (``bt-pp``, ``bt-pv``, ``bt-vp``,
 ``bt-fv``), ``bt-fl`` and any reducer added later can be asked for. A reducer that takes a
 band (``Description.band_option``) is given the comparison's band.
+
+With ``tol`` (``morsuite compare MODEL --tol 0.01``) the study leads with a ``tolerance`` scene
+(:mod:`morsuite.studies.tol_options`, :mod:`morsuite.analysis.tolerance`): each method's smallest
+model within each tolerance, the next smaller one, the search's cost, the cheapest and the
+smallest (:func:`tolerance_lines` prints them), and with ``save_roms`` the chosen models as files;
+``states`` may then be left out.
 """
 
 from __future__ import annotations
