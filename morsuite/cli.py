@@ -1,4 +1,4 @@
-"""Command line: ``morsuite run | compare | reduce | simulate | list | info | bench``."""
+"""Command line: ``morsuite run | compare | reduce | verify | simulate | list | info | bench``."""
 
 from __future__ import annotations
 
@@ -21,18 +21,28 @@ def _option_value(text):
     return _value(text)
 
 
+def _options(args) -> dict:
+    """The reducer options of ``--option KEY=VALUE`` (repeatable)."""
+    opts = {}
+    for item in args.option or []:
+        key, eq, val = item.partition("=")
+        if not eq:
+            raise SystemExit(f"--option expects KEY=VALUE or GROUP.KEY=VALUE, got {item!r}")
+        group, dot, sub = key.partition(".")
+        if dot:  # an advanced option in its group (morsuite.reducers.options)
+            opts.setdefault(group, {})[sub] = _option_value(val)
+        else:
+            opts[key] = _option_value(val)
+    return opts
+
+
 def _reduced(args):
     """(fom, Reduction) of ``--model``, ``--method``, ``--r``, ``--option``; the reducer's warnings are
     recorded in ``info["warnings"]`` (and not printed under ``--json``)."""
     from . import models, reducers
 
     fom = models.parse(args.model)
-    opts = {}
-    for item in args.option or []:
-        key, eq, val = item.partition("=")
-        if not eq:
-            raise SystemExit(f"--option expects KEY=VALUE, got {item!r}")
-        opts[key] = _option_value(val)
+    opts = _options(args)
     with warnings.catch_warnings():
         if args.json:
             warnings.simplefilter("ignore")  # they are recorded in info["warnings"]
@@ -90,7 +100,49 @@ def cmd_reduce(args) -> int:
         band=(out["max_abs_error"], float(df.sigma_full.max())),
         h2=(out["h2_rel_error"], 1.0), hinf=(out["hinf_rel_error"], 1.0))
     out["warnings"] = warned
+    if args.save:
+        out["saved"] = _save(args, fom, res, out, None if args.no_norms else norms, float(df.sigma_full.max()))
     _print(out, args.json)
+    return 0
+
+
+def _save(args, fom, res, out, norms, peak) -> list[str]:
+    """``reduce --save``: the reduced model's files and sidecar, with the errors as the command computed them."""
+    from .romfiles import ERROR_KEYS, provenance_of, save_rom
+
+    errs = {"max_abs_error": out["max_abs_error"], "max_rel_error": out["max_rel_error"], "band_peak": peak}
+    if norms is None:
+        errs["norms"] = "not computed (--no-norms)"
+    else:
+        errs.update({k: v for k, v in norms.items() if k in ERROR_KEYS})
+    prov = provenance_of(fom, args.method, _options(args), res.info, errs, grid=tuple(out["omega"]), source=args.model)
+    return [str(p) for p in save_rom(res.rom, args.save, provenance=prov)]
+
+
+def cmd_verify(args) -> int:
+    """``morsuite verify MODEL ROMFILE``: compute again the errors recorded in a saved reduced model's sidecar
+    (:func:`morsuite.analysis.verify.verify_rom`); print a table (or one JSON object with ``--json``);
+    exit 0 when every recorded value agrees within its stated accuracy, 1 when one does not (named)."""
+    from . import models
+    from .analysis.verify import table_lines, verify_rom
+    from .romfiles import load_rom
+
+    rom = load_rom(args.romfile)
+    fom = models.parse(args.model)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = verify_rom(fom, rom, norms=not args.no_norms)
+    result["warnings"] = [f"{w.category.__name__}: {w.message}" for w in caught] + result.pop("norm_warnings")
+    result.update(model=args.model, romfile=args.romfile)
+    if args.json:
+        _print(result, True)
+    else:
+        for w in result["warnings"]:
+            print(f"warning: {w}", file=sys.stderr)
+        print("\n".join(table_lines(result)))
+    if not result["agrees"]:
+        print(f"morsuite verify: {', '.join(result['failed'])} disagree", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -166,10 +218,16 @@ def cmd_info(args) -> int:
 
 
 def cmd_list(args) -> int:
-    """``morsuite list``: print the catalog models and the registered reducers; returns 0."""
+    """``morsuite list``: print the catalog models, the registered reducers and the methods of
+    ``morsuite compare`` (reducers and their variants; ``*``: compared by default); returns 0."""
     from . import models, reducers
     print("models:   " + ", ".join(models.available()))
     print("reducers: " + ", ".join(reducers.available()))
+    print("methods (morsuite compare; * compared by default):")
+    for name, m in reducers.methods().items():
+        opts = ", ".join(f"{k}={v!r}" for k, v in m.options.items())
+        print(f"  {'*' if m.default else ' '} {name:<16}{m.reducer + (f'({opts})' if opts else ''):<20}"
+              f"{m.states_per_order} states/order  {m.label}")
     return 0
 
 
@@ -179,7 +237,8 @@ def _add_simulate_parser(sub):
     p.add_argument("--model", required=True, help="catalog spec (dsms:g=6000) or .mat/.npz path")
     p.add_argument("--method", required=True, help="reducer name (see `morsuite list`)")
     p.add_argument("--r", required=True, type=int, help="reduced order")
-    p.add_argument("--option", action="append", metavar="KEY=VALUE", help="reducer option (repeatable)")
+    p.add_argument("--option", action="append", metavar="KEY=VALUE",
+                   help="reducer option, GROUP.KEY=VALUE for an advanced one (repeatable)")
     p.add_argument("--input", default="step", metavar="SPEC",
                    help="step (default), impulse, chirp:omega0=0.01,omega1=1, multisine:omegas=0.1;0.5, csv:PATH")
     p.add_argument("--horizon", type=float, metavar="T", help="simulated time in s (default 2 pi / band low end)")
@@ -228,19 +287,26 @@ def _add_run_parser(sub):
         from .studies.batch import shared_compute
         from .studies.cache import Cache
         from .studies.memo import SpecMemo
-        from .studies.workers import sigterm_exits, usable_cores
+        from .studies.workers import default_jobs, sigterm_exits
 
         cache = Cache(args.cache or Path(args.out) / ".cache", read=not args.no_cache)
         memo = SpecMemo(cache)  # validated models/methods: a cached study builds no model
         studies = [load_spec(path, memo=memo) for path in args.specs]  # every spec is valid before anything runs
-        jobs = args.jobs if args.jobs is not None else 1 if args.scheduler else min(2, len(usable_cores()))
+        rule = None
+        if args.jobs is not None:
+            jobs = args.jobs
+        elif args.scheduler:
+            jobs = 1
+        else:  # the usable cores, bounded by memory (studies.workers.default_jobs)
+            rule = default_jobs(max((m.n1 for s in studies for m in s.models.values()), default=0))
+            jobs = rule["jobs"]
         if not args.dry_run and jobs > 1 and args.scheduler is None and not args.no_cache:
             # what any of the studies lacks computed once, then each study's report, on pinned workers
             memo.flush()
             with sigterm_exits():  # stopped, the run stops its workers (studies.workers)
                 shared_compute(studies, cache, jobs, out=args.out, quiet=args.quiet,
                                run_kwargs={"out": args.out, "cache_dir": args.cache, "quiet": args.quiet,
-                                           "rerender": args.rerender})
+                                           "rerender": args.rerender}, jobs_rule=rule)
             return 0
         for study in studies:
             if args.dry_run:
@@ -256,7 +322,8 @@ def _add_run_parser(sub):
     p.add_argument("specs", nargs="+", metavar="SPEC", help="study spec files, e.g. studies/paper_*.toml")
     p.add_argument("--out", default="results", metavar="DIR", help="results root (default: results)")
     p.add_argument("--jobs", type=int, default=None, metavar="N",
-                   help="worker processes, each pinned to a core (default: the usable cores, at most 2); "
+                   help="worker processes, each pinned to a core (default: the usable cores, as many as the "
+                        "available memory holds: morsuite.studies.workers.default_jobs); "
                         "with N > 1 what the studies lack is computed once, side by side, before their reports "
                         "(morsuite.studies.batch); 1: one study after the other on Dask's synchronous scheduler")
     p.add_argument("--scheduler", metavar="ADDRESS", help="dask.distributed scheduler, e.g. tcp://HOST:8786")
@@ -272,33 +339,61 @@ def _add_run_parser(sub):
 
 
 def _add_compare_parser(sub):
-    """``morsuite compare MODEL --states N [N ...] [--methods ...] [--band LO HI] [--input ...] [--out DIR]``
+    """``morsuite compare MODEL [--states N ...] [--tol TOL ...] [--error band|h2|hinf] [--budget-lus N]
+    [--budget-s S] [--save-roms] [--methods ...] [--band LO HI] [--input ...] [--out DIR] [--jobs N]``
     (see :mod:`morsuite.studies.compare`)."""
 
     def cmd_compare(args) -> int:
         from .studies.compare import compare, rigid_line, verdict_lines
 
+        from .studies.workers import usable_cores
+
         line = rigid_line(args.model)
         if line:
             print(line)
+        jobs = args.jobs if args.jobs is not None else min(2, len(usable_cores()))
         result, path = compare(args.model, args.states, args.methods, args.band, args.input, out=args.out,
-                               name=args.name, quiet=args.quiet)
+                               name=args.name, quiet=args.quiet, jobs=jobs, tol=args.tol, error=args.error,
+                               budget_lus=args.budget_lus, budget_s=args.budget_s, max_states=args.max_states,
+                               save_roms=args.save_roms)
         print("\n".join(verdict_lines(result)))
         print(f"report: {result.outdir / 'index.html'}\nstudy:  {path} (morsuite run {path} --out {args.out})")
+        roms = sorted(str(f) for f in result.files if f.parent.name == "roms")
+        if roms:
+            print("models: " + "\n        ".join(roms))
         status = result.summary["status"].astype(str)
         if len(status) and not (status == "ok").any():  # every reduction failed: say why, exit non-zero
             print(f"morsuite compare: every reduction failed; the first: {status.iloc[0]}", file=sys.stderr)
             return 1
+        failed = [a for a in result.manifest["artifacts"] if a.get("kind") == "tolerance" and a.get("error")]
+        if args.tol and len(failed) == sum(1 for a in result.manifest["artifacts"] if a.get("kind") == "tolerance"):
+            print(f"morsuite compare: every tolerance search failed; the first: {failed[0]['error']}",
+                  file=sys.stderr)
+            return 1
         return 0
 
-    from .studies.compare import DEFAULT_METHODS, INPUTS, METHODS
+    from .studies.compare import INPUTS
     p = sub.add_parser("compare", help="compare reducers on one model at equal first-order states: a study, "
                                        "its HTML report and the verdict")
     p.add_argument("model", help=MODEL_HELP)
-    p.add_argument("--states", required=True, nargs="+", type=int, metavar="N",
+    p.add_argument("--states", nargs="+", type=int, metavar="N",
                    help="first-order states of the reduced models (even: a second-order ROM of order r has 2r)")
+    p.add_argument("--tol", nargs="+", type=float, metavar="TOL",
+                   help="relative tolerances in (0, 1): each method's smallest model within each, its cost, "
+                        "the cheapest and the smallest (give --states, --tol or both)")
+    p.add_argument("--error", default="band", choices=("band", "h2", "hinf"),
+                   help="the error --tol bounds: band max error over the band's peak (default), H2 error over "
+                        "||T||_H2, or the certified Hinf error bound over ||T||_Hinf")
+    p.add_argument("--budget-lus", type=int, metavar="N", help="each method's budget of sparse LUs in the search")
+    p.add_argument("--budget-s", type=float, metavar="S", help="each method's time budget of the search (s)")
+    p.add_argument("--max-states", type=int, metavar="N", help="the largest model tried (default 400 states)")
+    p.add_argument("--save-roms", action="store_true",
+                   help="write each chosen model as .npz and .mat with a JSON provenance sidecar (OUT/NAME/roms/)")
+    p.add_argument("--jobs", type=int, metavar="N",
+                   help="worker processes, each pinned to a core (default: the usable cores, at most 2)")
     p.add_argument("--methods", nargs="+", metavar="NAME",
-                   help=f"default: {' '.join(DEFAULT_METHODS)}; valid: {', '.join(METHODS)}")
+                   help="reducers or their variants (default: those marked * by `morsuite list`, which lists "
+                        "every valid name)")
     p.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
                    help="frequency band in rad/s (default: the model's; a model file: from its eigenfrequencies)")
     p.add_argument("--input", metavar="|".join(INPUTS) + "|FILE.csv",
@@ -335,19 +430,30 @@ def build_parser():
     p = sub.add_parser("info", help="summary of a model")
     p.add_argument("model", help=MODEL_HELP)
     p.set_defaults(func=cmd_info)
-    p = sub.add_parser("list", help="available models and reducers")
+    p = sub.add_parser("list", help="available models, reducers and the methods of compare")
     p.set_defaults(func=cmd_list)
     p = sub.add_parser("reduce", help="reduce one model, print errors and timing")
     p.add_argument("--model", required=True, help=MODEL_HELP)
     p.add_argument("--method", required=True, help="reducer name (see `morsuite list`)")
     p.add_argument("--r", required=True, type=int, help="reduced order")
     p.add_argument("--omega", type=_omega_arg, help="frequency grid LO:HI:N (rad/s, log-spaced)")
-    p.add_argument("--option", action="append", metavar="KEY=VALUE", help="reducer option (repeatable)")
+    p.add_argument("--option", action="append", metavar="KEY=VALUE",
+                   help="reducer option, GROUP.KEY=VALUE for an advanced one (repeatable)")
     p.add_argument("--no-norms", action="store_true",
                    help="skip the H2 and Hinf errors (printed as null); they cost the model's Gramian "
                         "factors once and up to a few hundred sparse LUs")
+    p.add_argument("--save", metavar="PATH",
+                   help="write the reduced model as PATH.npz, PATH.mat and the sidecar PATH.json (morsuite.romfiles)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_reduce)
+    p = sub.add_parser("verify", help="compute again the errors recorded with a saved reduced model; exit 1 "
+                                      "when one disagrees")
+    p.add_argument("model", help=MODEL_HELP)
+    p.add_argument("romfile", help="the saved reduced model: STEM.npz, STEM.mat, STEM.json or STEM")
+    p.add_argument("--no-norms", action="store_true", help="check the band errors only (the H2 and Hinf "
+                                                             "errors cost the Gramian factors and up to a few hundred LUs)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_verify)
     _add_simulate_parser(sub)
     _add_bench_parser(sub)
     _add_run_parser(sub)

@@ -49,6 +49,8 @@ def _finite_eigs(A, E):
 
 class _ROMBase:
     kind = "base"
+    #: the JSON sidecar of a model read by :func:`morsuite.romfiles.load_rom` (None otherwise)
+    provenance = None
 
     def freqresp(self, omega) -> np.ndarray:
         """Response at ``s = 1j * omega``: complex (len(omega), p, m)."""
@@ -71,18 +73,25 @@ class _ROMBase:
         return control.ss(np.linalg.solve(E, A), np.linalg.solve(E, B), C, D)
 
     def save(self, path) -> Path:
-        """Write to ``.npz`` or ``.mat`` (chosen by extension), atomically."""
+        """Write the matrices alone to one ``.npz`` or ``.mat`` file (chosen by the extension), atomically.
+
+        The file holds ``kind`` and the matrices under their own names
+        (:mod:`morsuite.romfiles` lists them); no provenance sidecar is written:
+        :func:`morsuite.romfiles.save_rom` writes both formats and the sidecar, and is what the
+        command line uses. Cost: writing ``r^2`` numbers.
+        """
         path = Path(path)
         arrays = {k: getattr(self, k) for k in self._fields}
-        arrays["kind"] = np.array(self.kind)
         if path.suffix == ".npz":
+            arrays["kind"] = np.array(self.kind)
             with atomic_path(path, suffix=".npz") as tmp:
                 with open(tmp, "wb") as fh:
                     np.savez(fh, **arrays)
         elif path.suffix == ".mat":
             import scipy.io as sio
+            # MATLAB v5, uncompressed; ``kind`` a char row vector (a MATLAB string), the matrices doubles
             with atomic_path(path, suffix=".mat") as tmp:
-                sio.savemat(tmp, arrays)
+                sio.savemat(tmp, {**arrays, "kind": self.kind}, format="5", do_compression=False)
         else:
             raise InputError(f"path {str(path)!r}: extension must be .npz or .mat")
         return path
@@ -301,24 +310,60 @@ class FirstOrderROM(_ROMBase):
         return _finite_eigs(self.A, self.E)
 
 
-def load_rom(path):
-    """Read a reduced model written by ``rom.save`` (.npz or .mat)."""
-    path = Path(path)
+def _text(x):
+    """A string stored as a 0-d (.npz) or 1-element (.mat char array) array, else None."""
+    a = np.asarray(x)
+    if a.dtype.kind not in "US" or a.size != 1:
+        return None
+    return str(a.ravel()[0])
+
+
+def _read_arrays(path: Path) -> dict:
+    """The named arrays of a .npz or .mat file; FileFormatError naming the file when it cannot be read."""
+    where = f"ROM file {str(path)!r}"
     if not path.is_file():
-        raise FileFormatError(f"ROM file {str(path)!r} does not exist")
-    if path.suffix == ".npz":
-        with np.load(path, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
-    elif path.suffix == ".mat":
+        raise FileFormatError(f"{where} does not exist")
+    if path.suffix not in (".npz", ".mat"):
+        raise FileFormatError(f"{where}: extension must be .npz or .mat")
+    try:
+        if path.suffix == ".npz":
+            with np.load(path, allow_pickle=False) as z:
+                return {k: z[k] for k in z.files}
         import scipy.io as sio
-        data = sio.loadmat(str(path))
-    else:
-        raise FileFormatError(f"ROM file {str(path)!r}: extension must be .npz or .mat")
-    kind = str(np.asarray(data.get("kind", "")).ravel()[0]) if "kind" in data else ""
+        return {k: v for k, v in sio.loadmat(str(path)).items() if not k.startswith("__")}
+    except Exception as exc:  # a truncated zip, a pickled object, an HDF5 (v7.3) or garbled .mat ...
+        kind = "NumPy .npz archive" if path.suffix == ".npz" else "MATLAB v5 .mat file"
+        raise FileFormatError(f"{where} is not a readable {kind} ({type(exc).__name__}: {exc})") from exc
+
+
+def load_rom(path):
+    """Read one file written by ``rom.save`` or :func:`morsuite.romfiles.save_rom` (.npz or .mat).
+
+    The file alone: :func:`morsuite.load_rom` (:func:`morsuite.romfiles.load_rom`) also checks
+    the provenance sidecar and attaches it. Values come back bit for bit.
+
+    Raises
+    ------
+    FileFormatError
+        Naming the file: it does not exist, has another extension, cannot be read, lacks
+        ``kind`` or a matrix, or its matrices do not make a reduced model (the reason given).
+    """
+    path = Path(path)
+    where = f"ROM file {str(path)!r}"
+    data = _read_arrays(path)
+    kind = _text(data["kind"]) if "kind" in data else ""
     cls = {"second-order": SecondOrderROM, "first-order": FirstOrderROM}.get(kind)
     if cls is None:
-        raise FileFormatError(f"ROM file {str(path)!r}: entry 'kind' missing or unknown ({kind!r})")
+        raise FileFormatError(f"{where}: entry 'kind' missing or unknown ({kind!r}); expected 'second-order' "
+                              "or 'first-order'")
     missing = [k for k in cls._fields if k not in data]
     if missing:
-        raise FileFormatError(f"ROM file {str(path)!r}: missing key {', '.join(missing)}")
-    return cls(*(data[k] for k in cls._fields))
+        raise FileFormatError(f"{where}: missing key {', '.join(missing)} of a {kind} model")
+    bad = [k for k in cls._fields if np.asarray(data[k]).dtype.kind not in "biufc"]
+    if bad:
+        raise FileFormatError(f"{where}: matrix {', '.join(bad)} is not real numeric data "
+                              f"(dtype {np.asarray(data[bad[0]]).dtype})")
+    try:
+        return cls(*(data[k] for k in cls._fields))
+    except InputError as exc:
+        raise FileFormatError(f"{where}: {exc}") from exc

@@ -4,6 +4,7 @@ worse-than-the-zero-model flag of reported errors (:func:`worse_than_zero`)."""
 from __future__ import annotations
 
 import contextlib
+import contextvars
 from concurrent.futures import ThreadPoolExecutor
 import math
 import os
@@ -153,11 +154,16 @@ def default_threads(backend: str) -> int:
 
 
 def map_threads(fn, jobs, threads: int) -> list:
-    """``[fn(j) for j in jobs]`` on a pool of ``threads`` threads (serial for one thread or one job)."""
+    """``[fn(j) for j in jobs]`` on a pool of ``threads`` threads (serial for one thread or one job).
+
+    Each job runs in a copy of the caller's context (:mod:`contextvars`), so that what the caller
+    has opened there (the solve-accuracy record of :func:`morsuite.linalg.accuracy.recording`)
+    sees the job's work too."""
     if threads <= 1 or len(jobs) <= 1:
         return [fn(j) for j in jobs]
+    contexts = [contextvars.copy_context() for _ in jobs]  # a context is entered by one thread at a time
     with ThreadPoolExecutor(max_workers=min(threads, len(jobs))) as pool:
-        return list(pool.map(fn, jobs))
+        return list(pool.map(lambda pair: pair[0].run(fn, pair[1]), zip(contexts, jobs)))
 
 
 def _judged(pair):

@@ -241,3 +241,106 @@ def moments(M, D, K, F, L, s0, k):
     for j in range(1, k):
         X.append(-sla.lu_solve(lu, A1 @ X[-1] + (M @ X[-2] if j >= 2 else 0)))
     return [L @ x for x in X]
+
+
+def _split(a):
+    """Veltkamp's splitting: a = hi + lo exactly, hi and lo with at most 26 significant bits."""
+    c = 134217729.0 * a  # 2^27 + 1
+    hi = c - (c - a)
+    return hi, a - hi
+
+
+def two_prod(a, b):
+    """Dekker's exact product, elementwise: a * b = p + e exactly (IEEE doubles, round to nearest, no
+    overflow), without a fused multiply-add: independent of the compiled kernels under test."""
+    a, b = np.broadcast_arrays(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
+    p = a * b
+    ah, al = _split(a)
+    bh, bl = _split(b)
+    return p, ((ah * bh - p) + ah * bl + al * bh) + al * bl
+
+
+def _expand(factors):
+    """The exact expansion (a list of arrays whose sum is the product, elementwise) of a product of arrays."""
+    terms = [np.asarray(factors[0], dtype=float)]
+    for f in factors[1:]:
+        terms = [t for u in terms for t in two_prod(u, f)]
+    return terms
+
+
+def exact_row_sums(n, rows, terms):
+    """Correctly rounded ``sum over the terms of each row`` (math.fsum: exact summation of doubles)."""
+    import math
+
+    rows = np.concatenate([np.broadcast_to(r, t.shape) for r, t in zip(rows, terms)])
+    vals = np.concatenate(terms)
+    order = np.argsort(rows, kind="stable")
+    rows, vals = rows[order], vals[order]
+    cuts = np.searchsorted(rows, np.arange(n + 1))
+    return np.array([math.fsum(vals[cuts[i]:cuts[i + 1]]) for i in range(n)])
+
+
+def exact_saddle_residual(fom, omega, x, z, b):
+    r"""The residual :math:`[b; 0] - S(j\omega)[x; z]` of the saddle system of ``fom`` at :math:`s = j\omega`,
+    exact and rounded once to double (real and imaginary parts by :func:`exact_row_sums` over exact
+    product expansions: :math:`\omega^2 M` and :math:`\omega D` are never rounded). Independent of
+    morsuite's solvers and kernels (numpy and math.fsum only)."""
+    import scipy.sparse as sp
+
+    n1, n2 = fom.n1, fom.n2
+    out = []
+    for part, (xp, xq, zp, bp) in enumerate(((x.real, x.imag, z.real, b.real), (x.imag, x.real, z.imag, b.imag))):
+        sign = 1.0 if part == 0 else -1.0  # Re: +omega D x_im, Im: -omega D x_re
+        rows, terms = [np.arange(n1)], [np.asarray(bp, dtype=float)]
+        for X, coeffs, vec, sgn in ((fom.K, (), xp, -1.0), (fom.M, (omega, omega), xp, 1.0),
+                                    (fom.D, (omega,), xq, sign)):
+            C = sp.coo_matrix(X)
+            for t in _expand([C.data, *[np.full(C.nnz, c) for c in coeffs], vec[C.col]]):
+                rows.append(C.row)
+                terms.append(sgn * t)
+        G = sp.coo_matrix(fom.G)
+        for t in _expand([G.data, zp[G.row]]):  # G^T z in the first block
+            rows.append(G.col)
+            terms.append(-t)
+        r1 = exact_row_sums(n1, rows, terms)
+        r2 = exact_row_sums(n2, [G.row] * 2, [-t for t in _expand([G.data, xp[G.col]])]) if n2 else np.zeros(0)
+        out.append(np.concatenate([r1, r2]))
+    return out[0] + 1j * out[1]
+
+
+def reference_transfer(fom, omega, steps=12):
+    r""":math:`T(j\omega)` of ``fom`` to about the rounding of double, independently of morsuite's solvers:
+    a dense LU (LAPACK) of :math:`S(j\omega)` assembled in double, refined with the exact residual of
+    :func:`exact_saddle_residual` until the correction is at most :math:`\varepsilon` of the solution
+    (max-norms; a contraction of about :math:`\kappa\varepsilon` per step: converges while that is below
+    one; the solution is then its exact value to a few units of roundoff of its largest entry), and
+    :math:`L x` summed exactly. Small models only (a dense matrix of order n1 + n2)."""
+    import math
+
+    n1, n2 = fom.n1, fom.n2
+    M, D, K = (np.asarray(X.toarray() if hasattr(X, "toarray") else X) for X in (fom.M, fom.D, fom.K))
+    G = fom.G.toarray() if hasattr(fom.G, "toarray") else np.asarray(fom.G).reshape(n2, n1)
+    S = np.zeros((n1 + n2, n1 + n2), dtype=complex)
+    S[:n1, :n1] = K - omega * omega * M + 1j * omega * D
+    S[:n1, n1:], S[n1:, :n1] = G.T, G
+    lu = sla.lu_factor(S)
+    F = np.asarray(fom.F.toarray() if hasattr(fom.F, "toarray") else fom.F, dtype=float)
+    B = np.vstack([F, np.zeros((n2, F.shape[1]))]).astype(complex)
+    X = sla.lu_solve(lu, B)
+    for _ in range(steps):
+        R = np.column_stack([exact_saddle_residual(fom, omega, X[:n1, j], X[n1:, j], B[:n1, j])
+                             for j in range(B.shape[1])])
+        dX = sla.lu_solve(lu, R)
+        X = X + dX
+        if np.max(np.abs(dX)) <= EPS * np.max(np.abs(X)):
+            break
+    else:
+        raise AssertionError(f"the reference's refinement did not converge at omega = {omega}")
+    L = np.asarray(fom.L.toarray() if hasattr(fom.L, "toarray") else fom.L, dtype=float)
+    T = np.empty((L.shape[0], B.shape[1]), dtype=complex)
+    for i in range(L.shape[0]):
+        for j in range(B.shape[1]):
+            re = _expand([L[i], X[:n1, j].real])
+            im = _expand([L[i], X[:n1, j].imag])
+            T[i, j] = math.fsum(np.concatenate(re)) + 1j * math.fsum(np.concatenate(im))
+    return T

@@ -72,6 +72,7 @@ def test_run_case_reports_guard_and_isolated_child():
     assert row["rss_delta_mb"] >= 0 and np.isfinite(row["tracemalloc_peak_mb"])
 
 
+@pytest.mark.slow
 def test_scaling_quick_writes_finite_results(tmp_path):
     res = bench_scaling(True, tmp_path, echo=None)
     for name in ("scaling.csv", "scaling.md", "scaling_fits.csv", "scaling_fits.md", "scaling.png"):
@@ -116,6 +117,7 @@ def test_write_readme_summarises_every_json(tmp_path):
     assert "partial" not in text
 
 
+@pytest.mark.slow
 def test_tcom_large_bench_records_times_memory_and_choices():
     """The tcom-1e6 benchmark on a small plan: both cases finish in child processes, with their
     LU counts, phases, peak RSS, the load, and the size-dependent choices resolved as at small n1

@@ -105,23 +105,36 @@ def test_dsms600_hsv_against_dense_modal_computation():
     assert_sets_close(hsv[n_big:n_mid], dense[n_big:n_mid], atol=2e-12 * dense[0], what="HSVs above 1e-9 sigma_1")
 
 
-def test_automatic_compression_above_its_size_keeps_the_hankel_singular_values():
+def test_automatic_compression_above_its_size_keeps_the_hankel_singular_values(monkeypatch):
     """compress_tol=None: plain factors below BT.COMPRESS_MIN_N1 positions (recorded 0), compressed
-    at BT.COMPRESS_AUTO_TOL from there on (the threshold lowered on the instance). Compression moves
-    P and Q by at most tol^2 = 1e-12 of their norms, a Hankel singular value sigma_i by about
-    1e-12 sigma_1^2 / sigma_i: the compressed run's values above 1e-5 sigma_1 match the dense
-    modal reference to 1e-5 relative (measured 5.3e-7), the next ones to 1e-8 sigma_1 (5.6e-10)."""
+    at BT.COMPRESS_AUTO_TOL from there on (the threshold lowered on the instance) once a factor
+    exceeds lradi's ``compress_from_mib`` (1024 MiB: these factors stay plain; set to 0 here).
+    Compression moves P and Q by at most tol^2 = 1e-12 of their norms, a Hankel singular value
+    sigma_i by about 1e-12 sigma_1^2 / sigma_i: the compressed run's values above 1e-5 sigma_1
+    match the dense modal reference to 1e-5 relative (measured 5.3e-7), the next ones to 1e-8
+    sigma_1 (5.6e-10)."""
+    import functools
+
+    from morsuite.linalg import gramians
     fom = ms.models.dsms(g=200)
     dense = _dense_modal_hsv(fom)
     plain = ms.reducers.make("bt", fom, gramian_cache="reducer").reduce(10)
     red = ms.reducers.make("bt", fom, gramian_cache="reducer")
     red.COMPRESS_MIN_N1 = 0
+    fits = red.reduce(10)  # compress_tol 1e-6, but the factors fit within compress_from_mib: kept plain
+    monkeypatch.setattr(gramians, "lradi_pair", functools.partial(gramians.lradi_pair, compress_from_mib=0.0))
+    red = ms.reducers.make("bt", fom, gramian_cache="reducer")
+    red.COMPRESS_MIN_N1 = 0
     comp = red.reduce(10)
     assert fom.n1 < ms.reducers.bt.balanced.BT.COMPRESS_MIN_N1 and plain.info["compress_tol"] == 0.0
-    assert comp.info["compress_tol"] == ms.reducers.bt.balanced.BT.COMPRESS_AUTO_TOL
+    assert comp.info["compress_tol"] == fits.info["compress_tol"] == ms.reducers.bt.balanced.BT.COMPRESS_AUTO_TOL
     for eq in ("controllability", "observability"):
         assert plain.info["factor_ranks"][eq] == plain.info["adi"][eq]["columns"]
+        assert fits.info["factor_ranks"][eq] == fits.info["adi"][eq]["columns"]
+        assert fits.info["adi"][eq]["compressions"] == 0 and fits.info["adi"][eq]["compress_from_mib"] == 1024.0
         assert comp.info["factor_ranks"][eq] < comp.info["adi"][eq]["columns"]
+    # the same plain factors, so the same Hankel singular values to rounding
+    assert_sets_close(fits.info["hsv"], plain.info["hsv"], atol=1e-13 * plain.info["hsv"][0], what="plain HSVs")
     n_big, n_mid = int(np.sum(dense > 1e-5 * dense[0])), int(np.sum(dense > 1e-9 * dense[0]))
     hsv = np.asarray(comp.info["hsv"])
     assert_sets_close(hsv[:n_big], dense[:n_big], rtol=1e-5, what="HSVs above 1e-5 sigma_1")
@@ -163,6 +176,7 @@ def _dense_modal_hsv(fom):
 
 
 # -- TCOM ---------------------------------------------------------------------------
+@pytest.mark.slow
 def test_tcom_gramians_and_hankel_singular_values(tcom_bt):
     info = tcom_bt.reduce(10).info
     its = info["adi_iterations"]
@@ -180,9 +194,9 @@ def test_tcom_gramians_and_hankel_singular_values(tcom_bt):
     assert_sets_close(hsv[:10], TCOM_HSV, rtol=1e-4, what="HSVs")
 
 
-@pytest.mark.parametrize("model", ["dsms", "tcom"])
-def test_second_order_levels_stable_or_say_why(model, dsms_bt, tcom_bt):
-    base = dsms_bt if model == "dsms" else tcom_bt
+@pytest.mark.parametrize("model", ["dsms", pytest.param("tcom", marks=pytest.mark.slow)])
+def test_second_order_levels_stable_or_say_why(model, request):
+    base = request.getfixturevalue(f"{model}_bt")   # only the model's own fixture (the TCOM's costs 7 s)
     for form in LEVELS:
         red = ms.reducers.make("bt", base.fom, form=form).use_gramians_of(base)
         for r in (10, 20, 30):

@@ -22,7 +22,8 @@ from support import assert_rounding, rounding_unit
 def _dense_band_gramians(fom, band):
     """P_band and Q_band of the first-order realization on the null space of G, in closed form:
     P_w = P S(w)^H + S(w) P, S(w) = (j / 2 pi) logm((A + jwI)(A - jwI)^-1) (Gawronski and Juang 1990),
-    the band's as the difference at w2 and w1; Q likewise for (A^T, C^T), then Q = E^-T Q~ E^-1."""
+    the band's as the difference at w2 and w1; Q likewise for (A^T, C^T), then Q = E^-T Q~ E^-1. Also the
+    full observability Gramian E^-T Q~ E^-1 (last)."""
     N = sla.null_space(fom.G.toarray())
     Mn, Dn, Kn = (N.T @ X.toarray() @ N for X in (fom.M, fom.D, fom.K))
     k = N.shape[1]
@@ -41,7 +42,7 @@ def _dense_band_gramians(fom, band):
     Pb = (P @ Sb.conj().T + Sb @ P).real
     Qtb = (Qt @ Sb + Sb.conj().T @ Qt).real
     Einv = np.linalg.inv(E)
-    return N, E, Pb, Einv.T @ Qtb @ Einv
+    return N, E, Pb, Einv.T @ Qtb @ Einv, Einv.T @ Qt @ Einv
 
 
 def _band_error(fom, rom, band):
@@ -68,7 +69,7 @@ def dense(dsms20):
 
 @pytest.mark.parametrize("variable", ["log", "linear"])
 def test_band_factors_match_the_dense_closed_form(dsms20, dense, variable):
-    N, E, Pb, Qb = dense
+    N, E, Pb, Qb, _ = dense
     omega, weights = band_nodes(BAND, 96, variable)  # (64 nodes: 3.6e-10 in log(w), 2.7e-9 in w)
     assert np.all((omega > BAND[0]) & (omega < BAND[1])) and weights.sum() == pytest.approx(BAND[1] - BAND[0])
     with blas_threads(BLAS_THREADS):  # as inside reduce: tiny solves, where BLAS threads only contend
@@ -94,7 +95,7 @@ def test_band_factors_match_the_dense_closed_form(dsms20, dense, variable):
 
 
 def test_reducer_band_hsv_match_dense(dsms20, dense):
-    N, E, Pb, Qb = dense
+    N, E, Pb, Qb, _ = dense
     red = ms.reducers.make("bt-fl", dsms20, limited="both", band=BAND)  # adaptive node count (default)
     info = red.reduce(4).info
     hsv_ref = np.sqrt(np.linalg.eigvals(Pb @ E.T @ Qb @ E).real.clip(0))   # the dense band HSVs, unordered
@@ -109,6 +110,24 @@ def test_reducer_band_hsv_match_dense(dsms20, dense):
     nodes = [lv["nodes"] for lv in info["quad_levels"]]
     assert nodes == [info["options"]["nodes_start"] * 2 ** i for i in range(len(nodes))]
     assert info["nodes"] == nodes[-1] and info["lu_count"] == info["nodes_evaluated"] == sum(nodes)
+
+
+def test_default_hsv_are_the_one_sided_weighted_values(dsms20, dense):
+    """limited='controllability' (the default): info['hsv'] are those of the pair it balances, the band
+    controllability Gramian and the full observability one (Enns): sqrt(eig(P_band E^T Q E)), not the band
+    Hankel singular values sqrt(eig(P_band E^T Q_band E)) of limited='both' (which differ: the test can fail)."""
+    N, E, Pb, Qb, Q = dense
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ms.errors.StabilityWarning)
+        info = ms.reducers.make("bt-fl", dsms20, band=BAND).reduce(4).info
+    assert info["limited"] == "controllability"
+    one_sided = np.sqrt(np.linalg.eigvals(Pb @ E.T @ Q @ E).real.clip(0))
+    band = np.sqrt(np.linalg.eigvals(Pb @ E.T @ Qb @ E).real.clip(0))
+    k, tol = 6, 10 * info["quad_tol"]
+    got = np.asarray(info["hsv"][:k])
+    assert all(np.min(np.abs(one_sided - h)) <= tol * h for h in got)
+    assert np.count_nonzero(one_sided > got[-1] * (1 + tol)) <= k - 1
+    assert any(np.min(np.abs(band - h)) > 100 * tol * h for h in got)
 
 
 def test_lu_count_is_one_per_node_and_factors_are_kept(dsms20, monkeypatch):

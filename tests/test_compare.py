@@ -31,6 +31,7 @@ def compared(tmp_path_factory):
     return out, out / "compare_dsms_g60"
 
 
+@pytest.mark.slow
 def test_states_become_orders_and_the_numbers_are_the_reducers(compared, capsys):
     out, folder = compared
     s = pd.read_csv(folder / "summary.csv").drop_duplicates(["method", "r_requested"])
@@ -43,6 +44,7 @@ def test_states_become_orders_and_the_numbers_are_the_reducers(compared, capsys)
         assert row.h2_error == pytest.approx(ref, rel=1e-6)
 
 
+@pytest.mark.slow
 def test_printed_verdict_table_matches_the_summary(tmp_path, capsys):
     rc = main(["compare", "dsms:g=60", "--states", "6", "--methods", "bt", "bt-vv", "--out", str(tmp_path),
                "--quiet"])
@@ -62,6 +64,7 @@ def test_printed_verdict_table_matches_the_summary(tmp_path, capsys):
     assert "Smallest error per measure: 6 states" in text and "index.html" in text
 
 
+@pytest.mark.slow
 def test_written_study_reruns_from_the_cache(compared):
     out, folder = compared
     toml = folder / "compare_dsms_g60.toml"
@@ -78,11 +81,46 @@ def test_written_study_reruns_from_the_cache(compared):
     assert (folder / "index.html").is_file() and (out / "index.html").is_file()
 
 
-def test_model_file_band_from_its_eigenfrequencies_and_a_time_scene(tmp_path):
+@pytest.fixture
+def counted(monkeypatch):
+    """Counts, in this process, the model builds (``catalog.parse``) and the sparse LUs of the saddle matrix
+    at s = 0 (bordered K)."""
+    from morsuite.linalg.saddle import SaddlePointSolver
+    from morsuite.models import catalog
+    from morsuite.studies.task_common import model_of
+
+    model_of.cache_clear()  # a model kept by an earlier test would hide its build
+    seen = {"builds": [], "lus_at_zero": 0}
+    parse, factor = catalog.parse, SaddlePointSolver.factor
+
+    def counting_parse(source, *a, **k):
+        seen["builds"].append(str(source))
+        return parse(source, *a, **k)
+
+    def counting_factor(self, s=None, *, coeffs=None):
+        before = self.stats.factorizations
+        lu = factor(self, s, coeffs=coeffs)
+        a, b, c = self._coeffs(s, coeffs)
+        if self.stats.factorizations > before and a == 0 and b == 0 and c == 1:
+            seen["lus_at_zero"] += 1
+        return lu
+
+    monkeypatch.setattr(catalog, "parse", counting_parse)
+    monkeypatch.setattr(SaddlePointSolver, "factor", counting_factor)
+    return seen
+
+
+@pytest.mark.slow
+def test_model_file_band_from_its_eigenfrequencies_and_a_time_scene(tmp_path, counted):
     mat = DATA / "mess_msd_ind3_g600.mat"
     rc = main(["compare", str(mat), "--states", "4", "--methods", "bt", "--input", "step", "--out",
-               str(tmp_path / "o"), "--quiet"])
+               str(tmp_path / "o"), "--quiet", "--jobs", "1"])
     assert rc == 0
+    # one build of the model in this process (the rigid-body line, the spec, both validations and the tasks
+    # share it: before issue 47 five, each with the constraint check's sparse LU of M) and one LU of the
+    # saddle matrix at s = 0 (measured: the H-infinity norm's sample at 0)
+    assert counted["builds"] == [str(mat.resolve())]
+    assert counted["lus_at_zero"] <= 1
     folder = tmp_path / "o" / "compare_mess_msd_ind3_g600"
     spec = tomllib.loads((folder / "compare_mess_msd_ind3_g600.toml").read_text())
     rel = Path(spec["models"]["model"])
@@ -159,6 +197,7 @@ def test_run_failing_in_a_reducer_leaves_nothing_half_written(tmp_path, monkeypa
     assert not list(folder.glob("*.tmp*")) and not list(folder.glob(".*.toml*"))
 
 
+@pytest.mark.slow
 def test_a_run_in_which_every_method_fails_exits_non_zero(tmp_path, monkeypatch, capsys):
     """Every reduction failing (recorded, not raised: a MorsuiteError in each reducer) is a failed
     command: exit 1 and the first reason on stderr, the report still written (issue 34 item 6)."""
@@ -169,7 +208,7 @@ def test_a_run_in_which_every_method_fails_exits_non_zero(tmp_path, monkeypatch,
     for name in ("bt", "irka"):
         monkeypatch.setattr(ms.reducers.get_class(name), "_reduce", fails)
     rc = main(["compare", "dsms:g=40", "--states", "4", "--methods", "bt", "irka", "--out", str(tmp_path),
-               "--quiet"])
+               "--quiet", "--jobs", "1"])  # the patched reducers live in this process
     err = capsys.readouterr().err
     assert rc == 1 and "every reduction failed" in err and "exactly singular" in err
     assert (tmp_path / "compare_dsms_g40" / "index.html").exists()

@@ -152,6 +152,7 @@ def _dense_peak(fom, rom, grid):
     return float(np.max(np.linalg.svd(T, compute_uv=False)[:, 0]))
 
 
+@pytest.mark.slow
 def test_screened_searches_pay_fewer_lus_and_keep_every_peak():
     """fem_block(200) with its Gramian factors (the model's resonances): the screened searches of a
     comparison (band response, model norm, three error searches) find every peak that the unscreened

@@ -153,11 +153,11 @@ def large_order_models():
 
 
 @pytest.mark.parametrize("spec,method,opts,r", [
-    ("tcom:nc=60", "bt", {}, 60),          # 60 states, 60 poles, ||E|| / ||T|| ~ 1e-8
-    ("tcom:nc=60", "irka-fo", {}, 30),
-    ("tcom:nc=60", "bt", {"form": "vv"}, 20),  # 40 states
+    pytest.param("tcom:nc=60", "bt", {}, 60, marks=pytest.mark.slow),   # 60 states, 60 poles, ||E|| / ||T|| ~ 1e-8
+    pytest.param("tcom:nc=60", "irka-fo", {}, 30, marks=pytest.mark.slow),
+    pytest.param("tcom:nc=60", "bt", {"form": "vv"}, 20, marks=pytest.mark.slow),  # 40 states
     ("dsms:g=60", "irka", {}, 8),
-], ids=["tcom60-bt60", "tcom60-irkafo30", "tcom60-vv20", "dsms60-irka8"])
+], ids=["tcom60-bt60", "tcom60-irkafo30", "tcom60-vv20", "dsms60-irka8"])   # tcom60: 6.5 to 9 s of CPU each
 def test_trusted_values_within_their_floor_at_large_orders(spec, method, opts, r, large_order_models):
     """Against the cancellation-free quadrature converged at rtol 1e-11 (another route: no Gramian, no
     modal form), and the dense Lyapunov reference where it is reliable."""

@@ -75,6 +75,7 @@ def test_pole_residue_floor_bounds_its_error_on_the_tcom(r, tcom60_bt):
     assert da["trusted"] and da["rel_floor"] <= d["rel_floor"] and abs(auto / ref - 1) <= da["rel_floor"] + dq["rel_floor"]
 
 
+@pytest.mark.slow
 def test_h2_norm_floor_bounds_its_error_on_the_tcom():
     """||T||_H2 from the refined Gramian factor against the quadrature of ||T(jw)||_F^2.
 

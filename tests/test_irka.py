@@ -354,29 +354,6 @@ def test_given_shifts_must_be_conjugate_closed_and_in_rhp():
         _reduce(fom, 2, init="given", init_shifts=[-0.1, 0.2])
 
 
-def test_registry_and_entry_points(monkeypatch):
-    from morsuite.reducers import base
-
-    assert {"irka"} <= set(ms.reducers.available())
-    with pytest.raises(ms.OptionError, match="unknown reducer 'nope'.*available"):
-        ms.reducers.make("nope", ms.models.dsms(50))
-
-    class Plugin(ms.reducers.IRKA):
-        name = "plugin-irka"
-
-    class EP:
-        name = "plugin-irka"
-
-        def load(self):
-            return Plugin
-
-    monkeypatch.setattr(base, "_ENTRY_POINTS_LOADED", False)
-    monkeypatch.setattr("importlib.metadata.entry_points", lambda group=None: [EP()] if group == "morsuite.reducers" else [])
-    assert "plugin-irka" in ms.reducers.available()
-    assert isinstance(ms.reducers.make("plugin-irka", ms.models.dsms(50)), Plugin)
-    base._REGISTRY.pop("plugin-irka", None)
-
-
 def test_info_is_plain_json_and_records_options():
     res = _reduce(ms.models.dsms(100), 4)
     text = json.dumps(res.info)

@@ -387,30 +387,67 @@ def test_given_shifts_are_factored_once_each():
 def test_factor_store_compression_matches_truncated_svd():
     """Planted answer: columns spanning 12 directions with singular values down to 1e-9, plus
     noise at 1e-14; compression at 1e-11 keeps exactly the 12, and the Gramian to the bound."""
-    from morsuite.linalg.adi_iteration import FactorStore
+    from morsuite.linalg.factor_store import FactorStore
     rng = np.random.default_rng(5)
     n1 = 300
     U = np.linalg.qr(rng.standard_normal((2 * n1, 12)))[0]
     s = np.logspace(0, -9, 12)
     cols = U @ (s[:, None] * rng.standard_normal((12, 200))) + 1e-14 * rng.standard_normal((2 * n1, 200))
     plain, comp = FactorStore(n1, 0.0), FactorStore(n1, 1e-11, chunk=16)
+    # plain for the first 60 columns (plain_bytes), then compressed; and a budget that all 200 columns fit
+    late, fits = FactorStore(n1, 1e-11, chunk=16, plain_bytes=60 * 16 * n1), FactorStore(n1, 1e-11, plain_bytes=1e9)
     for j in range(0, 200, 5):
-        for st in (plain, comp):
+        for st in (plain, comp, late, fits):
             st.append(2.0, cols[:n1, j:j + 5], cols[n1:, j:j + 5])
-        # compressed, the blocks grow by an eighth (at least a chunk), not by doubling
+        # compressed, the blocks grow by an eighth (at least a chunk), not by doubling; plain up to the
+        # switch, by doubling but not beyond the switch and a chunk
         assert comp.Z1.shape[1] <= comp.k_peak + max(comp.chunk, comp.k_peak // 8)
-    for st in (plain, comp):
+        assert late.Z1.shape[1] <= max(late.k_peak + max(late.chunk, late.k_peak // 8), 60 + late.chunk)
+        assert late.compressions == 0 if j + 5 <= 60 else late.compressions >= 1
+    for st in (plain, comp, late, fits):
         st.finish()
-    Zp, Zc = np.vstack(plain.blocks()), np.vstack(comp.blocks())
-    assert Zp.shape[1] == 200 and comp.columns == 200 and Zc.shape[1] == 12
+    Zp, Zc, Zl, Zf = (np.vstack(st.blocks()) for st in (plain, comp, late, fits))
+    assert Zp.shape[1] == 200 and comp.columns == 200 and Zc.shape[1] == 12 and Zl.shape[1] == 12
+    assert fits.compressions == 0 and Zf.shape[1] == 200 and np.array_equal(Zf, Zp)  # stored as appended
     # finish trims the blocks to the columns in use (the store is kept for the factor's life)
     assert plain.Z1.shape[1] == plain.Z2.shape[1] == 200 and comp.Z1.shape[1] == comp.Z2.shape[1] == 12
-    P, Pc = Zp @ Zp.T, Zc @ Zc.T
-    # each truncation at most tol^2 ||P||, each of the 40 absorptions 20 sqrt(5) eps ||P||
-    bound = (comp.compressions * 1e-22 + 40 * 20 * np.sqrt(5) * 2.2e-16) * np.linalg.norm(P, 2)
-    assert np.linalg.norm(P - Pc, 2) <= bound
-    assert_sets_close(np.linalg.svd(Zc, compute_uv=False), np.linalg.svd(Zp, compute_uv=False)[:12],
-                      rtol=1e-6, what="kept singular values")
+    P = Zp @ Zp.T
+    # each truncation at most tol^2 ||P||, each absorption 20 sqrt(b) eps ||P||: 40 of b = 5 (comp), the
+    # late store's first of b = 65 (the 60 plain columns and 5 more) and 28 of 5
+    for Z, bound in ((Zc, comp.compressions * 1e-22 + 40 * 20 * np.sqrt(5) * 2.2e-16),
+                     (Zl, late.compressions * 1e-22 + (20 * np.sqrt(65) + 28 * 20 * np.sqrt(5)) * 2.2e-16)):
+        assert np.linalg.norm(P - Z @ Z.T, 2) <= bound * np.linalg.norm(P, 2)
+        assert_sets_close(np.linalg.svd(Z, compute_uv=False), np.linalg.svd(Zp, compute_uv=False)[:12],
+                          rtol=1e-6, what="kept singular values")
+
+
+def test_householder_fallback_by_row_blocks_is_a_qr_of_the_stacked_blocks():
+    """The fallback's tall-skinny QR (FactorStore._tsqr, row blocks of TSQR_BYTES, here 64 rows and a last
+    block of 6 rows, fewer than the 16 columns) is a QR of the stacked [X1; X2]: Q orthonormal to rounding,
+    QR = X to rounding of ||X||, and R's singular values those of X (dense SVD); a rank-deficient block
+    normalised by it keeps its numerical rank."""
+    from morsuite.linalg.factor_store import FactorStore
+    rng = np.random.default_rng(11)
+    n1, b = 70, 16
+    X = rng.standard_normal((2 * n1, 10)) @ rng.standard_normal((10, b))  # rank 10
+    st = FactorStore(n1, 1e-8)
+    st.TSQR_BYTES = 8 * b  # rows per block: max(4 b, TSQR_BYTES / (8 b)) = 64
+    X1, X2 = np.asfortranarray(X[:n1]), np.asfortranarray(X[n1:])
+    parts, Qr, R = st._tsqr(X1, X2)
+    assert len(parts) == 4 and min(j - i for _, i, j, _, _ in parts) == 6
+    Q = np.zeros((2 * n1, Qr.shape[1]))
+    for (Xb, i, j, q, at) in parts:
+        Q[(0 if Xb is X1 else n1) + i:(0 if Xb is X1 else n1) + j] = q @ Qr[at:at + q.shape[1]]
+    assert_rounding(*orthonormality_error(Q), "orthonormality of Q")
+    assert np.linalg.norm(Q @ R - X) <= 10 * rounding_unit(2 * n1) * np.linalg.norm(X)
+    assert_sets_close(np.linalg.svd(R, compute_uv=False)[:10], np.linalg.svd(X, compute_uv=False)[:10],
+                      rtol=1e-12, what="singular values")
+    st.Z1, st.Z2 = np.asfortranarray(X[:n1].copy()), np.asfortranarray(X[n1:].copy())
+    Rn, t = st._normalise(0, b, 1e-10 * np.linalg.norm(X, 2))  # Gram condition ~1e32: Householder
+    assert st.householder == 1 and t == 10
+    Qn = np.vstack([st.Z1[:, :t], st.Z2[:, :t]])
+    assert_rounding(*orthonormality_error(Qn), "orthonormality of the normalised block")
+    assert np.linalg.norm(Qn @ Rn - X) <= 1e-10 * np.linalg.norm(X)
 
 
 def test_compressed_store_keeps_the_plain_gramian_on_both_normalisations():
@@ -418,7 +455,7 @@ def test_compressed_store_keeps_the_plain_gramian_on_both_normalisations():
     pair inserted: the compressed store's ZZ^T is within the documented bound of the plain
     store's fed the same columns; the well-conditioned blocks take Cholesky-QR, the block
     with the pair (Gram condition about 1e20) the Householder fallback; Q stays orthonormal."""
-    from morsuite.linalg.adi_iteration import FactorStore
+    from morsuite.linalg.factor_store import FactorStore
     fom = ms.models.tcom(nc=30)
     n1 = fom.n1
     Z = lradi(fom, "controllability", tol=1e-12, compress_tol=0.0).Z
@@ -459,7 +496,11 @@ def test_compressed_factors_keep_the_hankel_singular_values():
     hsv = np.sqrt(np.abs(np.linalg.eigvals(P @ Qs)))
     full = lradi_pair(fom, tol=1e-12, compress_tol=0.0)
     tau = 1e-7
-    comp = lradi_pair(fom, tol=1e-12, compress_tol=tau)
+    comp = lradi_pair(fom, tol=1e-12, compress_tol=tau, compress_from_mib=0.0)
+    kept = lradi_pair(fom, tol=1e-12, compress_tol=tau)  # these factors fit compress_from_mib: kept plain
+    for a, b in zip(full, kept):
+        assert b.compressions == 0 and b.rank == b.columns == a.columns
+        assert np.linalg.norm(a.Z - b.Z) <= 1e-13 * np.linalg.norm(a.Z)  # the same run: the same columns
     for a, b in zip(full, comp):
         assert a.rank == a.columns and b.columns == a.columns and b.rank < a.rank
         Pa, Pb = a.Z @ a.Z.T, b.Z @ b.Z.T
@@ -476,6 +517,7 @@ def test_compressed_factors_keep_the_hankel_singular_values():
     ({"shift_reuse": 1.0}, "shift_reuse"),
     ({"shift_reuse": -0.1}, "shift_reuse"),
     ({"compress_tol": 1.0}, "compress_tol"),
+    ({"compress_from_mib": -1.0}, "compress_from_mib"),
     ({"pool_full_reuse": 1.0}, "pool_full_reuse"),
     ({"pool_full_reuse": -0.2}, "pool_full_reuse"),
     ({"lu_pool_mib": -1.0}, "lu_pool_mib"),

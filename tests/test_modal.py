@@ -157,3 +157,54 @@ def test_free_floating_model_keeps_the_rigid_mode_and_corrects_the_flexible_part
     Zf = shapes[:, 1:]
     Tflex0 = fom.L @ Zf @ np.diag(1 / w_ref[1:] ** 2) @ Zf.T @ fom.F
     assert np.allclose(res.rom.flexible.transfer(0.0), Tflex0, rtol=1e-10, atol=0)
+
+
+def test_partial_convergence_of_the_modes_is_a_status(monkeypatch):
+    """ARPACK converging 3 of the 7 modes reduce(8) needs (planted) and a real run capped at one restart:
+    status 'partial', converged False, the warning in info, a reduced model of the modes that converged."""
+    import scipy.sparse.linalg as spla
+
+    from morsuite.errors import ConvergenceWarning
+    from morsuite.linalg import eigen
+
+    fom = ms.models.dsms(g=100)
+    w_ref, _ = dense_modes(fom)
+    real = spla.eigsh
+
+    def eigsh(*args, **kwargs):  # the second, fourth, ... nearest pairs converged
+        lam, X = real(*args, **kwargs)
+        raise spla.ArpackNoConvergence("planted", lam[1::2], X[:, 1::2])
+
+    with monkeypatch.context() as mp:
+        mp.setattr(eigen.spla, "eigsh", eigsh)
+        with pytest.warns(ConvergenceWarning) as said:
+            res = ms.reducers.make("modal", fom).reduce(8)
+    assert any("converged 3 of 7 modes" in str(w.message) for w in said)
+    info = res.info
+    assert info["status"] == "partial" and info["converged"] is False and info["modes"] == 3
+    assert res.rom.order == 4 and info["r"] == 4  # 3 modes and the static column
+    assert "converged 3 of 7" in info["status_reason"]
+    assert any("converged 3 of 7" in w for w in info["warnings"])
+    _contains(info["omega"], w_ref[1:7:2], RTOL, "the planted converged modes")
+    with pytest.warns(ConvergenceWarning):
+        capped = ms.reducers.make("modal", fom, maxiter=1).reduce(8)
+    assert capped.info["status"] == "partial" and not capped.info["converged"] and capped.info["warnings"]
+    assert capped.info["options"]["maxiter"] == 1
+
+
+def test_cutoff_selection_keeps_every_mode_up_to_the_factor():
+    """selection='cutoff' (the engineers' rule): the modes below cutoff x the band's upper end, no more; r caps them."""
+    fom = ms.models.tcom(nc=30)
+    w_ref, _ = dense_modes(fom)
+    w2 = 0.4
+    for c in (1.0, 2.5):
+        expect = np.sort(w_ref[(w_ref > 0) & (w_ref <= c * w2)])
+        red = ms.reducers.make("modal", fom, selection="cutoff", cutoff=c, band=[0.01, w2], static_correction=False)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = red.reduce(fom.order - 1)
+        assert_sets_close(np.asarray(res.info["omega"]), expect, rtol=1e-8, what="modes below the cutoff")
+        assert res.rom.order == expect.size
+    capped = ms.reducers.make("modal", fom, selection="cutoff", cutoff=2.5, band=[0.01, w2],
+                              static_correction=False).reduce(3)
+    assert capped.rom.order == 3 and np.allclose(np.asarray(capped.info["omega"]), expect[:3], rtol=1e-8)

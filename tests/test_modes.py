@@ -262,3 +262,87 @@ def test_structure_checks(block):
     assert not ms.analysis.structure_checks(ms.rom.SecondOrderROM(rom.M, D, rom.K, rom.F, rom.L))["D_psd"]
     zero = ms.rom.SecondOrderROM(rom.M, rom.D, rom.K, 0 * rom.F, rom.L)
     assert ms.analysis.structure_checks(zero, block, omega=np.geomspace(0.1, 3, 8))["beats_zero"] is False
+
+
+def test_modes_past_the_reach_of_lanczos_come_from_the_null_space(tcom):
+    """k up to n1 - n2 - 1 at a shift above the whole spectrum (ARPACK error 3 at ncv = k + 1 on scipy 1.17):
+    the dense null-space route, against the dense reference and against Lanczos where Lanczos fits."""
+    w_ref, _ = dense_modes(tcom)
+    limit = tcom.n1 - tcom.n2 - 1
+    sigma = 1e6  # above every mode (the band (1e3, 2e3) of test_constrained_modes_refuses_bad_input)
+    res = constrained_modes(tcom, k=limit, sigma=sigma)
+    assert res.info["method"] == "dense" and res.info["status"] == "converged" and res.info["covered"]
+    assert res.info["lu_count"] == 0 and res.omega.size == limit
+    # the limit modes nearest sigma: all but the lowest
+    assert_sets_close(res.omega, w_ref[1:], rtol=1e-10, what="modes nearest sigma")
+    err, tol = orthonormality_error(res.shapes, tcom.M)
+    assert err <= tol, (err, tol)
+    # backward errors in the norm of the pencil (eigh is backward stable for Z^T K Z, not per mode: the
+    # residual relative to ||K phi|| of a low mode grows with ||K|| / lambda; measured 5.5e-13 there)
+    R = tcom.K @ res.shapes + tcom.G.T @ res.multipliers - (tcom.M @ res.shapes) * res.eigenvalues
+    nK, nM = (np.linalg.norm(X.toarray(), 2) for X in (tcom.K, tcom.M))
+    backward = np.linalg.norm(R, axis=0) / ((nK + np.abs(res.eigenvalues) * nM) * np.linalg.norm(res.shapes, axis=0))
+    assert_rounding(backward.max(), 10 * rounding_unit(tcom.n1 + tcom.n2), "dense modes' backward errors")
+    lan = constrained_modes(tcom, k=40, sigma=sigma)
+    assert lan.info["method"] == "lanczos" and lan.info["status"] == "converged"
+    assert_sets_close(lan.omega, w_ref[-40:], rtol=1e-10, what="Lanczos modes nearest sigma")
+    # a band above the spectrum: its doubling k reaches the dense route, which covers the model and finds nothing
+    with pytest.raises(InputError, match="holds no mode"):
+        constrained_modes(tcom, band=(1e3, 2e3))
+    # above dense_max, Lanczos keeps two spare basis vectors: k = n1 - n2 - 1 is refused with the reason
+    with pytest.raises(InputError, match="leaves ARPACK no room"):
+        constrained_modes(tcom, k=limit, sigma=sigma, dense_max=1)
+
+
+def test_an_arpack_failure_falls_back_to_the_null_space_on_small_models(tcom, monkeypatch):
+    import scipy.sparse.linalg as spla
+
+    from morsuite.linalg import eigen
+
+    def broken(*args, **kwargs):
+        raise spla.ArpackError(3)
+
+    monkeypatch.setattr(eigen.spla, "eigsh", broken)
+    w_ref, _ = dense_modes(tcom)
+    res = constrained_modes(tcom, k=6)
+    assert res.info["method"] == "dense" and "ARPACK failed" in res.info["fallback"]
+    assert_sets_close(res.omega, w_ref[:6], rtol=1e-10, what="lowest modes")
+    with pytest.raises(spla.ArpackError):
+        constrained_modes(tcom, k=6, dense_max=1)
+
+
+def _partial_eigsh(converged):
+    """scipy's eigsh, then ARPACK's no-convergence exception carrying only the pairs ``converged`` picks."""
+    import scipy.sparse.linalg as spla
+
+    real = spla.eigsh
+
+    def eigsh(*args, **kwargs):
+        lam, X = real(*args, **kwargs)
+        keep = converged(lam.size)
+        raise spla.ArpackNoConvergence("planted", lam[keep], X[:, keep])
+
+    return eigsh
+
+
+def test_partial_convergence_is_a_status_never_silent(tcom, monkeypatch):
+    """ARPACK converging 4 of the 8 modes asked for (planted: the second, fourth, ... nearest) and a real
+    run capped at one restart: status 'partial', covered False, a warning, and only modes of the model."""
+    from morsuite.errors import ConvergenceWarning
+    from morsuite.linalg import eigen
+
+    w_ref, _ = dense_modes(tcom)
+    with monkeypatch.context() as mp:
+        mp.setattr(eigen.spla, "eigsh", _partial_eigsh(lambda n: np.arange(1, n, 2)))
+        with pytest.warns(ConvergenceWarning, match="converged 4 of 8 modes"):
+            res = constrained_modes(tcom, k=8)
+    assert res.info["status"] == "partial" and not res.info["covered"] and res.info["k_converged"] == 4
+    assert "modes nearer sigma may be missing" in res.info["reason"]
+    assert_sets_close(res.omega, w_ref[1:8:2], rtol=1e-10, what="the planted converged modes")
+    dsms = ms.models.dsms(g=100)
+    with pytest.warns(ConvergenceWarning, match="of 12 modes"):
+        real = constrained_modes(dsms, k=12, maxiter=1)
+    assert real.info["status"] == "partial" and real.omega.size < 12
+    w_dsms, _ = dense_modes(dsms)
+    for w in real.omega:  # whatever converged is a mode of the model
+        assert np.min(np.abs(w_dsms - w)) <= 1e-8 * w, w

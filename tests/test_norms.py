@@ -356,6 +356,7 @@ def test_bad_input():
 
 
 # -- the measured facts of the issue (tcom(nc=200), dense reference of the issue) ------------
+@pytest.mark.slow
 def test_tcom200_reproduces_the_issue():
     """||T||_H2 = 2.908e4; H2 errors of IRKA and BT-vv at r = 10: 122 and 23.2 (issue 18's dense figures,
     given to 3-4 digits), and each value at its own accuracy: the independent routes (the error system's

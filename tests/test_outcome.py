@@ -335,7 +335,7 @@ norms = ["h2", "hinf"]
 
 
 def test_study_tables_and_verdicts_flag_a_model_worse_than_zero(tmp_path, monkeypatch):
-    from morsuite.reducers import base
+    from morsuite.reducers import registry
     from morsuite.reducers.bt.balanced import BT
     from morsuite.studies import run
 
@@ -346,7 +346,7 @@ def test_study_tables_and_verdicts_flag_a_model_worse_than_zero(tmp_path, monkey
             rom, info = super()._reduce(r)
             return _mirror(rom), info
 
-    monkeypatch.setitem(base._REGISTRY, "mirror-bt", Mirror)
+    monkeypatch.setitem(registry._REGISTRY, "mirror-bt", Mirror)
     (tmp_path / "zero.toml").write_text(STUDY)
     res = run(tmp_path / "zero.toml", out=tmp_path / "results", use_cache=False, quiet=True, formats=())
     s = res.summary.set_index("method")

@@ -195,8 +195,10 @@ def test_scoreboard_view_marks_planted_flags_and_ties():
     a, b, c, d = v["rows"]
     cell = {r["method"]: dict(zip([k["key"] for k in v["columns"]], r["cells"])) for r in v["rows"]}
     assert cell["a"]["band"]["best"] and cell["c"]["band"]["best"]          # a tie: both best
-    assert [m for m, _ in cell["a"]["h2"]["marks"]] == ["≈"] and cell["a"]["h2"]["ratio"] == "best"
-    assert cell["c"]["h2"]["ratio"] == "×4.00" and cell["c"]["hinf"]["ratio"] == "×2.00"
+    # a's H2 value is untrusted: never ranked, so nothing is best in H2 (c, the one trusted value, has no peer)
+    assert [m for m, _ in cell["a"]["h2"]["marks"]] == ["≈"] and cell["a"]["h2"]["ratio"] == ""
+    assert not cell["a"]["h2"]["best"] and not cell["c"]["h2"]["best"] and cell["c"]["h2"]["ratio"] == ""
+    assert cell["a"]["hinf"]["ratio"] == "best" and cell["c"]["hinf"]["ratio"] == "×2.00"
     assert [m for m, _ in cell["a"]["hinf"]["marks"]] == ["✓"] and [m for m, _ in cell["c"]["hinf"]["marks"]] == ["≥"]
     assert [m for m, _ in b["marks"]] == ["nc", "unst"] and cell["b"]["h2"]["text"] == "∞"
     assert cell["b"]["h2"]["ratio"] == "" and "zero" in [m for m, _ in cell["b"]["band"]["marks"]]
@@ -204,9 +206,60 @@ def test_scoreboard_view_marks_planted_flags_and_ties():
     assert cell["a"]["lus"]["best"] and cell["c"]["lus"]["ratio"] == ""       # best 0: no ratio
     assert [m for m, _ in d["marks"]] == ["fail"] and all(x["text"] == "" for x in d["cells"])
     assert all(m in H.MARKS for r in v["rows"] for m, _ in r["marks"])
-    assert H.headline({"where": "r = 2", "rows": rows}) == \
-        "r = 2: a has the smallest H2 error, 4.00x below c (not accurate to four digits)"
+    # the untrusted H2 value decides nothing: the headline falls to the band maximum, a tie of a and c
+    assert H.headline({"where": "r = 2", "rows": rows}) == "r = 2: a has the smallest band max error, tied with c"
     assert H.headline({"where": "r = 2", "rows": rows[1:2]}) == ""
+
+
+def _planted(method, states, h2, h2_rel, trusted, band, band_rel):
+    return {"method": method, "status": "ok", "converged": True, "stable": True, "r_requested": 30, "r": states // 2,
+            "states": states, "h2_error": h2, "h2_rel_error": h2_rel, "h2_trusted": trusted, "max_abs_error": band,
+            "max_rel_error": band_rel}
+
+
+def test_noise_and_unequal_states_never_rank():
+    """The committed pages' cases (issue 45, item 3): results/paper_dsms's untrusted 2.5e-16 of IRKA at 48 states
+    against Krylov at 60 ('199710x below krylov'), results/sweep's untrusted 9.9e-17 at 48 states against BT at
+    42 ('15.1x below bt'): no ranking headline, no best mark, no ranked verdict; two values at the rounding level
+    at equal states are said as a tie; a clean board (equal states, trusted) is ranked."""
+    from morsuite.report.ranking import rank, standing
+
+    irka = _planted("irka", 48, 2.495e-16, 5.16e-15, False, 2.175e-15, 1.65e-14)
+    krylov = _planted("krylov", 60, 4.98e-11, 1.03e-9, True, 4.22e-10, 2.43e-9)
+    assert standing(irka, "h2_error") == "rounding" and standing(irka, "max_abs_error") == "rounding"
+    assert standing(krylov, "h2_error") == "ok" and standing(krylov, "max_abs_error") == "ok"
+    board = {"title": "t", "where": "r = 30", "rows": [irka, krylov]}
+    assert H.headline(board) == ""
+    view = H.scoreboard_view(board)
+    cells = [c for r in view["rows"] for c in r["cells"]]
+    assert not any(c["best"] for c in cells[:4]) and not any(c["ratio"] for c in cells)
+    assert all("≠" in [m for m, _ in c["marks"]] for c in cells)      # each alone at its number of states
+    # the sweep's case, and two rounding-level values at equal states: a tie, said as one, never ranked
+    bt = _planted("bt", 42, 3.1e-14, 1.5e-15, True, 4.5e-14, 4.5e-14)
+    assert H.headline({"title": "t", "where": "r = 40", "rows": [irka, bt]}) == ""
+    projected = _planted("projected", 48, 9.9e-17, 2.0e-15, False, 4.8e-15, 4.8e-15)
+    tie = {"title": "t", "where": "r = 40", "rows": [irka, projected]}
+    assert H.headline(tie) == "r = 40, H2 error: tie at the rounding level: irka, projected"
+    assert "smallest" not in H.headline(tie) and "below" not in H.headline(tie)
+    tie_view = H.scoreboard_view(tie)
+    assert all("tie" in [m for m, _ in c["marks"]] and not c["best"] and not c["ratio"]
+               for r in tie_view["rows"] for c in r["cells"])
+    # a noise value at equal states keeps the trusted ones from a 'best' (it may be the smallest)
+    g = rank([irka, _planted("so_h2", 48, 1e-9, 2e-8, True, 1e-9, 2e-8),
+              _planted("bt", 48, 3e-9, 6e-8, True, 3e-9, 6e-8)], "h2_error")
+    assert len(g) == 1 and g[0]["best"] is None and g[0]["rounding"] == ["irka"]
+    assert [n for _, n in g[0]["ranked"]] == ["so_h2", "bt"]
+    # a clean board: equal states, trusted values above their floors
+    clean = {"title": "t", "where": "r = 30", "rows": [
+        _planted("irka", 60, 2.0e-9, 4e-8, True, 8e-9, 1e-7), krylov,
+        _planted("modal", 60, 2.2e-2, 0.46, True, 0.11, 0.61)]}
+    assert H.headline(clean) == "r = 30: krylov has the smallest H2 error, 40.2x below irka"
+    cv = {r["method"]: r["cells"] for r in H.scoreboard_view(clean)["rows"]}
+    assert cv["krylov"][1]["best"] and cv["irka"][1]["ratio"] == "×40.2"
+    # mixed states with a clean group: ranked there, the other row named as not compared
+    mixed = {"title": "t", "where": "r = 30", "rows": [irka, krylov, clean["rows"][2]]}
+    assert H.headline(mixed) == ("r = 30, 60 states: krylov has the smallest H2 error, 4.4e+08x below modal; "
+                                 "not compared, at other states: irka (48 states)")
 
 
 def test_modes_section_shows_the_planted_modes_and_poles(moded):
@@ -414,3 +467,26 @@ def test_page_renders_in_headless_chromium(results, moded, browser, width, heigh
         assert px.shape[1] == width and px.shape[0] >= height // 2
         assert (px < 200).mean() > 0.01 and px.std() > 10, "the screenshot is blank"
         shot.save(page.parent / f"shot_{width}.png")   # to look at by hand
+
+
+def test_table_verdict_ranks_only_equal_states_above_the_floors():
+    """The table scenes' verdict on the planted rows of results/paper_dsms (r = 30: IRKA returned 48 states, an
+    untrusted H2 value at rounding; Krylov and modal 60): IRKA is named as not compared, Krylov ranked against
+    modal; a tie at the rounding level is said as a tie and never ranked."""
+    from types import SimpleNamespace
+
+    from morsuite.studies.scenes import _verdict
+
+    study = SimpleNamespace(methods={m: SimpleNamespace(label=m.upper()) for m in ("irka", "krylov", "modal", "bt")})
+    irka = _planted("irka", 48, 2.495e-16, 5.16e-15, False, 2.175e-15, 1.65e-14)
+    krylov = _planted("krylov", 60, 4.98e-11, 1.03e-9, True, 4.22e-10, 2.43e-9)
+    modal = _planted("modal", 60, 2.2e-2, 0.46, True, 0.11, 0.61)
+    text = _verdict([irka, krylov, modal], study)
+    assert "IRKA (" not in text and "smaller than the next" in text
+    assert "r = 30, 60 states, h2_error: KRYLOV (4.98e-11; 4.42e+08x smaller than the next)" in text
+    assert "Not compared (no other method at their number of states): IRKA at r = 30 (48 states)." in text
+    bt = _planted("bt", 48, 1.0e-16, 2.0e-15, False, 1.0e-15, 1.0e-14)
+    tie = _verdict([irka, bt], study)
+    assert "smaller than the next" not in tie
+    assert "r = 30, h2_error: tie at the rounding level: IRKA, BT" in tie
+    assert "r = 30, max_abs_error: tie at the rounding level: IRKA, BT" in tie

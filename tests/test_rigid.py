@@ -226,3 +226,52 @@ def test_cli_reduce_json_on_a_free_free_chain(capsys):
     assert main(["reduce", "--model", "dsms:g=40,free=true", "--method", "bt", "--r", "4", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["rigid_modes"] == 1 and out["states"] == 6 and np.isfinite(out["h2_error"]) and out["stable"]
+
+
+def test_damped_means_beyond_rounding(chain, block):
+    """dsms's D = 2.5 K annihilates its rigid mode exactly (K Phi in range G^T, G Phi = 0): D_Phi is rounding
+    (measured 4e-33), not damping; fem_block's Rayleigh D = alpha M + beta K gives D_Phi = alpha I exactly."""
+    free = rigid_body_modes(chain)
+    assert not free.damped and not free.summary()["damped"]
+    assert_rounding(np.abs(free.damping).max(), free.info["damping_tol"], "D_Phi of D = 2.5 K")
+    body = rigid_body_modes(block)
+    assert body.damped and body.summary()["damped"]
+    alpha = 1e-3  # fem_block's default Rayleigh coefficient of M
+    assert_rounding(np.abs(body.damping - alpha * np.eye(body.k)).max(), body.info["damping_tol"] + 1e-8 * alpha,
+                    "D_Phi - alpha I")
+
+
+def test_a_failed_or_partial_detection_is_said_and_never_converged(monkeypatch):
+    """The detection raising (planted: the shift is an eigenvalue, as for an indefinite K) or ARPACK converging
+    4 of 8 modes (planted): the detection's status and reason, a warning, and every reducer's info with status
+    'detection-failed'."""
+    import scipy.sparse.linalg as spla
+
+    from morsuite.errors import ConvergenceWarning, SingularShiftError
+    from morsuite.linalg import eigen
+
+    def broken(*args, **kwargs):
+        raise SingularShiftError("planted: the shift is an eigenvalue")
+
+    real = spla.eigsh
+
+    def partial(*args, **kwargs):
+        lam, X = real(*args, **kwargs)
+        raise spla.ArpackNoConvergence("planted", lam[:4], X[:, :4])
+
+    for where, fake, status, why in ((eigen, broken, "failed", "shift is an eigenvalue"),
+                                     (eigen.spla, partial, "partial", "converged 4 of 8")):
+        model = ms.models.fem_block(n1=192)  # clamped: no rigid mode, K not diagonally dominant (Lanczos runs)
+        with monkeypatch.context() as mp:
+            mp.setattr(where, "constrained_modes" if where is eigen else "eigsh", fake)
+            with pytest.warns(ConvergenceWarning, match=why):
+                rigid = rigid_body_modes(model)
+        assert rigid.k == 0 and rigid.info["status"] == status and why in rigid.info["reason"]
+        assert status in rigid.line(model.name)
+        with pytest.warns(ConvergenceWarning, match="rigid-body detection"):
+            res = ms.reducers.make("krylov", model).reduce(4)
+        info = res.info
+        assert info["status"] == "detection-failed" and info["converged"] is False
+        assert info["method_status"] == "direct" and why in info["status_reason"]
+        assert info["rigid_modes"]["status"] == status and info["rigid_modes"]["count"] == 0
+        assert any("rigid-body detection" in w for w in info["warnings"])

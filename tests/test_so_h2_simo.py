@@ -136,6 +136,7 @@ def dense_rho(fom, rom):
     return float(np.sqrt(np.sum(y * y / w[keep]) / J)), J
 
 
+@pytest.mark.slow
 def test_so_h2_converges_on_the_dsms_against_the_dense_reference(dsms60):
     """r = 3: the SIMO descent reaches a stationary point certified against the full model; the dense
     reference agrees with the reducer's relative gradient and H2 error; better than every BT level."""

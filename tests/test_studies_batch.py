@@ -86,6 +86,7 @@ def _manifest(root, name):
     return json.loads((root / name / "manifest.json").read_text())
 
 
+@pytest.mark.slow
 def test_shared_run_gives_the_sequential_numbers(two_runs):
     """Summaries of the shared (2 pinned workers) and the sequential run agree to 1e-12."""
     for name in ("sa", "sb"):
@@ -102,6 +103,7 @@ def test_shared_run_gives_the_sequential_numbers(two_runs):
             sorted(p.name for p in (two_runs / "seq" / name).iterdir())
 
 
+@pytest.mark.slow
 def test_shared_artifacts_are_computed_once_and_claimed_by_the_first_study(two_runs):
     """irka r = 4, 6 and bt r = 4, 6 are in both studies: computed in sa, reused in sb, as in
     the sequential run; each unit ran on one core; the record is in both manifests."""
@@ -121,6 +123,7 @@ def test_shared_artifacts_are_computed_once_and_claimed_by_the_first_study(two_r
     assert "shared_compute" not in _manifest(two_runs / "seq", "sb")
 
 
+@pytest.mark.slow
 def test_the_shared_run_writes_its_record(two_runs):
     """OUT/run.json: the studies in command-line order, the wall and busy time, and one log entry per
     unit (the same count as the manifests' record); the sequential run writes none."""
@@ -130,6 +133,7 @@ def test_the_shared_run_writes_its_record(two_runs):
     assert not (two_runs / "seq" / "run.json").exists()
 
 
+@pytest.mark.slow
 def test_a_cached_shared_run_computes_nothing(two_runs, tmp_path):
     """The same command again: no unit of work, every computed artifact taken from the cache. Into a
     copy of the shared run's folder: the module's other tests read its manifests as the first run wrote
@@ -141,6 +145,48 @@ def test_a_cached_shared_run_computes_nothing(two_runs, tmp_path):
     assert "shared_compute" not in m  # nothing to share: the studies ran in this process
     computed = [a for a in m["artifacts"] if a["kind"] not in ("figure", "table", "page")]
     assert computed and all(a["reused"] and a["cached"] for a in computed)
+
+
+@pytest.mark.slow
+def test_default_workers_give_the_numbers_of_two(two_runs, tmp_path, monkeypatch):
+    """Without --jobs: as many workers as usable cores (three here, however many the machine has, with the
+    usable cores stubbed; the workers are pinned round-robin to the real ones) when the memory holds them; the
+    study's summary agrees with the two-worker run's to 1e-12, and run.json records the rule."""
+    from morsuite.studies import workers
+    monkeypatch.setattr(workers, "usable_cores", lambda: [0, 1, 2])
+    rule = workers.default_jobs(61, available=2 ** 40)  # tcom:nc=20: n1 = 61
+    assert rule["jobs"] == 3 and rule["by_memory"] > 3
+    b = two_runs / "b.toml"
+    if workers.available_memory() is not None and workers.available_memory() < 3 * rule["worker_mib"] * 2 ** 20:
+        pytest.skip("less available memory than three workers' estimate")
+    assert main(["run", str(b), "--out", str(tmp_path / "auto"), "--quiet"]) == 0
+    rec = json.loads((tmp_path / "auto" / "run.json").read_text())
+    assert rec["jobs"] == 3 and rec["jobs_rule"]["jobs"] == 3 and rec["jobs_rule"]["cores"] == 3
+    keys = ["method", "r_requested"]
+    par = pd.read_csv(two_runs / "par" / "sb" / "summary.csv").sort_values(keys).reset_index(drop=True)
+    auto = pd.read_csv(tmp_path / "auto" / "sb" / "summary.csv").sort_values(keys).reset_index(drop=True)
+    assert list(auto.method) == list(par.method) and list(auto.r_requested) == list(par.r_requested)
+    for col in [c for c in NUMBERS if c in par]:
+        np.testing.assert_allclose(auto[col].to_numpy(float), par[col].to_numpy(float), rtol=1e-12, atol=0,
+                                   err_msg=col)
+    assert json.loads((two_runs / "par" / "run.json").read_text())["jobs_rule"] == "given"
+
+
+def test_default_jobs_rule(monkeypatch):
+    """default_jobs: min(cores, available / (256 MiB + 64 KiB n1)), at least 1, with the numbers worked by hand:
+    16 cores and 64 GiB at n1 = 2e4 (1506 MiB a worker: 43 fit) give 16; 16 GiB give 10 (16384 / 1506 =
+    10.9); 4 GiB at n1 = 1e5 (6506 MiB) give 1 (none fits: still one); no memory figure: the cores."""
+    from morsuite.studies import workers
+    from morsuite.studies.workers import default_jobs
+    cores = list(range(16))
+    assert default_jobs(20_000, cores, 64 * 2 ** 30)["jobs"] == 16
+    r = default_jobs(20_000, cores, 16 * 2 ** 30)
+    assert r["jobs"] == 10 and r["worker_mib"] == 1506.0 and r["by_memory"] == 10
+    assert default_jobs(100_000, cores, 4 * 2 ** 30)["jobs"] == 1
+    assert default_jobs(100_000, [0, 1], 0)["jobs"] == 1
+    monkeypatch.setattr(workers, "available_memory", lambda: None)
+    r = default_jobs(10 ** 6, cores[:4])
+    assert r["jobs"] == 4 and r["by_memory"] is None and r["available_mib"] is None
 
 
 def test_split_orders_give_the_same_reduced_models():

@@ -11,6 +11,9 @@ import scipy.linalg as sla
 import morsuite as ms
 from morsuite.cli import main
 
+#: one `morsuite compare` run of five methods serves every test here (6 s of CPU): the slow set
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def compared(tmp_path_factory):

@@ -294,7 +294,7 @@ def test_cached_rerun_computes_nothing_and_imports_no_numerics(study, tmp_path):
 @pytest.fixture
 def unstable_reducer(monkeypatch):
     """A registered reducer whose models have negative damping (poles in the right half-plane)."""
-    from morsuite.reducers import base
+    from morsuite.reducers import registry
     from morsuite.reducers.irka.second_order import IRKA
 
     class Unstable(IRKA):
@@ -305,7 +305,7 @@ def unstable_reducer(monkeypatch):
             rom = ms.rom.SecondOrderROM(rom.M, -0.05 * rom.M, rom.K, rom.F, rom.L)
             return rom, {**info, "stable": False}
 
-    monkeypatch.setitem(base._REGISTRY, "unstable", Unstable)
+    monkeypatch.setitem(registry._REGISTRY, "unstable", Unstable)
     return Unstable
 
 

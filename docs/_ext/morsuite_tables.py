@@ -8,6 +8,11 @@ Directives (each renders reStructuredText; the page is re-read on every build):
     (:class:`morsuite.reducers.base.Option`). The same table is appended to
     each reducer class's docstring in the API reference, and the raw
     ``OPTIONS`` attribute is left out there.
+``.. morsuite-reducer-table::``
+    One row per registered reducer, from its description
+    (:class:`morsuite.reducers.Description`): the reduced model (and the named
+    variants), what it targets, its cost in sparse LUs, what to use it for, the
+    options users set, its family folder and design page.
 ``.. morsuite-spec-keys::``
     The keys of a study spec (TOML), from the key tables of
     :mod:`morsuite.studies.spec` and the scene kinds of
@@ -75,7 +80,14 @@ SCENE_KEY_DOCS = {
     "r": "reduced order: an int, a list, or { from = 2, to = 40, step = 2 } (required)",
     "grid": "grid name (default: \"default\", the model's band with 200 points)",
     "paper_csv": "reference curve(s) to overlay: a path, or a table { curve = path }",
-    "error": "absolute or relative error",
+    "error": "error scenes: absolute or relative error; tolerance scenes: the error the tolerance bounds, band (max "
+             "over the grid over the band's peak), h2 (over ||T||_H2) or hinf (certified upper bound over ||T||_Hinf)",
+    "tol": "tolerance scene: a relative tolerance in (0, 1) or a list of them (required)",
+    "budget_lus": "tolerance scene: each method's sparse LUs in its search (default: no budget)",
+    "budget_s": "tolerance scene: each method's seconds of search (default: no budget)",
+    "max_states": "tolerance scene: the largest reduced model tried, in first-order states (default 400)",
+    "save_roms": "tolerance scene: write each chosen model as .npz and .mat with a JSON provenance sidecar into "
+                 "the study's roms/ folder (default: false)",
     "measure": "what is plotted against r: max absolute or relative error on the grid (max_abs, max_rel), or an "
                "exact norm of the error over the whole axis (h2, h2_rel, hinf, hinf_rel; no grid)",
     "norms": "table scene: exact error norms shown as columns, a list from \"h2\", \"hinf\"",
@@ -147,8 +159,24 @@ def option_rows(options: dict) -> list[list[str]]:
     return rows
 
 
-def options_table(options: dict) -> list[str]:
-    return list_table(["option", "default", "admissible", "description"], option_rows(options), "14 10 20 56")
+def options_table(options: dict, groups: dict | None = None) -> list[str]:
+    """The top-level options' table, then one table per group of advanced options
+    (:class:`morsuite.reducers.options.Group`): each option by its name in the group, with the name it is
+    recorded under (and may be given as) where that differs."""
+    groups = groups or {}
+    grouped = {m for g in groups.values() for m in g.members}
+    top = {k: v for k, v in options.items() if k not in grouped}
+    lines = list_table(["option", "default", "admissible", "description"], option_rows(top), "14 10 20 56")
+    for name, grp in groups.items():
+        doc = _rst_cell(grp.doc[:1].upper() + grp.doc[1:])
+        lines += [f".. rubric:: Advanced: ``{name}``", "", f"{doc}. Given as ``{name}={{...}}``; recorded (and "
+                  "accepted) under the names in brackets.", ""]
+        rows = option_rows({m: options[m] for m in grp.members})
+        for row, m in zip(rows, grp.members):
+            short = grp.short(m)
+            row[0] = f"``{short}``" + (f" (``{m}``)" if short != m else "")
+        lines += list_table(["option", "default", "admissible", "description"], rows, "14 10 20 56")
+    return lines
 
 
 def reducer_options_rst(name: str | None = None) -> list[str]:
@@ -163,8 +191,36 @@ def reducer_options_rst(name: str | None = None) -> list[str]:
             lines += [title, "-" * len(title), ""]
         lines += [f"Class :class:`{cls.__module__}.{cls.__qualname__}`; "
                   f"``ms.reducers.make({n!r}, fom, **options)``.", ""]
-        lines += options_table(cls.OPTIONS)
+        lines += options_table(cls.OPTIONS, getattr(cls, "GROUPS", {}))
     return lines
+
+
+def reducer_table_rows() -> list[list[str]]:
+    """Rows (method, reduced model, targets, cost, use it for, options) of every registered reducer,
+    read from its :class:`morsuite.reducers.Description`, in the registry's order."""
+    from morsuite import reducers
+
+    rows = []
+    for name, m in reducers.methods().items():
+        if m.name != m.reducer:
+            continue
+        d = m.description
+        variants = [v for v in reducers.methods().values() if v.reducer == name and v.name != name]
+        model = _rst_cell(f"{m.result.replace('-', ' ')}, "
+                          + ("r states" if m.states_per_order == 1 else "order r (2r states)"))
+        if variants:
+            model += "; " + ", ".join(f"``{v.name}``" for v in variants) + " (" + \
+                ", ".join(sorted({v.result.replace("-", " ") for v in variants})) + ")"
+        page = f":doc:`{d.page}`" if d.page else ""
+        rows.append([f"``{name}`` (``reducers/{d.family}/``{'; ' + page if page else ''})", model,
+                     _rst_cell(d.targets), _rst_cell(d.cost), _rst_cell(d.use_for),
+                     ", ".join(f"``{o}``" for o in d.options) or "\\-"])
+    return rows
+
+
+def reducer_table_rst() -> list[str]:
+    return list_table(["method", "reduced model", "what it targets", "cost in sparse LUs", "use it for",
+                       "options users set"], reducer_table_rows(), "14 18 18 16 18 16")
 
 
 def _is_option_table(obj) -> bool:
@@ -184,7 +240,8 @@ def _append_options(app, what, name, obj, options, lines):
         table = obj if what == "data" and name.endswith(".OPTIONS") else None
     if table is None or not _is_option_table(table) or (what == "class" and "OPTIONS" not in vars(obj)):
         return
-    lines += ["", ".. rubric:: Options", ""] + options_table(table)
+    groups = getattr(obj, "GROUPS", {}) if what in ("class", "exception") else {}
+    lines += ["", ".. rubric:: Options", ""] + options_table(table, groups)
 
 
 def _skip_options(app, what, name, obj, skip, options):
@@ -249,7 +306,8 @@ def spec_keys_rst() -> list[str]:
                 continue
             allowed = _admissible(choices)
             extra.append(f"``{key}``: {_toml(default)} ({_rst_cell(allowed)})")
-        needs = ["a grid" if kind.uses_grid else "no grid", "one r" if kind.one_r else "any number of r"]
+        needs = ["a grid" if kind.uses_grid else "no grid",
+                 "no r" if not kind.needs_r else "one r" if kind.one_r else "any number of r"]
         if kind.min_methods > 1:
             needs.append(f"at least {kind.min_methods} methods")
         rows.append([f"``{name}``", _rst_cell(kind.doc), ", ".join(needs), "; ".join(extra) or "\\-"])
@@ -345,6 +403,7 @@ def _directive(fn):
 def setup(app):
     app.setup_extension("morsuite_api")
     app.add_directive("morsuite-reducer-options", _directive(reducer_options_rst))
+    app.add_directive("morsuite-reducer-table", _directive(reducer_table_rst))
     app.add_directive("morsuite-spec-keys", _directive(spec_keys_rst))
     app.add_directive("morsuite-cli", _directive(cli_rst))
     app.add_directive("morsuite-refused-table", _directive(refused_rst))

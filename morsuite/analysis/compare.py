@@ -224,15 +224,18 @@ def error_norms(fom, rom, kinds=NORM_KINDS, options=None) -> dict:
         of the same kind), ``K_norm``, ``K_route``, ``K_trusted``, ``K_lu_count``
         (LUs of the error and of the model's norm, the Gramian factors included
         when this call computed them), ``K_time_s``; ``norm_warnings`` (list).
-        H-infinity: ``hinf_error`` and ``hinf_norm`` are the peaks found (lower
-        bounds); ``hinf_upper_bound`` (None where not certified), ``hinf_certified``
-        and ``hinf_norm_certified`` say whether each is enclosed by the level-set test.
+        H2: ``h2_floor`` and ``h2_norm_floor``, the estimated absolute accuracy of the error
+        and of the norm. H-infinity: ``hinf_error`` and ``hinf_norm`` are the peaks found (lower
+        bounds); ``hinf_upper_bound`` and ``hinf_norm_upper_bound`` (None where not certified),
+        ``hinf_certified`` and ``hinf_norm_certified`` say whether each is enclosed by the
+        level-set test. ``norm_options``: per kind, every option the error was computed with
+        (defaults filled in), so that it can be computed again alike (``morsuite verify``).
     """
     options = {} if options is None else options
     bad = sorted(set(options) - set(NORM_KINDS))
     if bad:
         raise OptionError(f"options has unknown norm(s) {bad}; valid: {', '.join(NORM_KINDS)}")
-    out, warned = {}, []
+    out, warned, used = {}, [], {}
     for kind in kinds:
         if kind not in NORM_KINDS:
             raise OptionError(f"norm must be one of {', '.join(map(repr, NORM_KINDS))}; got {kind!r}")
@@ -242,13 +245,24 @@ def error_norms(fom, rom, kinds=NORM_KINDS, options=None) -> dict:
         out.update({f"{kind}_error": e["value"], f"{kind}_rel_error": float(rel), f"{kind}_norm": n["value"],
                     f"{kind}_route": e["route"], f"{kind}_trusted": bool(e["trusted"] and n["trusted"]),
                     f"{kind}_lu_count": e["lu_count"] + n["lu_count"], f"{kind}_time_s": e["time_s"] + n["time_s"]})
+        if kind == "h2":  # the stated accuracies (absolute) of the error and of the model's norm
+            out.update(h2_floor=e["floor"], h2_norm_floor=_floor(n))
         if kind == "hinf":
             # the value is a lower bound; an upper bound where the level-set test certified one
             out.update(hinf_peak_frequency=e.get("peak_frequency"), hinf_certified=bool(e["certified"]),
-                       hinf_upper_bound=e["upper_bound"], hinf_norm_certified=bool(n["certified"]))
+                       hinf_upper_bound=e["upper_bound"], hinf_norm_certified=bool(n["certified"]),
+                       hinf_norm_upper_bound=n["upper_bound"])
+        used[kind] = e["options"]
         warned += e["warnings"] + n["warnings"]
     out["norm_warnings"] = warned
+    out["norm_options"] = used
     return out
+
+
+def _floor(rec):
+    """The absolute floor of a model norm's record (``rel_floor`` times the value), None where unknown."""
+    rel = rec.get("rel_floor")
+    return None if rel is None else float(rel) * rec["value"]
 
 
 def time_input(band, m: int, input="step", *, horizon=None, step=None, direction=None):

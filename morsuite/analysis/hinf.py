@@ -28,47 +28,64 @@ Search
     3. The local maxima of the grid, best first, are refined by a safeguarded
        secant iteration on :math:`d\sigma/d\omega = 0` inside the bracket of
        their grid neighbours (bisection when the secant step leaves the
-       bracket or the derivative has no sign change), until the upper bound
-       of the concave model (the crossing of the tangents at the bracket
-       ends) exceeds the best value by less than ``rtol`` relative, or the
-       LU budget ``max_lus`` is spent. Also :math:`\|D\|` at
-       :math:`\omega = \infty`.
+       bracket or the derivative has no sign change; the bracket keeps the
+       best sample at an end), until the gain the local quadratic model
+       still predicts is below ``rtol`` relative, or the LU budget
+       ``max_lus`` is spent. Maxima other than the best whose sample is below
+       :math:`10^3\varepsilon\|T\|` (rounding, not peaks) are not refined.
+       Also :math:`\|D\|` at :math:`\omega = \infty`.
+    4. The best sample is checked to be a local maximum to ``rtol`` (the gain
+       :math:`\sigma'^2 / (2|\sigma''|)` the quadratic model through it and its
+       nearest sample predicts, :func:`~morsuite.analysis._hinf_certify.peak_check`)
+       and refined where not (at most
+       :data:`~morsuite.analysis._hinf_certify.POLISH_LUS` LUs beyond ``max_lus``);
+       ``details["peak_check"]`` records the check.
 
-The search's result is a lower bound of the H-infinity norm, exact (to ``rtol``)
-at the peak it found; a peak between grid points that no pole announces can be
-missed.
+The search's result is a lower bound of the H-infinity norm, a local maximum of
+:math:`\sigma_{\max}` (to ``rtol``) at the peak it found; a peak between grid
+points that no pole announces can be missed.
 
 Certificate
     Where the hidden manifold is small, :math:`n_1 - n_2 \le` ``certify_dim``
     (default 1000):
 
-    4. A dense standard realization of the error system on the hidden manifold
+    5. A dense standard realization of the error system on the hidden manifold
        (:mod:`morsuite.analysis._hinf_dense`: an orthonormal basis of
        :math:`\ker G`, the reduced model stacked; from 150 positions the model's
-       modes with a negligible bounded contribution dropped) and the level-set test
+       modes with a negligible bounded contribution dropped, where the modal
+       form's own rounding, bounded a posteriori from its residuals, fits
+       the budget) and the level-set test
        (:func:`morsuite.linalg.levelset.level_set`) at
-       :math:`\gamma = (1 + \tau)\,\text{peak}`,
-       :math:`\tau = \max(c,\ 10^3\varepsilon\|T\|/\text{peak})`, :math:`c` = ``certify_tol``
-       (the second term: the double-precision realization of :math:`T - T_r`
-       cancels :math:`\|T\|` to the peak's size). No eigenvalue of the
+       :math:`\gamma - \Delta`, :math:`\gamma = (1 + \tau)\,\text{peak}`,
+       :math:`\tau = \max(c,\ 10^3\varepsilon\|T\|/\text{peak},\ 2\Delta/\text{peak})`,
+       :math:`c` = ``certify_tol`` (the second term: the double-precision realization
+       of :math:`T - T_r` cancels :math:`\|T\|` to the peak's size). :math:`\Delta`
+       counts every deviation of the dense realization from the model: the dropped
+       modes and the modal form's rounding (bounds), and the realization's own rounding,
+       an allowance :math:`\max(300\varepsilon\|T\|, 10 m)`, :math:`m` its largest
+       deviation from the model's refined samples at the peak and at the samples of
+       largest :math:`\|T\|` and error (measured:
+       :func:`~morsuite.analysis._hinf_certify.verify`). No eigenvalue of the
        Hamiltonian on (or within :math:`\sqrt\varepsilon\|H\|` of) the
        imaginary axis: :math:`\gamma` is a certified upper bound.
-    5. Otherwise the frequencies of those eigenvalues and their midpoints are
+    6. Otherwise the frequencies of those eigenvalues and their midpoints are
        sampled (Boyd-Balakrishnan-Bruinsma-Steinbuch); a sample above
        :math:`\gamma` is a missed peak: it is refined (steps 2-3), and the test
        repeated above it (at most 3 rounds). An eigenvalue near the axis whose
        hump of :math:`\sigma_{\max}` (climbed and refined from its frequency)
-       peaks below :math:`\gamma` is not a crossing (rounding near a local
+       peaks below :math:`\gamma - 2\Delta` is not a crossing (rounding near a local
        maximum just below :math:`\gamma`, or near a lightly damped pole): when
        every one is explained so, :math:`\gamma` is certified. At most
        ``certify_lus`` further LUs.
 
 ``details``: ``lower_bound`` (the value returned), ``upper_bound`` (None where
 not computed), ``certified``, ``certificate`` (the record of the test: order,
-:math:`\tau`, the rounds with their candidate frequencies and climbs, LUs,
-time, or why there is none), ``search_value`` and ``search_lu_count`` (the
-search alone), the peak frequency, the LUs, the samples and the refinement
-record of each candidate. The level-set test is one dense eigenvalue problem of
+:math:`\tau`, ``delta`` (:math:`\Delta` and its parts), ``verified`` (the
+frequencies compared and the deviation measured), ``truncation`` (the modal
+form: kept order, bounds, :math:`\kappa_1(V)`), the rounds with their candidate
+frequencies and climbs, LUs, time, or why there is none), ``search_value`` and
+``search_lu_count`` (the search alone), ``peak_check`` (step 4), the peak
+frequency, the LUs, the samples and the refinement record of each candidate. The level-set test is one dense eigenvalue problem of
 order :math:`2(2(n_1 - n_2) + r)` a round, :math:`O((n_1 - n_2)^3)`; its measured
 cost, the threshold and the measured gaps: ``docs/design/norms.md``.
 
@@ -89,10 +106,11 @@ from ..linalg.gramians import cached_gramian_factors
 from ..utils import blas_threads
 from ..norms._common import adi_options, check_fom, flexible_route, infinite, refuse_rigid, validate_rom
 from ..norms._fom import FomResponse
-from ._hinf_certify import BAR_MARGIN, certificate as _certificate, refine_peak as _refine
+from ._hinf_certify import BAR_MARGIN, POLISH_LUS, RESOLUTION, certificate as _certificate, polish as _polish, \
+    refine_peak as _refine
 from ._hinf_grid import start_grid as _grid
 from ._hinf_screen import model_poles, predicted_peak, screen as screen_resonances
-from ._hinf_dense import error_realization, hidden_realization
+from ._hinf_dense import error_realization, hidden_realization, realization_response
 from ..norms._rom import RomResponse
 
 __all__ = ["hinf_norm", "hinf_error", "hinf_rel_error"]
@@ -153,6 +171,10 @@ class _Sigma:
         self.calls = 0
         #: the largest ||T(jw)||_F sampled: the scale of the cancellation in T - T_r
         self.scale = 0.0
+        #: per sample, T - T_r from the refined solves (the certificate checks its realization against them)
+        self.reference = {}
+        #: per sample, ||T(jw)||_F
+        self.gain = {}
 
     def __call__(self, w):
         w = float(w)
@@ -163,19 +185,21 @@ class _Sigma:
         # always refined and kept: the entry then serves every search and the band response alike
         T0, Tx, dT = self.ev.sample(s)
         self.full[w] = (T0, dT)
+        best = T0 if Tx is None else Tx
+        self.gain[w] = float(np.linalg.norm(np.asarray(best, dtype=complex)))
+        self.scale = max(self.scale, self.gain[w])
         if self.rr is None:
             T = T0
+            self.reference[w] = np.asarray(best, dtype=complex)
         else:
             Tr = self.rr.transfer(s)
             # refined only where the unrefined difference would lose more than rtol / 100 (16 eps |T| / |E|)
             need = bool(16.0 * EPS * np.linalg.norm(T0) > 0.01 * self.rtol * np.linalg.norm(T0 - Tr))
             T = Tx if need and Tx is not None else T0
-            self.scale = max(self.scale, float(np.linalg.norm(np.asarray(T, dtype=complex))))
+            self.reference[w] = np.asarray(best - Tr, dtype=complex)
             T = T - Tr
             dT = dT - self.rr.derivative(s)
         E = np.asarray(T, dtype=complex)
-        if self.rr is None:
-            self.scale = max(self.scale, float(np.linalg.norm(E)))
         U, sv, Vh = np.linalg.svd(E)
         u, v = U[:, 0], Vh[0].conj()
         ds = float(np.real(u.conj() @ (1j * dT) @ v)) if w > 0 else 0.0
@@ -225,6 +249,10 @@ def _search(fom, rr, rom_poles, feed, *, max_lus, grid_lus, rtol, per_decade, re
         if e < skip_factor * best[0]:
             skipped.append({"start": float(ws[i]), "estimate": float(e)})
             continue
+        if fs[i] < best[0] and fs[i] < RESOLUTION * EPS * sig.scale:
+            # a maximum at the samples' rounding level (below the certificate's resolution): noise, not a peak
+            skipped.append({"start": float(ws[i]), "value": float(fs[i]), "reason": "rounding level"})
+            continue
         if i == ws.size - 1:
             continue  # the largest grid frequency: the response decays beyond it
         if i == 0 and ws[0] == 0.0 and sig.samples[ws[1]][1] <= 0:
@@ -236,13 +264,15 @@ def _search(fom, rr, rom_poles, feed, *, max_lus, grid_lus, rtol, per_decade, re
         refinements.append({"start": float(ws[i]), "peak": float(wv), "value": fv, "lus": used})
         if fv > best[0]:
             best = (fv, float(wv))
+    # the best sample refined to a local maximum where the refinements left it short (budget, rounding)
+    best, check = _polish(sig, best[1], rtol, POLISH_LUS)
     value, w_peak = best
     if feed is not None and feed > value:
         value, w_peak = float(feed), np.inf
     rec = {"peak_frequency": w_peak, "lu_count": sig.ev.lu_count, "lu_shifts": list(sig.ev.shifts),
            "samples": len(sig.samples),
            "grid": how, "grid_size": int(pts.size), "model_resonances_from": "cached LR-ADI shifts" if gf else None,
-           "refinements": refinements, "skipped": skipped, "screened": screened}
+           "refinements": refinements, "skipped": skipped, "screened": screened, "peak_check": check}
     return float(value), rec, sig
 
 
@@ -286,7 +316,7 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
     ----------
     fom : Index3Model
     max_lus : int
-        LU budget (one LU per sample; default 190).
+        LU budget (one LU per sample; default 190; the peak's local-maximum check may add up to 24).
     grid_lus : int
         Of which at most this many for the start grid (default 120).
     rtol : float
@@ -360,8 +390,9 @@ def hinf_norm(fom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float = 1e-
             value, rec, sig = _search(fom, None, np.zeros(0), None, max_lus=max_lus, grid_lus=grid_lus, rtol=rtol,
                                       per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi,
                                       band_grid=band_grid, skip_factor=skip_factor, screen=screen)
-            value = _certificate(fom, sig, lambda b: hidden_realization(fom, b), value, rec, certify_dim=certify_dim,
-                                 certify_tol=certify_tol, certify_lus=certify_lus, rtol=rtol)
+            value = _certificate(fom, sig, lambda b: hidden_realization(fom, b),
+                                 lambda real, ws: realization_response(fom, real, ws), value, rec,
+                                 certify_dim=certify_dim, certify_tol=certify_tol, certify_lus=certify_lus, rtol=rtol)
         rec["time_s"] = time.perf_counter() - t0
         rec["cached"] = False
         if cache is not None:
@@ -433,8 +464,9 @@ def hinf_error(fom, rom, *, max_lus: int = 190, grid_lus: int = 120, rtol: float
         value, rec, sig = _search(fom, rr, rom.poles(), feed, max_lus=max_lus, grid_lus=grid_lus, rtol=rtol,
                                   per_decade=per_decade, refine=refine, n_peaks=n_peaks, adi=adi,
                                   band_grid=band_grid, skip_factor=skip_factor, screen=screen)
-        value = _certificate(fom, sig, lambda b: error_realization(fom, arrays, b), value, rec, certify_dim=certify_dim,
-                             certify_tol=certify_tol, certify_lus=certify_lus, rtol=rtol)
+        value = _certificate(fom, sig, lambda b: error_realization(fom, arrays, b),
+                             lambda real, ws: realization_response(fom, real, ws, arrays), value, rec,
+                             certify_dim=certify_dim, certify_tol=certify_tol, certify_lus=certify_lus, rtol=rtol)
     rec["time_s"] = time.perf_counter() - t0
     rec["value"] = value
     return (value, rec) if details else value

@@ -61,10 +61,12 @@ def band_response(fom, omega, *, progress: bool = False, threads: int = 0):
     r"""The full model's response on a grid, drawn from and kept in the model's memo of :math:`T(j\omega)`.
 
     The values of :meth:`Index3Model.freqresp <morsuite.models.Index3Model.freqresp>` (one LU per
-    frequency, the LU's solution), computed through
+    frequency, its solves at the backward-error target of :mod:`morsuite.linalg.accuracy`, refined
+    against the exact :math:`S(j\omega)` in extended precision until the estimated error is below
+    double's rounding; the LU's own values until 2026-12-02), computed through
     :meth:`FomResponse.sample <morsuite.norms._fom.FomResponse.sample>`: each sample is also
-    refined in extended precision and given its derivative :math:`T'(j\omega)` (one transposed
-    solve), and kept in ``fom.cache``, so that the H-infinity searches of the model and of its
+    given its derivative :math:`T'(j\omega)` (one transposed solve), and kept with the LU's value
+    in ``fom.cache``, so that the H-infinity searches of the model and of its
     reduced models (:func:`~morsuite.analysis.hinf_norm` and :func:`~morsuite.analysis.hinf_error`
     with ``band_grid``) pay no LU at these frequencies; a frequency already kept costs none here.
 
@@ -107,7 +109,7 @@ def band_response(fom, omega, *, progress: bool = False, threads: int = 0):
 
     def run(k):
         for i in range(k, w.size, threads):
-            out[i] = evs[k].sample(1j * w[i])[0]
+            out[i] = evs[k].sample(1j * w[i])[1]  # the refined value (the LU's, [0], stays in the memo)
             if bar is not None:
                 bar.update(1)
     with blas_threads(1):

@@ -1,6 +1,6 @@
-r"""Benchmark ``irka-fo-floor``: irka-fo's own work against its LU floor over the README's sweep.
+r"""Benchmark ``irka-fo-floor``: irka-fo's own work against its LU floor over the five-method study (studies/five.toml).
 
-The orders of ``studies/sweep.toml`` for irka-fo: dsms(g=1000) at 4, 12, ..., 60 states and
+The orders of ``studies/five.toml`` for irka-fo: dsms(g=1000) at 4, 12, ..., 60 states and
 tcom(nc=2000) at 12, 28, 44, 60, reduced in increasing r on ONE reducer per model, as the
 study does (``studies.tasks.reduce_sweep``), with one solver thread (``SOLVER_THREADS``), as on
 the study's workers, each pinned to one core (``studies.batch``). The start (the model's Gramian
@@ -38,7 +38,7 @@ from .floor import irka_lu_shifts, lu_floor
 
 __all__ = ["bench_irka_fo_floor", "CASES"]
 
-#: (model, orders) of the full run: the orders of studies/sweep.toml for irka-fo
+#: (model, orders) of the full run: the orders of studies/five.toml for irka-fo
 CASES = [("dsms:g=1000", list(range(4, 61, 8))), ("tcom:nc=2000", [12, 28, 44, 60])]
 QUICK = [("tcom:nc=60", [8, 16]), ("dsms:g=200", [4, 12])]
 #: irka-fo's solver threads in the benchmark: 1, as on the study's pinned workers (2026-11-26, third session)

@@ -46,20 +46,22 @@ from .output import code_state, resolve_out_dir, rewrite_derived
 from .pareto_report import write_outputs
 from .profiler import profile_categories
 
-__all__ = ["bench_pareto", "derive_verdicts", "rewrite", "soh2_against_bt", "METHODS"]
+__all__ = ["bench_pareto", "derive_verdicts", "rewrite", "soh2_against_bt", "method_of", "LABELS", "BENCH_OPTIONS"]
 
-#: method label -> (registry name, options, what r means)
-METHODS = {
-    "irka": ("irka", {}, "second-order, r x r (2r states)"),
-    "bt": ("bt", {"gramian_cache": "reducer"}, "first-order square-root BT (r states)"),
-    "bt-vv": ("bt", {"form": "vv", "gramian_cache": "reducer"}, "second-order velocity-velocity BT (2r states)"),
-    "irka-projected": ("irka-projected", {}, "second-order, dense Pi-projected (2r states)"),
-    "irka-fo": ("irka-fo", {}, "first-order tangential IRKA (r states)"),
-    "so-h2": ("so-h2", {}, "second-order H2 descent from the best BT level / IRKA (2r states)"),
-}
+#: options the benchmark adds to a method's reducer: each bt reducer times its own LR-ADI run
+BENCH_OPTIONS = {"bt": {"gramian_cache": "reducer"}}
+#: the methods of the benchmark (names of the reducers' registry, :func:`morsuite.reducers.methods`)
+LABELS = ("irka", "bt", "bt-vv", "irka-projected", "irka-fo", "so-h2")
 
-#: methods whose r is the number of first-order states (the others: 2r states)
-FIRST_ORDER = ("bt", "irka-fo")
+
+def method_of(label: str) -> tuple:
+    """``(reducer, options, what r means)`` of ``label``, a method of the reducers' registry, with the
+    benchmark's options (:data:`BENCH_OPTIONS`). Cost: the registry's discovery on first use."""
+    from .. import reducers
+
+    m = reducers.method(label)
+    return (m.reducer, {**m.options, **BENCH_OPTIONS.get(m.reducer, {})},
+            f"{m.label} ({'r' if m.states_per_order == 1 else '2r'} states)")
 
 
 def _plan(quick: bool) -> dict:
@@ -86,7 +88,7 @@ def _sweep(spec, fom, methods, rs, omega, H, echo):
 
     rows = []
     for label in methods:
-        name, opts, meaning = METHODS[label]
+        name, opts, meaning = method_of(label)
         try:
             red = reducers.make(name, fom, **opts)
         except Exception as exc:
@@ -104,7 +106,7 @@ def _sweep(spec, fom, methods, rs, omega, H, echo):
                     continue
             info = res.info
             err = errors(fom, res.rom, omega, H_full=H)
-            nominal = int(r) if label in FIRST_ORDER else 2 * int(r)
+            nominal = int(r) * reducers.method(label).states_per_order
             row.update({
                 "status": "ok", "r": info["r"], "states": info["states"], "states_nominal": nominal,
                 "kind": info["kind"], "converged": bool(info.get("converged", True)),
@@ -302,7 +304,7 @@ def _floor_shifts(label, info):
 def _floor_case(spec, fom, label, r, samples, repeat):
     from .. import reducers
 
-    name, opts, _ = METHODS[label]
+    name, opts, _ = method_of(label)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = reducers.make(name, fom, **opts).reduce(r)
@@ -393,7 +395,7 @@ def bench_pareto(quick: bool = False, out_dir=None, *, plan: dict | None = None,
             "band of sigma_max(T - T_r).")
     result = {"plan": {k: ([list(m) if isinstance(m, tuple) else m for m in v] if isinstance(v, (list, tuple)) else v)
                        for k, v in plan.items()},
-              "methods": {k: {"reducer": v[0], "options": v[1], "order": v[2]} for k, v in METHODS.items()},
+              "methods": {k: dict(zip(("reducer", "options", "order"), method_of(k))) for k in LABELS},
               "code_start": code_start, "code": code_state(),
               "full_response": resp, "rows": rows, "pairs": pairs, "verdicts": verdicts, "so_h2": soh2,
               "floor": floor,

@@ -169,9 +169,9 @@ def _peer_record(fn, omega, H):
 
 def _ours(label, fom, r, omega, H):
     from .. import reducers
+    from .pareto import method_of
 
-    name, opts = {"irka": ("irka", {}), "bt-vv": ("bt", {"form": "vv", "gramian_cache": "reducer"}),
-                  "irka-fo": ("irka-fo", {}), "so-h2": ("so-h2", {})}[label]
+    name, opts, _ = method_of(label)  # the registry's method, bt with its own Gramian run
     if label in ("irka-fo", "so-h2"):
         fom.cache.clear()  # standalone: its start pays for the Gramian factors, as the peer pays for all
     with warnings.catch_warnings():

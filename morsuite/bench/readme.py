@@ -117,7 +117,10 @@ _SECTIONS = {"pareto": _section_pareto, "scaling": _section_scaling, "peers": _s
              "bt": lambda res: _section_rows(res, ("model", "run", "time_s", "lu_count", "floor_s", "ratio",
                                                    "ratios")),
              "rslab-ldlt": lambda res: _section_rows(res, ("model", "n1", "t_ldlt", "t_lu", "ldlt_over_lu",
-                                                           "factor_nnz", "berr"))}
+                                                           "factor_nnz", "berr")),
+             "solve-accuracy": lambda res: _section_rows(res, ("model", "n1", "frequencies", "t_target", "t_before",
+                                                               "target_over_before", "median_ratio",
+                                                               "refinement_steps", "backward_error_max"))}
 
 
 _OWN_TABLES = ("pareto", "scaling", "peers")

@@ -2,7 +2,8 @@ r"""One case of the ``scaling`` benchmark: a reduction or a full response, its t
 
 :func:`run_case` runs one case in this process: ``model`` ("dsms" | "tcom" | "fem_block") at
 ``size`` (g, nc or n1), ``task`` ("irka" | "bt" | "freqresp" | "irka-projected"),
-``r``, ``nfreq``, ``nfreq_measured``, ``options``, ``trace``. It records wall
+``r``, ``nfreq``, ``nfreq_measured``, ``options``, ``trace``, ``warm`` (the compiled kernels
+loaded before the timer; default False: a fresh process's first call pays them). It records wall
 and CPU time, the LU count, and the memory of :class:`~morsuite.bench.memory.MemoryProbe`
 against the :math:`8 n_1^2` bytes of one dense :math:`n_1 \times n_1` array
 (``peak_over_dense_square``), the process's lifetime peak RSS (``process_maxrss_mb``) and,
@@ -66,7 +67,7 @@ def run_case(case: dict) -> dict:
     ("freqresp" or a reducer's name: "irka", "bt", "irka-projected", "irka-fo", ...), ``r``, ``nfreq`` (grid
     size of the response), ``nfreq_measured`` (frequencies actually solved,
     every k-th of the grid), ``options`` (reducer options), ``trace``
-    (tracemalloc on).
+    (tracemalloc on), ``warm`` (the kernels loaded before the timer).
     """
     from .. import reducers
     from ..analysis import freq_grid
@@ -80,6 +81,9 @@ def run_case(case: dict) -> dict:
            "code_digest": code_state(git=False)["digest"],
            "dense_square_mb": 8.0 * fom.n1 ** 2 / MIB}
     opts = dict(case.get("options") or {})
+    if case.get("warm"):  # the compiled kernels loaded (or compiled) before the timer, as a reducer's own time_s
+        from ..linalg.warmup import warm_kernels
+        warm_kernels()
     probe = MemoryProbe(trace=bool(case.get("trace", True)))
     status, info = "ok", {}
     with warnings.catch_warnings(record=True) as caught:
@@ -114,6 +118,9 @@ def run_case(case: dict) -> dict:
                 row.update(time_breakdown=info.get("time_breakdown"),
                            **{k: info[k] for k in ("compress_tol", "stage_stall", "update_switch_reasons",
                                                    "factor_ranks") if k in info})
+                if isinstance(info.get("adi"), dict):  # LR-ADI's columns made and compressions, per equation
+                    row.update({f"adi_{k}": {eq: a.get(k) for eq, a in info["adi"].items()}
+                                for k in ("columns", "compressions")})
         except MemoryBudgetError as exc:
             status = "refused by memory guard"
             row["message"] = str(exc)

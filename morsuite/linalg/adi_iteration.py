@@ -53,267 +53,12 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from scipy.linalg import blas as _blas
-from scipy.linalg import cholesky as _cholesky
-from scipy.linalg import solve_triangular as _solve_triangular
-from scipy.linalg.lapack import dtrcon as _dtrcon
 
 from ..errors import InputError
+from .factor_store import FactorStore
 from .refine import refine_columns
 
-__all__ = ["ADIIteration", "FactorStore"]
-
-
-def _in_place(out, X):
-    """X = out, unless the BLAS wrapper already wrote into X (it does for F-ordered columns)."""
-    if not np.may_share_memory(out, X):
-        X[...] = out
-
-
-class FactorStore:
-    r"""The columns of a low-rank factor :math:`Z = [Z_1; Z_2]` (n1-blocks), kept plain or compressed.
-
-    ``tol = 0``: the columns are stored as appended (blocks grown by doubling: a run should
-    not reserve ``maxiter`` columns it may never use).
-
-    ``tol > 0``: column compression as the factor grows. The store holds
-    :math:`ZZ^T = QFF^TQ^T` with :math:`Q = [Q_1; Q_2]` orthonormal (stacked, k columns)
-    and F diagonal. Appended columns B are written straight into the blocks after Q and
-    compressed once :math:`b = \max(\texttt{chunk}, (\texttt{GROWTH} - 1)k)` of them
-    wait (``GROWTH`` 1.5: Q and the waiting columns reach 1.5 times the last rank), by
-    reorthogonalised block classical Gram-Schmidt (BCGS2), all BLAS 3 and in place,
-    the two blocks never stacked:
-
-    1. :math:`C_1 = Q^TB`, :math:`B \leftarrow B - QC_1`; :math:`B = XR_1` by
-       Cholesky-QR (:math:`R_1^TR_1 = B_1^TB_1 + B_2^TB_2`, :math:`X = BR_1^{-1}`);
-    2. on the normalised X, one product gives :math:`H = Q^TX` and :math:`X^TX`;
-       :math:`X - QH = Q_bR_2` with :math:`R_2^TR_2 = X^TX - H^TH` (Cholesky; accepted
-       while its condition number is at most ``FOLD_COND_MAX``, 100, so that the
-       difference loses no accuracy: after step 1, :math:`X^TX \approx I` and H is tiny), so that
-       :math:`B = Q(C_1 + HR_1) + Q_bR_2R_1` and
-       :math:`ZZ^T = [Q, Q_b]\,\hat F\hat F^T[Q, Q_b]^T`,
-       :math:`\hat F = [[F, C_1 + HR_1], [0, R_2R_1]]`;
-    3. the SVD :math:`\hat F = U\Sigma V^T` truncates: singular values below ``tol``
-       times :math:`\sigma_1(Z)` are dropped, and
-       :math:`Q \leftarrow [Q, Q_b]U_t = [Q, X]\,[[U_Q - HW], [W]]`,
-       :math:`W = R_2^{-1}U_b`: one in-place product by row blocks, into which the
-       second pass's :math:`X - QH` is folded (it is never formed); :math:`F = \Sigma_t`.
-
-    A Cholesky-QR is accepted while the Gram matrix's condition number is at most
-    ``GRAM_COND_MAX`` (1e8: a loss of orthogonality of at most about
-    :math:`10^8\varepsilon` after step 1, :math:`O(\varepsilon)` after step 2). When
-    step 1's Cholesky fails or the block is worse conditioned (ADI columns of close
-    shifts, a rank-deficient block), that normalisation is a Householder QR of a
-    stacked copy and the SVD of its R, which drops only numerically null directions
-    (singular values below :math:`10\varepsilon` times a lower bound of
-    :math:`\sigma_1(Z)`); when step 2's Cholesky fails or exceeds ``FOLD_COND_MAX``,
-    :math:`X - QH` is formed and normalised as in step 1, Cholesky-QR or Householder
-    (each Householder fallback counted in ``householder``). A compression changes :math:`ZZ^T`
-    by at most :math:`\mathrm{tol}^2\sigma_1(Z)^2` (the truncation: the rank-revealing
-    SVD of Z itself) plus :math:`20\sqrt{b}\,\varepsilon\,\sigma_1(Z)^2` (the
-    absorption). Every kept column is a combination of appended ones, so the store
-    commutes with any projection applied to the rows (the observability position
-    block is kept unprojected, see :class:`ADIIteration`).
-
-    Memory: plain, the blocks grow by doubling and are trimmed to the columns in use at
-    :meth:`finish`; compressed, by an eighth (at least ``chunk`` columns); Q and the
-    waiting columns share the blocks (``k_peak``: the most held at once, about
-    ``GROWTH`` times the kept rank, at least the rank plus ``chunk``, instead of every
-    column produced).
-
-    Cost of a compression with k columns in Q, b waiting and t kept: :math:`8n_1kb`
-    (step 1's two products with Q) :math:`+ 4n_1(k+b)b` (step 2's one product)
-    :math:`+ 4n_1b^2` (step 1's Gram matrix and triangular solve)
-    :math:`+ 4n_1(k+b)t` (the rotation) flops, no n1-sized copy (a Householder fallback
-    adds a QR of a stacked :math:`2n_1 \times b` copy). With b = k/2 and t = k that is
-    about :math:`28n_1k` flops per column produced, against about :math:`38n_1k` for
-    the earlier store (two full Gram-Schmidt passes per 64 columns, a Householder QR
-    with Q formed, its rotation and a stacked copy per block, a separate truncation
-    rotating Q); measured in ``docs/design/lradi.md``.
-    """
-
-    #: truncate when Q has grown to GROWTH times the rank of the last truncation
-    GROWTH = 1.5
-    #: Cholesky-QR accepted while the Gram matrix's condition number (cond(R)^2) is at most this
-    GRAM_COND_MAX = 1e8
-    #: the second pass's Gram matrix X^TX - H^TH (Pythagoras) accepted while its condition number is at most this
-    FOLD_COND_MAX = 1e2
-
-    def __init__(self, n1, tol=0.0, chunk=64):
-        self.n1, self.tol, self.chunk = int(n1), float(tol), int(chunk)
-        self.Z1 = np.empty((self.n1, 0), order="F")
-        self.Z2 = np.empty((self.n1, 0), order="F")
-        self.k = 0           # plain: columns stored; compressed: columns of Q
-        self.nb = 0          # compressed: appended columns waiting in Z[:, k:k + nb]
-        self.F = np.zeros((0, 0))
-        self.sigma1 = 0.0    # compressed: a lower bound of sigma_1(Z) (a column norm, a truncation's sigma_1)
-        self.columns = 0     # columns appended in all
-        self.compressions = 0  # absorptions of waiting columns, each with its truncation
-        self.householder = 0   # normalisations that fell back to Householder
-        self.k_truncated = 0   # rank after the last truncation
-        self.k_peak = 0        # most columns held at once (compressed: Q and the waiting ones)
-        self.t_compress = 0.0
-        self.done = False
-
-    def _reserve(self, cols):
-        """Room for ``cols`` columns: plain, doubled (amortised appends); compressed, ``cols`` plus
-        an eighth or one ``chunk``, whichever is more (its column count is bounded by the truncation
-        rule, and a doubled Q at n1 = 1e6 would hold gigabytes of unused columns)."""
-        if cols > self.Z1.shape[1]:
-            room = max(2 * cols, 32) if self.tol == 0 else cols + max(self.chunk, cols // 8)
-            used = self.k + self.nb
-            for name in ("Z1", "Z2"):
-                Z = np.empty((self.n1, room), order="F")
-                Z[:, :used] = getattr(self, name)[:, :used]
-                setattr(self, name, Z)
-
-    def _trim(self):
-        """Release the unused columns of the blocks (one block copied at a time): the factor
-        is kept for the reducer's life, and a doubled store can hold twice its columns."""
-        for name in ("Z1", "Z2"):
-            Z = getattr(self, name)
-            if Z.shape[1] > self.k + max(8, self.k // 16):
-                setattr(self, name, np.array(Z[:, :self.k], order="F"))
-
-    def append(self, c, X1, X2):
-        """Append the columns c [X1; X2]."""
-        j = X1.shape[1]
-        self.columns += j
-        if self.tol == 0:
-            self._reserve(self.k + j)
-            np.multiply(X1, c, out=self.Z1[:, self.k:self.k + j])
-            np.multiply(X2, c, out=self.Z2[:, self.k:self.k + j])
-            self.k += j
-            return
-        t0 = time.perf_counter()
-        s = self.k + self.nb
-        self._reserve(s + j)
-        np.multiply(X1, c, out=self.Z1[:, s:s + j])  # straight into the waiting room after Q
-        np.multiply(X2, c, out=self.Z2[:, s:s + j])
-        self.nb += j
-        self.k_peak = max(self.k_peak, s + j)
-        self.t_compress += time.perf_counter() - t0
-        if self.nb >= max(self.chunk, (self.GROWTH - 1) * self.k_truncated):
-            self._compress()
-
-    def _project(self, k, lo, hi):
-        r"""One block Gram-Schmidt pass of the columns lo:hi against Q: :math:`H = Q^TX`,
-        :math:`X \leftarrow X - QH` in place; returns H."""
-        H = self.Z1[:, :k].T @ self.Z1[:, lo:hi]
-        H += self.Z2[:, :k].T @ self.Z2[:, lo:hi]
-        self._subtract(k, lo, hi, H)
-        return H
-
-    def _subtract(self, k, lo, hi, H):
-        r""":math:`X \leftarrow X - QH` in place for the columns X = lo:hi and Q the first k (BLAS 3)."""
-        for Z in (self.Z1, self.Z2):
-            _in_place(_blas.dgemm(-1.0, Z[:, :k], H, 1.0, Z[:, lo:hi], overwrite_c=1), Z[:, lo:hi])
-
-    @staticmethod
-    def _cholesky(G, cond_max):
-        """The upper Cholesky factor R of the Gram matrix G, or None when the Cholesky fails or
-        cond(R)^2 > ``cond_max`` (LAPACK trcon's 1-norm estimate)."""
-        try:
-            R = _cholesky(G, lower=False, check_finite=False)
-        except np.linalg.LinAlgError:
-            return None
-        return R if _dtrcon(R, norm="1", uplo="U")[0] ** 2 * cond_max >= 1.0 else None
-
-    def _normalise(self, lo, hi, floor):
-        r"""Orthonormalise the columns X = lo:hi in place: X = X_new R, X_new the first t of them.
-
-        Cholesky-QR (:math:`X^TX = R^TR`, :math:`X \leftarrow XR^{-1}` in place, t = hi - lo) when
-        :meth:`_cholesky` accepts the Gram matrix; else Householder on a stacked copy and the SVD
-        of its R, keeping the t directions with singular values above ``floor``. Returns (R, t),
-        R t x (hi - lo)."""
-        X1, X2 = self.Z1[:, lo:hi], self.Z2[:, lo:hi]
-        G = X1.T @ X1
-        G += X2.T @ X2
-        R = self._cholesky(G, self.GRAM_COND_MAX)
-        if R is not None:
-            for X in (X1, X2):
-                _in_place(_blas.dtrsm(1.0, R, X, side=1, lower=0, overwrite_b=1), X)
-            return R, hi - lo
-        self.householder += 1
-        Qh, Rh = np.linalg.qr(np.vstack([X1, X2]))
-        U, s, Vt = np.linalg.svd(Rh)
-        t = int(np.sum(s > floor))
-        Qh = Qh @ U[:, :t]
-        X1[:, :t], X2[:, :t] = Qh[:self.n1], Qh[self.n1:]
-        return s[:t, None] * Vt[:t], t
-
-    def _compress(self):
-        """Absorb the waiting columns and truncate: one rotation of [Q, X] (see the class)."""
-        b = self.nb
-        t0 = time.perf_counter()
-        k, hi = self.k, self.k + b
-        eps = np.finfo(float).eps
-        C = self._project(k, k, hi) if k else np.zeros((0, b))         # pass 1: B - QC
-        R1, t = self._normalise(k, hi, 10 * eps * self.sigma1)          # = X R1
-        r1 = np.sqrt(np.max(np.sum(R1 * R1, axis=0), initial=0.0))      # <= ||R1||_2 <= sqrt(b) r1
-        self.sigma1 = max(self.sigma1, r1)                               # a column of Z: <= sigma_1(Z)
-        Z1, Z2 = self.Z1, self.Z2
-        folded = False
-        if t:  # pass 2 on the normalised X: H = Q^T X, and X - QH = Q_b R2 by Cholesky-QR of its Gram
-            HG = Z1[:, :k + t].T @ Z1[:, k:k + t]                        # [H; X^T X] in one product
-            HG += Z2[:, :k + t].T @ Z2[:, k:k + t]
-            H = HG[:k]
-            R2 = self._cholesky(HG[k:] - H.T @ H, self.FOLD_COND_MAX)  # Pythagoras: accurate if ||H|| < 1
-            folded = R2 is not None
-            if not folded:  # X - QH formed, and normalised (Householder if need be)
-                if k:
-                    self._subtract(k, k, k + t, H)
-                R2, t = self._normalise(k, k + t, 10 * eps * self.sigma1 / max(np.sqrt(b) * r1, 1e-300))
-            C += H @ R1
-            Rb = R2 @ R1                                                 # B = QC + Q_b Rb
-        else:
-            Rb = R1
-        # ZZ^T = [Q, Q_b] F F^T [Q, Q_b]^T, F = [[F, C], [0, Rb]]; its SVD truncates
-        U, s, _ = np.linalg.svd(np.block([[self.F, C], [np.zeros((t, self.F.shape[1])), Rb]]),
-                                full_matrices=False)
-        kept = int(np.sum(s > self.tol * s[0])) if s.size and s[0] > 0 else 0
-        U = U[:, :kept]
-        if folded:  # [Q, (X - QH) R2^{-1}] U = [Q, X] [[U_Q - H W], [W]], W = R2^{-1} U_b
-            W = _solve_triangular(R2, U[k:], lower=False, check_finite=False)
-            U = np.vstack([U[:k] - H @ W, W])
-        self._rotate(U)
-        self.F = np.diag(s[:kept])
-        self.sigma1 = max(self.sigma1, s[0] if s.size else 0.0)
-        self.k_truncated, self.nb = kept, 0
-        self.compressions += 1
-        self.t_compress += time.perf_counter() - t0
-
-    def _rotate(self, X):
-        """:math:`Q \\leftarrow QX` in place (X is k x t, t <= k), by row blocks."""
-        r, t = X.shape
-        step = max(1, 2 ** 22 // max(r, 1))
-        for Z in (self.Z1, self.Z2):
-            for i in range(0, self.n1, step):
-                Z[i:i + step, :t] = Z[i:i + step, :r] @ X
-        self.k = t
-
-    def finish(self):
-        """Absorb the waiting columns (and truncate), then turn Q into the factor :math:`QF`
-        (in place); once. The blocks are then trimmed to the columns in use."""
-        if self.done:
-            return
-        if self.tol == 0:
-            self._trim()
-            self.done = True
-            return
-        if self.nb:
-            self._compress()
-        t0 = time.perf_counter()
-        self._rotate(self.F)  # F is diagonal: Q U_t Sigma_t
-        self._trim()
-        self.done = True
-        self.t_compress += time.perf_counter() - t0
-
-    def blocks(self):
-        """The factor's blocks (n1 x rank views); after :meth:`finish` when compressing."""
-        if not self.done:
-            raise RuntimeError("FactorStore.blocks before finish")
-        return self.Z1[:, :self.k], self.Z2[:, :self.k]
+__all__ = ["ADIIteration", "FactorStore"]  # FactorStore: from linalg.factor_store (its home since 2026-12-02)
 
 
 class ADIIteration:
@@ -335,9 +80,11 @@ class ADIIteration:
         :math:`S(a)x` in long double on the solver's pattern (needed when ``refine`` > 0).
     compress_tol : float
         Column compression of the factor (:class:`FactorStore`; 0: none).
+    compress_from_mib : float
+        With ``compress_tol`` > 0, the factor is kept plain up to this many MiB (:class:`FactorStore`).
     """
 
-    def __init__(self, fom, equation, proj, operators, refine=0, saddle=None, compress_tol=0.0):
+    def __init__(self, fom, equation, proj, operators, refine=0, saddle=None, compress_tol=0.0, compress_from_mib=0.0):
         self.fom, self.equation, self.proj = fom, equation, proj
         self.refine, self.saddle = int(refine), saddle
         self.rho = 0.0  # the largest first correction of a refined solve, relative
@@ -355,7 +102,8 @@ class ADIIteration:
         if not self.norm0 > 0:
             raise InputError(f"the right-hand side of the {equation} equation is zero: matrix "
                              f"{'F' if equation == 'controllability' else 'L'} vanishes on the hidden manifold")
-        self.store = FactorStore(n1, compress_tol, chunk=max(64, 8 * self.W1.shape[1]))
+        self.store = FactorStore(n1, compress_tol, chunk=max(64, 8 * self.W1.shape[1]),
+                                 plain_bytes=compress_from_mib * 2.0 ** 20)
         self.residuals = [1.0]
         self.shifts = []
         self.iterations = 0
@@ -440,14 +188,16 @@ class ADIIteration:
         else:  # M^T ker G is not range(Pi) when M is not symmetric
             self.W2 = self.W2 + c * self.proj.project(self.Mt @ R2)
 
-    def take_block(self):
-        """The primal columns produced since the last call, and the primal residual directions."""
+    def take_block(self) -> list:
+        """The primal columns produced since the last call, and the primal residual directions: a list of
+        n1-row arrays (the caller stacks the blocks of both equations once: at n1 = 2e5 every fresh
+        n1 x k array is page-faulted anew, ``docs/design/lradi.md``)."""
         cols = list(self.block)
         self.block = []
         # E^{-1}W (controllability) or its primal counterpart (observability): where the residual lives
         cols += [self.W1, self.proj(self.W2)[1]] if self.equation == "controllability" else \
             [self.proj(self.W1)[1], self.proj(self.W2)[1]]
-        return np.column_stack(cols)
+        return cols
 
     def finish(self):
         """Complete the factor (absorb the last compressed columns); call once, after the last step."""

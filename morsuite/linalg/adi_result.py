@@ -74,7 +74,9 @@ class LRADIResult:
     lu_pool_peak_mib : float
         Largest estimated memory of the kept LUs.
     compress_tol : float
-        Column compression tolerance (0: none; :class:`~morsuite.linalg.adi_iteration.FactorStore`).
+        Column compression tolerance (0: none; :class:`~morsuite.linalg.factor_store.FactorStore`).
+    compress_from_mib : float
+        With ``compress_tol`` > 0: the factor was kept plain up to this many MiB (``compressions`` 0: it stayed so).
     columns : int
         Columns the iteration produced; ``rank`` is the number kept.
     compressions : int
@@ -109,6 +111,7 @@ class LRADIResult:
     lu_reused: int = 0
     lu_pool_peak_mib: float = 0.0
     compress_tol: float = 0.0
+    compress_from_mib: float = 0.0
     columns: int = 0
     compressions: int = 0
     residual_w1: np.ndarray = field(default=None, repr=False, compare=False)
@@ -155,7 +158,7 @@ class LRADIResult:
                "shift_reuse": self.shift_reuse, "lu_pool_mib": self.lu_pool_mib,
                "pool_full_reuse": self.pool_full_reuse, "lu_dropped": self.lu_dropped, "lu_reused": self.lu_reused,
                "lu_pool_peak_mib": self.lu_pool_peak_mib, "compress_tol": self.compress_tol,
-               "columns": self.columns, "compressions": self.compressions,
+               "compress_from_mib": self.compress_from_mib, "columns": self.columns, "compressions": self.compressions,
                "ritz_standard_rcond": adi_shifts.STANDARD_RCOND if self.strategy == "projection" else None}
         if history:
             out["residuals"] = self.residuals.tolist()

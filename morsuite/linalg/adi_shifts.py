@@ -119,7 +119,9 @@ def _orthonormal_map(X, rank_tol=1e-12):
     enough for Ritz values.
     """
     norms = np.sqrt(np.einsum("ij,ij->j", X, X))
-    X = X[:, norms > 0] / norms[norms > 0]
+    keep = norms > 0
+    X = X[:, keep]  # a copy (boolean index), scaled in place: one n1 x k array, not two
+    X /= norms[keep]
     if X.shape[1] == 0:
         return X, np.zeros((0, 0))
     w, U = np.linalg.eigh(X.T @ X)

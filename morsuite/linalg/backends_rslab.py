@@ -123,10 +123,11 @@ class RslabLDLT:
       perturbed factor would hide it, and :func:`rslab_factor` takes the LU, which reports it.
     - **Solves.** Each solve refines against the matrix itself, at most ``refine`` (2) times, until
       rslab's normwise backward error is below ``target`` (1e-15): one step on fem_block, two on
-      tcom(20), where one left 2e-12. Measured backward errors 4e-17 to 1.2e-16 (with pivots
-      perturbed at 1e-12 instead, the factor grew and two steps left 4e-13 to 8e-11 on tcom(20)).
-      :class:`~morsuite.linalg.saddle_lu.SaddleLU` checks every solve as for any backend and falls
-      back to rslab's LU.
+      tcom(20), where one left 2e-12. Measured backward errors 4e-17 to 1.2e-16 at well-damped
+      shifts (with pivots perturbed at 1e-12 instead, the factor grew and two steps left 4e-13 to
+      8e-11 on tcom(20)); at lightly damped resonances 5e-14 to 6e-12 after the two steps, which
+      :class:`~morsuite.linalg.saddle_lu.SaddleLU` refines to its backward-error target with this
+      factor (falling back to rslab's LU where that stagnates), as it checks every backend's solves.
 
     Cost against the LU (docs/design/backends.md, 2026-11-28): a factorization with three solves
     0.61-0.79 of its time at complex shifts of fem_block, a solve about twice its (the refinement

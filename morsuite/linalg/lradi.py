@@ -52,7 +52,7 @@ ADI distance
 :math:`|p - q|/|p + \bar q| \le 0.5` of a kept LU's shift q is served by that
 LU), ``pool_full_reuse=0.8`` (once the pool has had to drop an LU: reuse within ADI distance
 0.8, and drop the kept LU farthest from the current batch's shifts), ``compress_tol=0`` (no column compression;
-:class:`~morsuite.linalg.adi_iteration.FactorStore`).
+:class:`~morsuite.linalg.factor_store.FactorStore`).
 
 Cost in sparse LUs: one per distinct shift that no kept LU serves (a complex pair: one complex LU),
 plus one real LU of :math:`[[M, G^T], [G, 0]]` for the projector
@@ -91,6 +91,11 @@ SHIFT_REUSE = 0.5
 LU_POOL_MIB = 2048.0
 POOL_FULL_REUSE = 0.8  # fem_block(4000) with a pool of 6 LUs: 94 LUs instead of 159
 COMPRESS_TOL = 0.0  # the exact H2 error reads the factors' column layout (norms/error_gramian.py)
+#: with compress_tol > 0 a factor is kept plain up to this many MiB (both blocks), then compressed: where it fits,
+#: compression only costs time (dsms(2e5): 146 columns, 0.47 GB; BT's time per LU went as n1^1.6 from 2e4 to
+#: 2e5 when it compressed them), while tcom at n1 = 1e6 (about 1300 columns, 21 GB per factor) starts compressing
+#: after 64 columns, as the store did before this budget (docs/design/lradi.md)
+COMPRESS_FROM_MIB = 1024.0
 STRATEGIES = ("projection", "penzl")
 SELECTIONS = ("residual", "gain")
 
@@ -132,7 +137,8 @@ def _check_shifts(shifts):
 
 
 def _run(fom, equations, tol, maxiter, shifts, num_shifts, selection, solver, refine=0, refined=EQUATIONS,
-         shift_reuse=SHIFT_REUSE, lu_pool_mib=LU_POOL_MIB, compress_tol=COMPRESS_TOL, pool_full_reuse=POOL_FULL_REUSE):
+         shift_reuse=SHIFT_REUSE, lu_pool_mib=LU_POOL_MIB, compress_tol=COMPRESS_TOL, pool_full_reuse=POOL_FULL_REUSE,
+         compress_from_mib=COMPRESS_FROM_MIB):
     check_system(fom, "fom")
     tol = _unit_float("tol", tol, 0.0, open_low=True)
     maxiter = _positive_int("maxiter", maxiter)
@@ -148,9 +154,14 @@ def _run(fom, equations, tol, maxiter, shifts, num_shifts, selection, solver, re
     if isinstance(lu_pool_mib, (bool, np.bool_)) or not isinstance(lu_pool_mib, (int, float, np.integer, np.floating)) \
             or not 0 <= float(lu_pool_mib) < np.inf:
         raise InputError(f"lu_pool_mib must be a finite number >= 0; got {lu_pool_mib!r}")
+    if isinstance(compress_from_mib, (bool, np.bool_)) \
+            or not isinstance(compress_from_mib, (int, float, np.integer, np.floating)) \
+            or not 0 <= float(compress_from_mib) < np.inf:
+        raise InputError(f"compress_from_mib must be a finite number >= 0; got {compress_from_mib!r}")
     with blas_threads(1):
         return _iterate(fom, equations, tol, maxiter, strategy, num_shifts, selection, solver, int(refine),
-                        refined, shift_reuse, float(lu_pool_mib), compress_tol, pool_full_reuse)
+                        refined, shift_reuse, float(lu_pool_mib), compress_tol, pool_full_reuse,
+                        float(compress_from_mib))
 
 
 def _unit_float(name, value, low, open_low=False):
@@ -165,7 +176,7 @@ def _unit_float(name, value, low, open_low=False):
 
 
 def _iterate(fom, equations, tol, maxiter, strategy, num_shifts, selection, solver, refine, refined, shift_reuse,
-             lu_pool_mib, compress_tol, pool_full_reuse):
+             lu_pool_mib, compress_tol, pool_full_reuse, compress_from_mib):
     t_start = time.perf_counter()
     solver = new_solver(fom, cache_size=0) if solver is None else solver
     stats0 = solver.stats.copy()
@@ -175,8 +186,8 @@ def _iterate(fom, equations, tol, maxiter, strategy, num_shifts, selection, solv
     operators = {"controllability": (fom.M, sp.vstack([fom.M, fom.D], format="csr"), sym_m),
                  "observability": (Mt, sp.vstack([Mt, fom.D.T], format="csr"), sym_m)}
     saddle = SaddleOperator(solver.pattern) if refine else None
-    its = [ADIIteration(fom, eq, proj, operators, refine if eq in refined else 0, saddle, compress_tol)
-           for eq in equations]
+    its = [ADIIteration(fom, eq, proj, operators, refine if eq in refined else 0, saddle, compress_tol,
+                        compress_from_mib) for eq in equations]
     given = not isinstance(strategy, str)
     label = "given" if given else strategy
     # a given or Penzl set is applied as it is: its LUs serve its cyclic repeats only
@@ -208,7 +219,7 @@ def _iterate(fom, equations, tol, maxiter, strategy, num_shifts, selection, solv
             if fixed is not None:
                 new = fixed
             else:
-                basis = np.hstack([it.take_block() for it in active])
+                basis = np.column_stack([c for it in active for c in it.take_block()])  # one n1 x k array
                 new = list(projection_shifts(fom, basis, num_shifts,
                                              residuals=[(it.equation, it.W1, it.W2) for it in active],
                                              selection=selection, used=used))
@@ -265,7 +276,8 @@ def _iterate(fom, equations, tol, maxiter, strategy, num_shifts, selection, solv
                                solve_rho=it.rho if it.refine else float("nan"),
                                shift_reuse=shift_reuse, lu_pool_mib=lu_pool_mib, lu_reused=reused,
                                pool_full_reuse=pool_full_reuse, lu_dropped=dropped,
-                               lu_pool_peak_mib=pool_peak, compress_tol=compress_tol, columns=it.columns,
+                               lu_pool_peak_mib=pool_peak, compress_tol=compress_tol,
+                               compress_from_mib=compress_from_mib, columns=it.columns,
                                compressions=it.compressions, residual_w1=it.W1, residual_w2=it.W2,
                                projector=proj if it.equation == "observability" and proj.lu is not None else None))
     return out
@@ -273,7 +285,8 @@ def _iterate(fom, equations, tol, maxiter, strategy, num_shifts, selection, solv
 
 def lradi(fom, equation="controllability", *, tol=1e-10, maxiter=2000, shifts="projection", num_shifts=16,
           selection="residual", solver=None, refine=0, shift_reuse=SHIFT_REUSE, lu_pool_mib=LU_POOL_MIB,
-          compress_tol=COMPRESS_TOL, pool_full_reuse=POOL_FULL_REUSE) -> LRADIResult:
+          compress_tol=COMPRESS_TOL, pool_full_reuse=POOL_FULL_REUSE,
+          compress_from_mib=COMPRESS_FROM_MIB) -> LRADIResult:
     r"""Low-rank ADI for one projected Lyapunov equation (see the module docstring).
 
     Parameters
@@ -331,9 +344,14 @@ def lradi(fom, equation="controllability", *, tol=1e-10, maxiter=2000, shifts="p
     compress_tol : float in [0, 1)
         Column compression of the factor as it grows: new directions below
         ``compress_tol`` times its largest singular value are dropped
-        (:class:`~morsuite.linalg.adi_iteration.FactorStore`); 0 (default) keeps
+        (:class:`~morsuite.linalg.factor_store.FactorStore`); 0 (default) keeps
         every column in the order made, the layout that the exact H2 error's
         error-Gramian route replays (:mod:`morsuite.norms.error_gramian`).
+    compress_from_mib : float >= 0
+        With ``compress_tol`` > 0, the factor is kept plain (every column, in the order made)
+        while it holds at most this many MiB, and compressed from there on; 0 compresses from
+        the first columns. Default 1024: a factor that fits is not compressed (time only:
+        dsms(2e5)'s 146 columns cost BT 37% more CPU time compressed, ``docs/design/lradi.md``).
 
     Returns
     -------
@@ -353,12 +371,12 @@ def lradi(fom, equation="controllability", *, tol=1e-10, maxiter=2000, shifts="p
     if equation not in EQUATIONS:
         raise InputError(f"equation must be 'controllability' or 'observability'; got {equation!r}")
     return _run(fom, (equation,), tol, maxiter, shifts, num_shifts, selection, solver, refine, EQUATIONS,
-                shift_reuse, lu_pool_mib, compress_tol, pool_full_reuse)[0]
+                shift_reuse, lu_pool_mib, compress_tol, pool_full_reuse, compress_from_mib)[0]
 
 
 def lradi_pair(fom, *, tol=1e-10, maxiter=2000, shifts="projection", num_shifts=16, selection="residual",
                solver=None, refine=0, shift_reuse=SHIFT_REUSE, lu_pool_mib=LU_POOL_MIB, compress_tol=COMPRESS_TOL,
-               pool_full_reuse=POOL_FULL_REUSE):
+               pool_full_reuse=POOL_FULL_REUSE, compress_from_mib=COMPRESS_FROM_MIB):
     r"""Both projected Lyapunov equations in lock step: one shift sequence, one LU per shift.
 
     Each LU of :math:`[[S(-p), G^T], [G, 0]]` serves the controllability solve
@@ -381,5 +399,5 @@ def lradi_pair(fom, *, tol=1e-10, maxiter=2000, shifts="projection", num_shifts=
         ``times["shifts"]`` and ``times["total"]`` are those of the shared run.
     """
     c, o = _run(fom, EQUATIONS, tol, maxiter, shifts, num_shifts, selection, solver, refine, ("controllability",),
-                shift_reuse, lu_pool_mib, compress_tol, pool_full_reuse)
+                shift_reuse, lu_pool_mib, compress_tol, pool_full_reuse, compress_from_mib)
     return c, o

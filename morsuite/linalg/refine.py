@@ -199,8 +199,10 @@ def _join(hi, lo):
     return out
 
 
-def refine_columns(lu, rhs, x, trans, a, operator: SaddleOperator, *, steps: int, ext: bool = True):
-    r"""``steps`` refinements of the LU's solution of :math:`S(a)[x; z] = [\mathrm{rhs}; 0]` (``trans``: :math:`S(a)^T`).
+def refine_columns(lu, rhs, x, trans, a, operator: SaddleOperator, *, steps: int, ext: bool = True,
+                   tol: float | None = None, max_steps: int = 6, record: dict | None = None):
+    r"""``steps`` refinements of the LU's solution of :math:`S(a)[x; z] = [\mathrm{rhs}; 0]` (``trans``: :math:`S(a)^T`),
+    and with ``tol`` more until the estimated error is below it.
 
     Parameters
     ----------
@@ -216,9 +218,22 @@ def refine_columns(lu, rhs, x, trans, a, operator: SaddleOperator, *, steps: int
     operator : SaddleOperator
         S(a) on the pattern of the solver that made ``lu``.
     steps : int
-        Refinement steps (>= 1).
+        Refinement steps (>= 1), all made.
     ext : bool
         Residual in np.longdouble (equals float where longdouble is double), else float.
+    tol : float, optional
+        After ``steps``, continue (at most ``max_steps`` in all) while a column's estimated relative
+        error :math:`\rho_j c` is above ``tol``: :math:`\rho_j` its last correction relative to its
+        first block (max-norm), :math:`c` the contraction per step, the largest of the LU solution's
+        error :math:`\rho_1`, ``lu.contraction`` (what the LU's own refinement measured,
+        :class:`~morsuite.linalg.saddle_lu.SaddleLU`) and the ratio of the last two corrections; a
+        column stops when that ratio exceeds 1/2 (a correction that grew is not applied). None
+        (default): exactly ``steps``.
+    max_steps : int
+        Most steps with ``tol`` (6).
+    record : dict, optional
+        Filled with ``steps`` (the most a column took) and ``estimate`` (the largest estimated
+        relative error after them).
 
     Returns
     -------
@@ -246,6 +261,8 @@ def refine_columns(lu, rhs, x, trans, a, operator: SaddleOperator, *, steps: int
     xr = x.real.astype(ft)
     xi = x.imag.astype(ft) if cplx else None
     rho = 0.0
+    most = steps if tol is None else max(steps, int(max_steps))
+    taken, estimate = 0, 0.0
     for j in range(x.shape[1]):
         # real and imaginary parts held apart (see SaddleOperator.at: the same bits, faster); b and the
         # LU's solution are doubles (their long double copies would give the same residual, slower)
@@ -256,7 +273,8 @@ def refine_columns(lu, rhs, x, trans, a, operator: SaddleOperator, *, steps: int
             bi = np.zeros(x.shape[0])
             bi[:n1] = np.imag(b[:, j])
         size = float(np.max(np.abs(x[:n1, j]))) if n1 else 0.0
-        for step in range(steps):
+        first = prev = est = 0.0
+        for step in range(most):
             if step == 0:  # the LU's solution, in double
                 cur = (x[:, j].real, x[:, j].imag if cplx else None)
             else:
@@ -264,11 +282,27 @@ def refine_columns(lu, rhs, x, trans, a, operator: SaddleOperator, *, steps: int
             r = apply.residual(br, bi, *cur)  # b - S x, rounded to double once
             # the correction needs no accuracy check of its own: the refined solution is judged
             d = lu._raw_solve(r[:, None], trans)[:, 0]
-            if step == 0 and size > 0:
-                rho = max(rho, float(np.max(np.abs(d[:n1]))) / size)
+            rel = float(np.max(np.abs(d[:n1]))) / size if size > 0 else 0.0
+            if step == 0:
+                first = rel
+                rho = max(rho, rel)
+            ratio = rel / prev if prev > 0 else 0.0
+            if step >= steps and ratio > 1.0:  # a correction that grew: not applied
+                taken = max(taken, step)
+                break
             xr[:, j] += d.real.astype(ft)
             if cplx:
                 xi[:, j] += d.imag.astype(ft)
+            prev = rel
+            est = rel * max(first, getattr(lu, "contraction", 0.0), ratio)
+            if step + 1 >= steps and (tol is None or est <= tol or ratio > 0.5):
+                taken = max(taken, step + 1)
+                break
+        else:
+            taken = max(taken, most)
+        estimate = max(estimate, est)
+    if record is not None:
+        record.update(steps=taken, estimate=estimate)
     if vector:
         xr, xi = xr[:, 0], (xi[:, 0] if cplx else None)
     return xr, xi, rho

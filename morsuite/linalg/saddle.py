@@ -24,7 +24,8 @@ later shift. Solves and their accuracy check are in
 
 Options of :class:`SaddlePointSolver` (defaults): ``cache_size=2``,
 ``pivot_tol=0`` (off), ``rcond_tol=0`` (off), ``permc_spec="COLAMD"``,
-``diag_pivot_thresh=0.1``, ``backward_tol=1e-10``, ``scaling="diagonal"``,
+``diag_pivot_thresh=0.1``, ``backward_tol=1e-10``, ``backward_target=1e-15``,
+``refine_steps=4``, ``scaling="diagonal"``,
 ``ruiz_sweeps=2``, ``reuse_ordering=True``, ``backend="auto"`` (the LU:
 banded with a Schur-complement border for narrow RCM bands, KLU for narrow bands
 with a larger border, rslab's supernodal LU (or PARDISO) for wide bands, chosen from the pattern alone by :mod:`morsuite.linalg.backends`; measurements
@@ -33,7 +34,8 @@ in ``docs/design/backends.md``).
 Cost: one sparse LU per distinct shift, none for a cached shift or the
 conjugate of one (real data); ``rcond_tol > 0`` adds 10-20% of an LU, Ruiz
 scaling about 12% per sweep, the diagonal scaling O(n1). A solve that fails
-the backward-error check costs one more LU per fallback tried.
+the backward-error check costs one more LU per fallback tried; a refinement
+step towards ``backward_target`` one more solve (:mod:`morsuite.linalg.accuracy`).
 """
 
 
@@ -51,8 +53,9 @@ from ..errors import InputError, SingularShiftError
 from . import kernels
 from .backends import LIBRARY_BACKENDS, BandedBorderLU, analyse, permuted_pattern, resolve_backend, superlu_ordering
 from .backends_ext import KLULU, PardisoLU
-from .backends_rslab import RslabLDLT, RslabLU, rslab_factor
-from .saddle_lu import SaddleLU, SolverStats, rcond_estimate
+from .backends_rslab import rslab_factor
+from .accuracy import check_options, without_check_caches
+from .saddle_lu import SaddleLU, SolverStats, fallback_factors, rcond_estimate
 
 __all__ = ["SaddlePointSolver", "SaddleLU", "SolverStats"]
 
@@ -104,13 +107,19 @@ class SaddlePointSolver:
         scaling (its column scaling is computed per column of S).
     backward_tol : float
         Largest normwise backward error of the factorized, equilibrated system
-        accepted from a solve (default 1e-10; 0 turns the check off). Above it
+        accepted from a solve (default 1e-10; 0 turns every check off). Above it
         one step of iterative refinement is made; if that does not help, the
         matrix is refactored with, in turn, the same ordering and diagonal
         pivot threshold 0.01, a fresh COLAMD ordering, and MMD_AT_PLUS_A with
         partial pivoting (the last resort: it can fill in heavily), each solve
         checked again; if none passes, :class:`SingularShiftError`: an
         inaccurate solve is never returned silently.
+    backward_target, refine_steps : float, int
+        The backward error every checked solve reaches (None, default: 1e-15, about
+        9 units of roundoff, or 0 where ``MORSUITE_SOLVE_TARGET=off``; 0: the check of
+        ``backward_tol`` alone, before 2026-12-02): above it, at most ``refine_steps``
+        (4) refinement steps with an extended residual and the same LU, one fallback
+        LU, then the solve is returned flagged (:mod:`morsuite.linalg.accuracy`).
     pattern : dict, optional
         The ``pattern`` of another solver of the same M, D, K, G (shared,
         read-only, with its stored column ordering); default: built here.
@@ -126,13 +135,16 @@ class SaddlePointSolver:
     Notes
     -----
     ``stats.factorizations`` counts every LU made; it is the floor against which
-    the run time of a reducer is judged.
+    the run time of a reducer is judged. ``stats.checked_solves``, ``above_target``,
+    ``refinement_steps``, ``target_fallbacks`` and ``backward_error_max`` record the
+    backward-error target (also in the open :func:`~morsuite.linalg.accuracy.recording`).
     """
 
     def __init__(self, M, D, K, G, *, cache_size: int = 2, pivot_tol: float = 0.0,
                  rcond_tol: float = 0.0, permc_spec: str = "COLAMD", diag_pivot_thresh: float = 0.1,
                  backward_tol: float = 1e-10, scaling: str = "diagonal", ruiz_sweeps: int = 2,
-                 pattern: dict | None = None, reuse_ordering: bool = True, backend: str = "auto"):
+                 pattern: dict | None = None, reuse_ordering: bool = True, backend: str = "auto",
+                 backward_target: float | None = None, refine_steps: int = 4):
         self.n1 = M.shape[0]
         self.n2 = G.shape[0]
         self.cache_size = int(cache_size)
@@ -141,6 +153,7 @@ class SaddlePointSolver:
         self.permc_spec = permc_spec
         self.diag_pivot_thresh = float(diag_pivot_thresh)
         self.backward_tol = float(backward_tol)
+        self.backward_target, self.refine_steps = check_options(backward_target, refine_steps)
         if scaling not in ("diagonal", "ruiz", "none"):
             raise InputError(f"scaling must be 'diagonal', 'ruiz' or 'none'; got {scaling!r}")
         self.scaling = scaling
@@ -175,10 +188,12 @@ class SaddlePointSolver:
         self.backend = self.analysis["backend"]
 
     def __getstate__(self):
-        """Pickled (e.g. to Dask workers) without the cached factorizations: KLU's and PARDISO's
-        are handles of this process."""
+        """Pickled (e.g. to Dask workers) without the cached factorizations (KLU's and PARDISO's
+        are handles of this process) and without the structures the backward-error check keeps
+        with the pattern (:func:`~morsuite.linalg.accuracy.without_check_caches`)."""
         state = dict(self.__dict__)
         state["_cache"] = OrderedDict()
+        state["pattern"] = without_check_caches(self.pattern)
         return state
 
     # -- pattern ---------------------------------------------------------
@@ -265,7 +280,8 @@ class SaddlePointSolver:
             self.stats.add(reused=1)
             return SaddleLU(key, base.lu, self.n1, self.n2, not base.conjugate, self.stats,
                             base.min_pivot_ratio, base.complex_lu, base.matrix, base.backward_tol, base.norms,
-                            base.dr, base.dc, q=base.q)
+                            base.dr, base.dc, q=base.q, target=base.target, refine_steps=base.refine_steps,
+                            structure=base.structure, contraction=base.contraction)
         t0 = time.perf_counter()
         perm = self._ordering()
         dr, dc, As, norms = self._assemble_scaled(a, b, c, perm)
@@ -321,23 +337,11 @@ class SaddlePointSolver:
         checked = self.backward_tol > 0
 
         spec = "NATURAL" if perm and not banded else self.permc_spec
-        fallback = ((
-            # rslab's LDL^T perturbs tiny pivots: its own LU (threshold pivoting) of the same matrix first
-            lambda As=As: RslabLU(As, self.pattern),
-        ) if checked and isinstance(lu, RslabLDLT) else ()) + ((
-            # the banded LU pivots within A11 only (KLU, PARDISO: own pivoting): SuperLU on the same matrix first
-            lambda As=As: spla.splu(As, permc_spec="COLAMD", diag_pivot_thresh=self.diag_pivot_thresh),
-        ) if other and isinstance(lu, (BandedBorderLU, KLULU, RslabLU, RslabLDLT, PardisoLU)) else ()) + (
-            # more weight on the diagonal of the equilibrated matrix, same ordering (cheap)
-            lambda As=As: spla.splu(As, permc_spec=spec, diag_pivot_thresh=min(0.01, self.diag_pivot_thresh)),
-            # a fresh column ordering
-            lambda As=As: spla.splu(As, permc_spec="COLAMD", diag_pivot_thresh=self.diag_pivot_thresh),
-            # symmetric ordering, partial pivoting: the last resort (it can fill in heavily)
-            lambda As=As: spla.splu(As, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=1.0),
-        ) if checked else ()
+        fallback = fallback_factors(As, lu, self.pattern, spec, self.diag_pivot_thresh) if checked else ()
         f = SaddleLU(key, lu, self.n1, self.n2, False, self.stats, ratio, np.iscomplexobj(As.data),
                      As if checked else None, self.backward_tol, norms, dr, dc,
-                     fallback, q=perm["q"] if perm else None)
+                     fallback, q=perm["q"] if perm else None, target=self.backward_target if checked else 0.0,
+                     refine_steps=self.refine_steps, structure=perm if perm else self.pattern)
         if self.cache_size > 0:
             self._cache[key] = f
             while len(self._cache) > self.cache_size:

@@ -10,32 +10,46 @@ symmetrically renumbered matrix :math:`A_e = (D_r S D_c)[q][:, q]` of
 
 made by :class:`~morsuite.linalg.saddle.SaddlePointSolver`, and solves
 :math:`Sx = b` or :math:`S^Tx = b` (plain transpose) for one or many
-right-hand sides; for real data it also stands for the conjugate matrix. After
-each solve the normwise backward error of the factorized system,
-:math:`\|b_e - A_e x_e\| / (\|A_e\|\|x_e\| + \|b_e\|)`, is checked against
-``backward_tol`` (1e-10 by default; 0: no check): above it, one step of
-iterative refinement, then the fallback factorizations in turn, then
-:class:`SingularShiftError`. :func:`rcond_estimate` estimates the reciprocal
-condition of the equilibrated matrix for ``rcond_tol``.
+right-hand sides; for real data it also stands for the conjugate matrix. Each
+solve is checked by its normwise backward error on the factorized system,
+:math:`\eta = \|b_e - A_e x_e\| / (\|A_e\|\|x_e\| + \|b_e\|)` (defined precisely, with what
+"reached" means, in :mod:`morsuite.linalg.accuracy`):
 
-Cost: a solve is two triangular solves; the check one sparse product (about 3%
-of an LU); a fallback one more LU (counted in ``stats.factorizations`` and
-``stats.refactorizations``); :func:`rcond_estimate` a few solves (10-20% of an LU).
+- above ``backward_tol`` (1e-10; an unstable factor): one step of iterative refinement, then
+  the fallback factorizations in turn, then :class:`SingularShiftError`;
+- then, down to ``backward_target`` (1e-15, about 9 units of roundoff): certified in double where
+  the residual's rounding bound allows it, else measured with a double-double residual; above the
+  target, refinement with that residual and the same LU (at most ``refine_steps``), then one
+  fallback factorization, then the solve is returned flagged (``stats.above_target``, an
+  :class:`~morsuite.errors.AccuracyWarning`, the run's record of :mod:`~morsuite.linalg.accuracy`).
+
+``backward_target=0`` restores the check before 2026-12-02 (``backward_tol`` only).
+:func:`rcond_estimate` estimates the reciprocal condition of the equilibrated matrix for ``rcond_tol``.
+
+Cost: a solve is two triangular solves; the check one sparse product (about 3% of an LU),
+plus one with :math:`|A_e|` for the certificate in double, or one double-double product (about
+90 flops per complex entry: 2-4% of a 3D element model's LU at n1 = 2e4, where it is always
+needed); a refinement step one solve and one double-double product; a fallback one more LU
+(counted in ``stats.factorizations`` and ``stats.refactorizations``); :func:`rcond_estimate` a few
+solves (10-20% of an LU). Measured: ``docs/design/backends.md`` (2026-12-02).
 """
 
 from __future__ import annotations
 
 import threading
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..errors import InputError, SingularShiftError
+from ..errors import AccuracyWarning, InputError, SingularShiftError
+from . import accuracy
+from .accuracy import TargetRefinement
 
-__all__ = ["SaddleLU", "SolverStats", "rcond_estimate"]
+__all__ = ["SaddleLU", "SolverStats", "fallback_factors", "rcond_estimate"]
 
 _STATS_LOCK = threading.Lock()  # the counters are shared by solves that run concurrently (shift-parallel)
 
@@ -51,12 +65,25 @@ class SolverStats:
     factor_time_s: float = 0.0
     solve_time_s: float = 0.0
     assemble_time_s: float = 0.0
+    # the backward-error target (:mod:`morsuite.linalg.accuracy`): right-hand sides checked, of them
+    # returned above the target (flagged), refinement steps and fallback LUs on the way to it, the worst
+    # certified backward error and the largest target (these two merge by maximum, not by sum)
+    checked_solves: int = 0
+    above_target: int = 0
+    refinement_steps: int = 0
+    target_fallbacks: int = 0
+    backward_error_max: float = 0.0
+    backward_target: float = 0.0
+
+    #: counters that merge by maximum
+    MAXIMA = ("backward_error_max", "backward_target")
 
     def add(self, **amounts):
-        """Add to counters, thread-safely (factorizations and solves may run in a thread pool)."""
+        """Add to counters (the largest for :data:`MAXIMA`), thread-safely (factorizations and solves may
+        run in a thread pool)."""
         with _STATS_LOCK:
             for k, v in amounts.items():
-                setattr(self, k, getattr(self, k) + v)
+                setattr(self, k, max(getattr(self, k), v) if k in self.MAXIMA else getattr(self, k) + v)
 
     def as_dict(self) -> dict:
         """The counters as a plain dict (for ``info`` and manifests)."""
@@ -67,13 +94,16 @@ class SolverStats:
         return SolverStats(**self.__dict__)
 
     def since(self, earlier: "SolverStats") -> dict:
-        """Counters accumulated since the snapshot ``earlier``."""
-        return {k: v - getattr(earlier, k) for k, v in self.__dict__.items()}
+        """Counters accumulated since the snapshot ``earlier`` (:data:`MAXIMA`: the value now)."""
+        return {k: v if k in self.MAXIMA else v - getattr(earlier, k) for k, v in self.__dict__.items()}
 
 
 @dataclass
-class SaddleLU:
+class SaddleLU(TargetRefinement):
     """A factorization of :math:`a M + b D + c K` bordered by G and G^T.
+
+    Its solves are checked, and refined to ``target``, by the methods of
+    :class:`~morsuite.linalg.accuracy.TargetRefinement`.
 
     ``conjugate`` is True when this object stands for the conjugate of the
     factorized matrix (real data: :math:`S(\\bar s) = \\overline{S(s)}`).
@@ -95,6 +125,12 @@ class SaddleLU:
     fallback: tuple = ()  # callables () -> another LU of the same matrix, tried in order
     refactored: bool = False
     q: object = field(default=None, repr=False)  # the LU is of (Dr S Dc)[q][:, q] (a reused ordering)
+    target: float = 0.0  # backward_target (0: backward_tol only, the check before 2026-12-02)
+    refine_steps: int = 0  # most refinement steps per solve on the way to the target
+    structure: object = field(default=None, repr=False)  # the pattern dict of ``matrix`` (cached structures)
+    #: largest ratio of successive backward errors seen in the target refinement (the factor's contraction)
+    contraction: float = 0.0
+    target_fallback: bool = False  # the one fallback LU of a missed target was tried
 
     def solve(self, rhs, *, trans: bool = False, full: bool = False):
         """Solve :math:`S x = b` (``trans=False``) or :math:`S^T x = b`.
@@ -139,8 +175,9 @@ class SaddleLU:
         return x[:, 0] if vector else x
 
     def backward_error(self, rhs, *, trans: bool = False) -> float:
-        """Normwise backward error of one unchecked solve with ``rhs`` (n1 or n1 + n2 rows),
-        measured as the per-solve check measures it (on the equilibrated system)."""
+        """Normwise backward error of one unchecked solve with ``rhs`` (n1 or n1 + n2 rows) on the
+        equilibrated system, from a residual in double (the check certifies it:
+        :mod:`morsuite.linalg.accuracy`)."""
         if self.matrix is None:
             raise InputError("backward_error needs a factorization made with backward_tol > 0")
         b = np.asarray(rhs).reshape(np.shape(rhs)[0], -1)
@@ -167,21 +204,49 @@ class SaddleLU:
             self.norms["1"] = float(np.add.reduceat(av, A.indptr[:-1]).max()) if av.size else 0.0
         return self.norms["1"]
 
-    def _backward_error(self, b, x, trans):
-        """Normwise backward error per column, the worst: ||r|| / (||A|| ||x|| + ||b||).
+    def _etas(self, b, x, trans, r=None):
+        """Normwise backward error of each column, its residual and its denominator:
+        ``(eta, r, den)`` with ``eta = ||r|| / den``, ``den = ||A|| ||x|| + ||b||``.
 
-        1-norms for ``A x = b``, inf-norms for ``A^T x = b`` (``||A^T||_inf = ||A||_1``).
+        1-norms for ``A x = b``, inf-norms for ``A^T x = b`` (``||A^T||_inf = ||A||_1``). ``r``, if
+        given, is the residual (formed in extended precision); else ``b - A x`` in double.
         """
-        r = b - self._apply(x, trans)
+        if r is None:
+            r = b - self._apply(x, trans)
         red = np.max if trans else np.sum
         den = self._norm() * red(np.abs(x), axis=0) + red(np.abs(b), axis=0)
         with np.errstate(invalid="ignore", divide="ignore"):
-            return float(np.max(np.where(den > 0, red(np.abs(r), axis=0) / den, 0.0))), r
+            eta = np.where(den > 0, red(np.abs(r), axis=0) / np.where(den > 0, den, 1.0), 0.0)
+        return eta, r, den
+
+    def _backward_error(self, b, x, trans):
+        """Normwise backward error per column, the worst: ``(max eta, r)`` (:meth:`_etas`)."""
+        eta, r, _ = self._etas(b, x, trans)
+        return float(np.max(eta)) if eta.size else 0.0, r
 
     def _checked(self, b, x, trans):
-        eta, r = self._backward_error(b, x, trans)
-        if eta <= self.backward_tol:
-            return x
+        etas, r, ext = self._measure(b, x, trans)
+        if not np.max(etas) <= self.backward_tol:
+            x, eta = self._stabilised(b, x, r, trans)
+            etas, r, ext = self._measure(b, x, trans) if self.target > 0 else (np.full(b.shape[1], eta), None, False)
+        steps = fell = 0
+        if self.target > 0:
+            x, etas, steps, fell = self._to_target(b, x, trans, etas, r, ext)
+        above = int(np.count_nonzero(etas > self.target)) if self.target > 0 else 0
+        worst = float(np.max(etas)) if etas.size else 0.0
+        self.stats.add(checked_solves=b.shape[1], above_target=above, refinement_steps=steps, target_fallbacks=fell,
+                       backward_error_max=worst, backward_target=self.target)
+        accuracy.note(eta=worst, target=self.target, checked=b.shape[1], above_target=above, refinement_steps=steps,
+                      fallback_lus=fell)
+        if above:
+            warnings.warn("saddle-point solves stayed above their backward-error target after refinement and a "
+                          "fallback LU (near a pole?): counted in the solver's stats.above_target and in the run's "
+                          "solve_accuracy record", AccuracyWarning, stacklevel=4)
+        return x
+
+    def _stabilised(self, b, x, r, trans):
+        """An unstable factor (backward error above ``backward_tol``): one refinement step, then the fallback
+        factorizations in turn; :class:`SingularShiftError` if none passes. Returns ``(x, eta)``."""
         x = x + self._lu_solve(r, trans)  # one step of iterative refinement
         eta, _ = self._backward_error(b, x, trans)
         while not eta <= self.backward_tol and self.fallback:
@@ -203,7 +268,7 @@ class SaddleLU:
                 f"{eta:.1e} > backward_tol {self.backward_tol:.0e} after one refinement step "
                 "(the shift is at or next to a pole)"
             )
-        return x
+        return x, eta
 
     def _to_lu_space(self, b, trans):
         """Right-hand side of the factorized system Ae = (Dr S Dc)[q][:, q] for S x = b (S^T x = b).
@@ -239,6 +304,30 @@ class SaddleLU:
         else:
             x = self.lu.solve(np.ascontiguousarray(b, dtype=complex if self.complex_lu else float), trans=tr)
         return x
+
+
+def fallback_factors(As, lu, pattern, spec: str, thresh: float) -> tuple:
+    """The fallback list of the factorization ``lu`` of ``As``: callables () -> another LU of the same
+    matrix, cheapest first (``spec``: the column ordering ``lu`` used, ``thresh``: the pivot threshold).
+    Each costs one LU; :meth:`SaddleLU._stabilised` takes them in turn, the target's check the first."""
+    from .backends import BandedBorderLU
+    from .backends_ext import KLULU, PardisoLU
+    from .backends_rslab import RslabLDLT, RslabLU
+
+    return ((
+        # rslab's LDL^T perturbs tiny pivots: its own LU (threshold pivoting) of the same matrix first
+        lambda: RslabLU(As, pattern),
+    ) if isinstance(lu, RslabLDLT) else ()) + ((
+        # the banded LU pivots within A11 only (KLU, PARDISO: own pivoting): SuperLU on the same matrix first
+        lambda: spla.splu(As, permc_spec="COLAMD", diag_pivot_thresh=thresh),
+    ) if isinstance(lu, (BandedBorderLU, KLULU, RslabLU, RslabLDLT, PardisoLU)) else ()) + (
+        # more weight on the diagonal of the equilibrated matrix, same ordering (cheap)
+        lambda: spla.splu(As, permc_spec=spec, diag_pivot_thresh=min(0.01, thresh)),
+        # a fresh column ordering
+        lambda: spla.splu(As, permc_spec="COLAMD", diag_pivot_thresh=thresh),
+        # symmetric ordering, partial pivoting: the last resort (it can fill in heavily)
+        lambda: spla.splu(As, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=1.0),
+    )
 
 
 def rcond_estimate(A, solve, n1: int, mag) -> float:

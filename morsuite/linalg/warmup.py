@@ -7,7 +7,7 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from . import kernels
+from . import dd_kernels, kernels
 from .refine import SaddleOperator
 from .saddle import SaddlePointSolver
 
@@ -23,11 +23,15 @@ def warm_kernels(first: int = 0) -> float:
     Runs the paths a reduction takes on a 40-position chain with a tie constraint: LUs at a complex
     and a real shift (banded backend: the band LU, the border's half-sweeps, the one-pass assembly,
     the scatter), solves and transposed solves with one and three right-hand sides, one
-    Gram-Schmidt basis, the dense pencil and the refinement's double-double residual. Idempotent (a flag per process); returns the seconds it took (0.0 after the
-    first call, or where the kernels are off). Measured 2026-11-26: about 8.5 s when nothing is
-    cached (a fresh install's first process), 0.2-0.5 s afterwards; called by
+    Gram-Schmidt basis, the dense pencil, the refinement's double-double residual and the backward-error
+    certificate's Dot2 residual. Idempotent (a flag per process); returns the seconds it took (0.0 after the first call, or where the kernels
+    are off). Every kernel is a module-level function compiled with ``cache=True``, so only a fresh
+    install's first process compiles (about 8.5 s, 2026-11-26); later processes load the machine
+    code (0.37 s on a quiet machine, of which 0.33 s is numba's own start: its import and its
+    registries; 2026-12-02, ``docs/design/backends.md``; ``tests/test_kernel_cache.py`` checks
+    that nothing compiles again). Called by
     :meth:`morsuite.reducers.base.Reducer.reduce` before its timer starts and by the study runner's
-    worker processes (``docs/design/backends.md``).
+    worker processes.
 
     ``first`` (default 0) picks which half is compiled first: 0 the complex kernels, 1 the real
     ones (then the other half). Two processes starting together with 0 and 1 (the study runner's
@@ -55,6 +59,10 @@ def warm_kernels(first: int = 0) -> float:
         kernels.dense_pencil(A, A, A, s, np.empty((4, 4), dtype=complex if s.imag else float, order="F"))
         ones = np.ones(np.asarray(solver.pattern["_rowptr"]).size - 1)  # refinement's double-double residual
         SaddleOperator(solver.pattern).at(s, False, True).residual(ones, None, ones.astype(np.longdouble))
+        S = solver.matrix(s)  # the backward-error certificate's Dot2 residual (3D patterns take it)
+        seg = (S.indptr.astype(np.int64), S.indices.astype(np.int64), np.arange(S.nnz, dtype=np.int64))
+        for x in (ones, ones + 0.5j):
+            dd_kernels.residual(seg, S.data, x, ones)
 
     steps = [lambda: at(0.3j), lambda: at(1.7),
              lambda: gram_schmidt(np.asfortranarray(np.vander(np.linspace(0.1, 1.0, n), 4)), 1e-12)]

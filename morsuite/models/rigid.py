@@ -18,6 +18,11 @@ matrix is nonsingular whatever the rigid modes
 found is rigid. A symmetric K with positive diagonal that is diagonally dominant, strictly
 in at least one row of each connected component of its graph, is positive definite: then
 there is no rigid mode and nothing is factored (the chains ``dsms`` and ``tcom``).
+A detection that raises (``info["status"]`` "failed": the model is treated as having no
+rigid mode) or that ARPACK converges only in part ("partial": rigid modes may be missing)
+is never silent: a :class:`~morsuite.errors.ConvergenceWarning`, ``info["reason"]``, and
+every reducer on the model records it (``info["rigid_modes"]``, status ``detection-failed``,
+:mod:`morsuite.reducers.outcome`).
 
 **Deflation** (:func:`flexible_part`). With :math:`\Phi` (n1 x k) the rigid modes,
 M-orthonormal, and any basis :math:`Z_f` of the M-orthogonal complement of
@@ -68,13 +73,18 @@ import scipy.sparse.linalg as spla
 
 from ..errors import ConvergenceWarning, InputError, ModelError, MorsuiteError
 
-__all__ = ["RigidModes", "rigid_body_modes", "flexible_part", "with_rigid", "split", "RTOL", "COUPLING_TOL"]
+__all__ = ["RigidModes", "rigid_body_modes", "flexible_part", "with_rigid", "split", "RTOL", "COUPLING_TOL",
+           "DAMPING_UNIT"]
 
 #: eigenvalues with absolute value at most RTOL * rho (rho about the largest eigenvalue) are rigid-body modes
 RTOL = 1e-10
 #: largest relative damping coupling between rigid and flexible modes that deflation accepts
 #: (rounding gives 1e-16 and below; dsms(200) with its end dampers doubled, 6e-6)
 COUPLING_TOL = 1e-10
+#: D_Phi counts as zero (``damped`` False) below DAMPING_UNIT * sqrt(n1) * eps * ``max(abs(Phi).T @ abs(D) @
+#: abs(Phi))``, the rounding of the product (with D Phi = 0 exactly, the shapes' errors enter squared):
+#: dsms(40, free=True) gives 4e-33 against a level of 3e-15
+DAMPING_UNIT = 10.0
 #: the detection shift is -SHIFT * rho
 SHIFT = 1e-6
 #: probe this many modes first (six rigid-body modes of a 3D body, and one more)
@@ -102,9 +112,13 @@ class RigidModes:
         Angular frequency (rad/s) of the lowest flexible mode found (nan if none was).
     info : dict
         Plain data: ``method`` ("diagonal-dominance", "lanczos", "dense", or "failed" with
-        ``error``: the detection raised, a :class:`ConvergenceWarning` said so, k = 0), ``sigma``,
+        ``error``: the detection raised, k = 0), ``status`` ("ok"; "partial": ARPACK converged
+        only some of the modes asked for, rigid modes may be missing; "failed") and ``reason``
+        (None when "ok"; else the sentence of the :class:`ConvergenceWarning` issued), ``sigma``,
         ``rho``, ``rtol``, ``lu_count``, ``solves``, ``time_s``, ``max_rigid_eigenvalue``
-        (largest :math:`|\lambda|/\rho` of the rigid modes: rounding, about 1e-16).
+        (largest :math:`|\lambda|/\rho` of the rigid modes: rounding, about 1e-16),
+        ``damping_tol`` (the rounding level of :math:`D_\Phi`: :data:`DAMPING_UNIT`
+        :math:`\sqrt{n_1}\,\varepsilon\,\max_{ij}(|\Phi|^T|D||\Phi|)_{ij}`).
     """
 
     shapes: np.ndarray
@@ -119,14 +133,24 @@ class RigidModes:
         """Number of rigid-body modes."""
         return int(self.shapes.shape[1])
 
+    @property
+    def damped(self) -> bool:
+        r"""Whether :math:`D_\Phi` is nonzero beyond its rounding: some :math:`|(D_\Phi)_{ij}|` above
+        ``damping_tol`` (``info``; 0 when there are no rigid modes)."""
+        return bool(self.k and np.max(np.abs(self.damping)) > self.info.get("damping_tol", 0.0))
+
     def summary(self) -> dict:
         """Plain data for ``info`` and reports: ``count``, ``lowest_flexible_rad_s``, ``coupling``,
-        ``damped`` (D_Phi nonzero) and the detection's ``info``."""
+        ``damped`` (:attr:`damped`: D_Phi nonzero beyond ``damping_tol``) and the detection's ``info``
+        (``status`` "ok", "partial" or "failed", with its ``reason``)."""
         return {"count": self.k, "lowest_flexible_rad_s": _plain(self.lowest_flexible),
-                "coupling": float(self.coupling), "damped": bool(np.any(self.damping != 0)), **self.info}
+                "coupling": float(self.coupling), "damped": self.damped, **self.info}
 
     def line(self, name: str = "model") -> str:
         """One line saying what was found, as ``morsuite info`` and ``compare`` print it."""
+        if self.info.get("status") in ("partial", "failed"):
+            return (f"{name}: rigid-body detection {self.info['status']} ({self.info.get('reason')}); "
+                    f"treated as having {self.k} rigid-body mode{'s' if self.k != 1 else ''}")
         if not self.k:
             return f"{name}: no rigid-body modes (K is nonsingular on ker G; {self.info.get('method')})"
         low = "" if not np.isfinite(self.lowest_flexible) else f", lowest flexible mode {self.lowest_flexible:.4g} rad/s"
@@ -159,14 +183,6 @@ def _positive_definite_by_dominance(K) -> bool:
     strict = d > off * (1 + 1e-12)
     n_comp, labels = csgraph.connected_components(K, directed=False)
     return bool(np.all(np.bincount(labels[strict], minlength=n_comp) > 0))
-
-
-def _dense_modes(model):
-    """Dense route for tiny constrained spaces (n1 - n2 <= PROBE): a null-space basis of G."""
-    Z = sla.null_space(model.G.toarray()) if model.n2 else np.eye(model.n1)
-    Kz, Mz = Z.T @ (model.K @ Z), Z.T @ (model.M @ Z)
-    lam, C = sla.eigh(0.5 * (Kz + Kz.T), 0.5 * (Mz + Mz.T))
-    return lam, Z @ C
 
 
 def rigid_body_modes(model, *, rtol: float = RTOL, refresh: bool = False) -> RigidModes:
@@ -206,15 +222,19 @@ def rigid_body_modes(model, *, rtol: float = RTOL, refresh: bool = False) -> Rig
     t0 = time.perf_counter()
     rho = _scale(model)
     n1, limit = model.n1, model.order - 1
-    info = {"rtol": float(rtol), "rho": rho, "sigma": None, "lu_count": 0, "solves": 0}
+    info = {"rtol": float(rtol), "rho": rho, "sigma": None, "lu_count": 0, "solves": 0, "status": "ok",
+            "reason": None}
     lu = None
     if _positive_definite_by_dominance(model.K):
         info["method"] = "diagonal-dominance"
         lam, Phi = np.zeros(0), np.zeros((n1, 0))
         low = float("nan")
     elif limit <= PROBE:
+        from ..linalg.eigen import null_space_modes
+
         info["method"] = "dense"
-        lam, Phi = _dense_modes(model)
+        dense = null_space_modes(model)
+        lam, Phi = dense.eigenvalues, dense.shapes
     else:
         from ..linalg.eigen import constrained_modes
 
@@ -223,20 +243,27 @@ def rigid_body_modes(model, *, rtol: float = RTOL, refresh: bool = False) -> Rig
         solver = model.new_solver(cache_size=1)
         try:
             with warnings.catch_warnings():
-                warnings.simplefilter("ignore", ConvergenceWarning)  # a partial Lanczos run still shows rigid modes
+                warnings.simplefilter("ignore", ConvergenceWarning)  # a partial run is said below, once
                 lu = solver.factor(coeffs=(-sigma, 0.0, 1.0))
                 kk = min(PROBE, limit)
                 while True:
                     res = constrained_modes(model, k=kk, sigma=sigma, factorization=lu)
                     info["solves"] += res.info["solves"]
-                    if kk >= limit or np.any(np.abs(res.eigenvalues) > rtol * rho):
+                    if (res.info["status"] != "converged" or kk >= limit
+                            or np.any(np.abs(res.eigenvalues) > rtol * rho)):
                         break
                     kk = min(limit, 2 * kk)
             lam, Phi = res.eigenvalues, res.shapes
+            info["method"] = "lanczos" if res.info["method"] == "lanczos" else "dense"
+            if res.info["status"] != "converged":
+                info.update(status="partial", reason=f"{res.info['reason']}; rigid-body modes may be missing")
+                warnings.warn(f"rigid_body_modes: detection on {model.name} incomplete: {info['reason']}",
+                              ConvergenceWarning, stacklevel=2)
         except (MorsuiteError, spla.ArpackError) as exc:  # e.g. K indefinite: sigma < 0 is an eigenvalue
-            warnings.warn(f"rigid_body_modes: detection on {model.name} failed ({exc}); treated as having no "
-                          "rigid-body modes", ConvergenceWarning, stacklevel=2)
-            info.update(method="failed", error=str(exc))
+            info.update(method="failed", error=str(exc), status="failed",
+                        reason=f"the detection raised ({exc}); treated as having no rigid-body modes")
+            warnings.warn(f"rigid_body_modes: detection on {model.name} failed: {info['reason']}",
+                          ConvergenceWarning, stacklevel=2)
             lam, Phi, lu = np.zeros(0), np.zeros((n1, 0)), None
         info.update(sigma=sigma, lu_count=int(solver.stats.factorizations))
     if info["method"] != "diagonal-dominance":
@@ -250,6 +277,9 @@ def rigid_body_modes(model, *, rtol: float = RTOL, refresh: bool = False) -> Rig
             Mr = Phi.T @ (model.M @ Phi)
             Phi = Phi @ np.linalg.inv(np.linalg.cholesky(0.5 * (Mr + Mr.T))).T
     Dphi = Phi.T @ (model.D @ Phi)
+    absP = np.abs(Phi)
+    info["damping_tol"] = float(DAMPING_UNIT * np.sqrt(n1) * np.finfo(float).eps *
+                                np.max(absP.T @ (abs(model.D) @ absP), initial=0.0))
     coupling = _coupling(model, Phi, Dphi, lu)
     out = RigidModes(shapes=Phi, eigenvalues=lam, damping=Dphi, coupling=coupling, lowest_flexible=low,
                      info={**info, "time_s": time.perf_counter() - t0})

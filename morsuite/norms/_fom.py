@@ -1,9 +1,13 @@
 r"""The full model's transfer function at single shifts, to extended precision, counting LUs.
 
 :math:`T(s)\,b = L x` with :math:`S(s)[x; z] = [Fb; 0]`, one sparse LU of
-:math:`S(s)` per shift (a conjugate shift reuses it), then ``refine`` steps of
+:math:`S(s)` per shift (a conjugate shift reuses it; its solves reach the backward-error target of
+:mod:`morsuite.linalg.accuracy`), then ``refine`` steps of
 iterative refinement whose residual :math:`[Fb; 0] - S(s)[x; z]` is formed beyond
-double (double-double, :mod:`morsuite.linalg.refine`) with the same LU, the solution kept in long double and
+double (double-double, :mod:`morsuite.linalg.refine`) with the same LU, and more (at most
+:data:`~morsuite.linalg.accuracy.FORWARD_MAX_STEPS` in all) until the estimated relative error of the solution is below
+:data:`~morsuite.linalg.accuracy.FORWARD_TOL` (near a lightly damped resonance, where the
+condition of :math:`S(s)` multiplies the LU's rounding), the solution kept in long double and
 :math:`Lx` summed in long double. Where :math:`T - T_r` is 1e-12 of :math:`T`,
 a response rounded to double has lost all but four digits of the difference
 (its error is :math:`\varepsilon|T|`); refined, the difference keeps
@@ -14,9 +18,13 @@ a response rounded to double has lost all but four digits of the difference
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
+from ..linalg.accuracy import FORWARD_MAX_STEPS, forward_tol
 from ..linalg.refine import SaddleOperator, refine_columns, refined_unit
+from ..linalg.warmup import warm_kernels
 
 __all__ = ["FomResponse", "refined_unit"]
 
@@ -34,13 +42,15 @@ class FomResponse:
     fom : Index3Model
     refine : int
         Steps of extended-precision iterative refinement of each solve (0: the
-        LU's solution, rounded to double).
+        LU's solution, rounded to double); more, up to :data:`~morsuite.linalg.accuracy.FORWARD_MAX_STEPS`, while the estimated
+        error is above :data:`~morsuite.linalg.accuracy.FORWARD_TOL`.
     cache_size : int
         LUs kept by the solver (2: a shift and its conjugate, or the value and
         the derivative at one shift, share one LU).
     memo : bool
         Keep :math:`T(s)` (the whole matrix, with its unit and whether it was refined; and
-        :math:`T'(s)` for :meth:`transfer_and_derivative`) per exact shift in ``fom.cache``, at most :data:`MEMO_SIZE` shifts, and serve :meth:`transfer`
+        :math:`T'(s)` for :meth:`transfer_and_derivative`, with the seconds it took) per exact shift in
+        ``fom.cache``, at most :data:`MEMO_SIZE` shifts, and serve :meth:`transfer`
         from it (default False): the H2 quadrature's nodes recur across the reduced models of one
         model, as do the H-infinity search's start grids (``docs/design/norms.md``, 2026-11-26
         third session). Each call returns what a
@@ -62,6 +72,9 @@ class FomResponse:
         on = memo and cache is not None
         self._memo = cache.setdefault(("fom_response", self.refine), {}) if on else None
         self._memo_d = cache.setdefault(("fom_response_derivative", self.refine), {}) if on else None
+        # the seconds each kept sample of :meth:`sample` took (its LU, solves and refinement), so that a user of
+        # samples another computation paid can still state their cost
+        self._seconds = cache.setdefault(("fom_response_seconds", self.refine), {}) if on else None
         self.solver = fom.new_solver(cache_size=cache_size)
         self._op = None  # the long-double S(s) x on the solver's pattern, made on the first refinement
         self.last_unit = refined_unit(0.0, self.refine)
@@ -83,9 +96,11 @@ class FomResponse:
         """``refine`` steps from the LU solution ``x`` (n1 + n2 rows): the primal block in clongdouble."""
         if self._op is None:
             self._op = SaddleOperator(self.solver.pattern)
-        xr, xi, rho = refine_columns(lu, rhs, x, False, s, self._op, steps=self.refine)
+        taken = {}
+        xr, xi, rho = refine_columns(lu, rhs, x, False, s, self._op, steps=self.refine, tol=forward_tol(),
+                                     max_steps=FORWARD_MAX_STEPS, record=taken)
         n1 = self.fom.n1
-        self.last_unit = refined_unit(rho, self.refine)
+        self.last_unit = max(refined_unit(rho, taken["steps"]), 4.0 * taken["estimate"])
         out = xr[:n1].astype(CLD)
         if xi is not None:
             out = out + 1j * xi[:n1].astype(CLD)
@@ -176,11 +191,17 @@ class FomResponse:
         hit = self._recall(self._memo_d, s, need)
         if hit is not None:
             return hit
+        warm_kernels()  # a sample's seconds are its LU and solves, not the process's first compile of the kernels
+        t0 = time.perf_counter()
         lu, x = self._first(s, fom.F)
         T0, T = self._values(s, lu, fom.F, x, need)
         X = x[: fom.n1]
         Y = lu.solve(fom.L.T.astype(complex), trans=True)
         dT = -(Y.T @ ((2 * s) * (fom.M @ X) + fom.D @ X))
         self._keep(self._memo_d, s, T0, T, dT)
+        if self._seconds is not None:
+            if len(self._seconds) >= MEMO_SIZE:
+                self._seconds.clear()
+            self._seconds[complex(s)] = time.perf_counter() - t0
         self._last = (T0, T, self.last_unit, dT)
         return (T0 if T is None else T), dT

@@ -1,15 +1,21 @@
-"""Reducers: one interface, a registry (``make``, ``available``), one module per method."""
+"""Reducers: one interface (:mod:`.base`), a registry (:mod:`.registry`: ``make``, ``available``,
+``describe``, ``methods``), one folder per family, found by being there.
 
-from .base import Option, Reducer, Reduction, available, get_class, make, register
-from .irka.second_order import IRKA
-from .irka.projected import IRKAProjected  # noqa: F401  (registers "irka-projected")
-from .bt.balanced import BT  # noqa: F401  (registers "bt")
-from .bt.frequency_limited import BTFL  # noqa: F401  (registers "bt-fl")
-from .irka.first_order import IRKAFO  # noqa: F401  (registers "irka-fo")
-from .h2.so_h2 import SOH2  # noqa: F401  (registers "so-h2")
-from .modal import Modal  # noqa: F401  (registers "modal")
-from .krylov import Krylov  # noqa: F401  (registers "krylov")
-from .adaptive import Adaptive  # noqa: F401  (registers "adaptive")
-from .dominant import Dominant  # noqa: F401  (registers "dominant")
+``ms.reducers.IRKA``, ``ms.reducers.BT``, ...: every registered reducer class is also an attribute
+of this package under its class name (looked up in the registry on first use).
+"""
 
-__all__ = ["Option", "Reducer", "Reduction", "make", "available", "register", "get_class", "IRKA"]
+from .base import Option, Reducer, Reduction
+from .registry import Description, Method, Variant, available, describe, get_class, make, method, methods, register
+
+__all__ = ["Option", "Reducer", "Reduction", "Description", "Variant", "Method", "make", "available", "register",
+           "get_class", "describe", "methods", "method"]
+
+
+def __getattr__(name):
+    if name[:1].isupper():
+        for reducer in available():
+            cls = get_class(reducer)
+            if cls.__name__ == name:
+                return cls
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

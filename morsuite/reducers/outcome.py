@@ -13,6 +13,12 @@ Every reducer's ``info`` carries, besides its own records:
     :meth:`Reducer.reduce <morsuite.reducers.Reducer.reduce>` applies it to every result
     (a reducer that sets only one of the two gets the other derived,
     :func:`complete_outcome`).
+``status_reason``
+    A sentence saying why, where a status other than ``converged``/``direct`` comes from
+    something the method depends on rather than its own iteration (``partial``: how many modes
+    ARPACK converged; ``detection-failed``: what the rigid-body detection said). A warning
+    with the same text is issued and recorded in ``info["warnings"]``; the method's own
+    status, when it said converged or direct, is kept as ``method_status``.
 ``lu_count``, ``lu_count_shared``, ``setup_reused``, ``setup_cost``
     ``lu_count`` is every LU this call paid (the LUs its ``time_s`` covers: sparse LUs of
     the saddle-point matrix, or dense LUs for ``irka-projected``, whatever they served:
@@ -60,6 +66,11 @@ STATUS = {
               "within the budget is returned",
     "skipped": "the method did not iterate (e.g. its start is below the objective's resolution); "
                "its start is returned",
+    "partial": "an inner eigensolver converged only some of what was asked (ARPACK within its restart cap: "
+               "modal's modes); the result is built from what converged and may lack modes",
+    "detection-failed": "the model's rigid-body-mode detection failed or converged only in part "
+                        "(morsuite.models.rigid): it was reduced as having the rigid modes found (none if the "
+                        "detection failed), which may be wrong",
     "stopped": "converged=False and the reducer did not say why (set by the base class)",
 }
 

@@ -29,10 +29,14 @@ from .files import write_bytes, write_text
 __all__ = ["Curve", "FigureData", "CsvSource", "plot", "render", "save", "pgfplots_tex", "style", "style_context",
            "STYLE_VERSION", "STYLE_RC"]
 
-STYLES = ("line", "points", "paper", "full", "flagged")
+STYLES = ("line", "points", "paper", "full", "flagged", "level", "chosen", "steps")
 
 #: Bump when the look of the figures changes in a way their data and :func:`style` do not show.
-STYLE_VERSION = 2  # 2 (2026-11-26): log-axis tick labels in plain text (10⁻³), not mathtext
+STYLE_VERSION = 3  # 3 (2026-12-02): titles wrapped (TITLE_WIDTH), point labels thinned (MAX_LABELS); 2: plain ticks
+#: titles longer than this many characters are wrapped (a title wider than the axes was cut)
+TITLE_WIDTH = 64
+#: a curve's point labels (``annotate``) are drawn at most this many times, evenly spread
+MAX_LABELS = 5
 #: rc settings on top of matplotlib's defaults; the SVG salt fixes the ids that would be random.
 STYLE_RC = {"svg.hashsalt": "morsuite"}
 FIGSIZE = (6.4, 4.2)
@@ -45,6 +49,7 @@ METADATA = {"pdf": {"CreationDate": None}, "svg": {"Date": None}}
 def style() -> dict:
     """Everything besides the data and matplotlib's version that decides a figure's pixels."""
     return {"version": STYLE_VERSION, "rc": STYLE_RC, "figsize": FIGSIZE, "margins": MARGINS, "dpi": DPI,
+            "title_width": TITLE_WIDTH, "max_labels": MAX_LABELS,
             "metadata": {k: sorted(v) for k, v in METADATA.items()}}
 
 
@@ -107,9 +112,12 @@ class Curve:
     legend text (mathtext allowed, it is also valid LaTeX); ``style`` is "line",
     "full" (the full-order model: a thick black line under the reduced ones),
     "points" (markers joined by a thin line, e.g. a Pareto front), "paper"
-    (a dashed reference curve read from the paper's figure data) or "flagged"
+    (a dashed reference curve read from the paper's figure data), "flagged"
     (large hollow markers around points of the curve ``NAME`` for a curve named
-    ``flagged_NAME``: values that are not to be read as exact).
+    ``flagged_NAME``: values that are not to be read as exact), "level" (a grey dotted
+    horizontal line at its first value across the axes: a tolerance), "chosen" (large stars on
+    points of the curve ``NAME`` for a curve named ``chosen_NAME``: the models a search chose) or
+    "steps" (a staircase through its points: a best-so-far value against cost).
     """
 
     name: str
@@ -147,6 +155,8 @@ class FigureData:
     xscale: str = "log"
     yscale: str = "log"
     notes: list = field(default_factory=list)
+    #: a log x axis of whole numbers (states): ticks labelled 2, 5, 10, 20 instead of 2×10⁰
+    xplain: bool = False
 
 
 def _positive(y):
@@ -169,6 +179,14 @@ def plot(figdata: FigureData, *, ax=None):
             fig.subplots_adjust(**MARGINS)
             fig, ax = _draw(figdata, fig, fig.subplots())
             _plain_log_ticks(ax)
+            if figdata.xplain and figdata.xscale == "log":
+                from matplotlib.ticker import FuncFormatter, LogLocator
+                ax.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+                ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+                ax.xaxis.set_minor_formatter(FuncFormatter(lambda v, _: ""))
+            wrapped = ax.get_title().count("\n")
+            if wrapped:  # room for the title's extra lines
+                fig.subplots_adjust(top=MARGINS["top"] - 0.045 * wrapped)
             return fig, ax
     return _draw(figdata, ax.figure, ax)
 
@@ -219,11 +237,22 @@ def _draw(figdata, fig, ax):
         elif c.style == "points":
             (line,) = ax.plot(x, y, marker="o", markersize=4, linewidth=0.8, label=c.label)
             colors[c.name] = line.get_color()
-            if c.annotate:
-                for xi, yi, t in zip(x, y, c.data[c.annotate]):
-                    if np.isfinite(xi) and np.isfinite(yi):
-                        ax.annotate(f"{c.annotate}={t}", (xi, yi), textcoords="offset points", xytext=(3, 3),
-                                    fontsize=6, color=line.get_color())
+            if c.annotate:  # at most MAX_LABELS labels a curve, its ends among them: labels must not overlap
+                pts = [(xi, yi, t) for xi, yi, t in zip(x, y, c.data[c.annotate]) if np.isfinite(xi) and np.isfinite(yi)]
+                keep = sorted(set(np.linspace(0, len(pts) - 1, min(MAX_LABELS, len(pts))).round().astype(int)))
+                for i in keep:
+                    xi, yi, t = pts[i]
+                    ax.annotate(f"{c.annotate}={t}", (xi, yi), textcoords="offset points", xytext=(3, 3),
+                                fontsize=6, color=line.get_color())
+        elif c.style == "level":  # a tolerance: across the axes, whatever their x range
+            ax.axhline(float(y[0]), color="0.4", linestyle=":", linewidth=1.2, label=c.label)
+        elif c.style == "chosen":  # stars on the points of the curve they mark, in its colour
+            own = colors.get(c.name[len("chosen_"):], "0.35")
+            ax.plot(x, y, linestyle="none", marker="*", markersize=12, color=own, markeredgecolor="black",
+                    markeredgewidth=0.5, label=c.label)
+        elif c.style == "steps":
+            (line,) = ax.plot(x, y, drawstyle="steps-post", marker="o", markersize=3, linewidth=1.2, label=c.label)
+            colors[c.name] = line.get_color()
         elif c.style == "full":
             (line,) = ax.plot(x, y, color="black", linewidth=3.0, alpha=0.45, label=c.label)
         else:
@@ -238,7 +267,8 @@ def _draw(figdata, fig, ax):
     ax.set_xlabel(figdata.xlabel)
     ax.set_ylabel(figdata.ylabel)
     if figdata.title:
-        ax.set_title(figdata.title, fontsize=10)
+        import textwrap
+        ax.set_title("\n".join(textwrap.wrap(figdata.title, TITLE_WIDTH)), fontsize=10)
     ax.grid(True, which="major", alpha=0.3)
     if figdata.curves:
         ax.legend(fontsize=8)
@@ -302,15 +332,21 @@ def pgfplots_tex(figdata: FigureData, csv_files: dict) -> str:
              r"\begin{axis}[" + ",\n  ".join(opts) + "]"]
     for c in figdata.curves:
         style = {"line": "thick", "full": "black!50, line width=2pt", "points": "mark=*, mark size=1.5pt",
-                 "paper": "dashed, thick", "flagged": "only marks, mark=o, mark size=3pt"}[c.style]
+                 "paper": "dashed, thick", "flagged": "only marks, mark=o, mark size=3pt",
+                 "level": "black!60, densely dotted", "chosen": "only marks, mark=star, mark size=4pt",
+                 "steps": "const plot, mark=*, mark size=1pt"}[c.style]
         meta = ""
         if c.annotate:
             style += (", nodes near coords, point meta=explicit symbolic, "
                       "every node near coord/.append style={font=\\tiny}")
             meta = f", meta={c.annotate}"
-        lines.append(rf"\addplot+[{style}{', no markers' if c.style not in ('points', 'flagged') else ''}] "
+        marks = c.style in ("points", "flagged", "chosen", "steps")
+        lines.append(rf"\addplot+[{style}{'' if marks else ', no markers'}] "
                      rf"table[x={c.x}, y=value{meta}, col sep=comma] {{\morsuitedir {csv_files[c.name]}}};")
-        lines.append(rf"\addlegendentry{{{_tex_text(c.label)}}}")
+        if not c.label.startswith("_"):  # matplotlib's rule: a label starting with "_" has no legend entry
+            lines.append(rf"\addlegendentry{{{_tex_text(c.label)}}}")
+        else:
+            lines[-1] = lines[-1].replace(r"\addplot+[", r"\addplot+[forget plot, ", 1)
     lines += [r"\end{axis}", r"\end{tikzpicture}", ""]
     return "\n".join(lines)
 

@@ -18,8 +18,9 @@ Table cells carry the flags of the numbers they show, visibly (a phone has no ho
   red; ``growth`` and a ``status`` other than ``ok`` in red too); ``cached`` as ``cache``.
 
 A study page opens with a scoreboard per size compared (:func:`scoreboard_view`: a row per
-method, a column per measure, the best value marked and the others as ratios to it, flags as
-the short marks of :data:`MARKS`), and shows a modes section (:func:`modes_view`, :func:`pole_svg`)
+method, a column per measure, the best value marked and the others as ratios to it, at equal
+states and above their floors only (:mod:`morsuite.report.ranking`), flags as the short marks
+of :data:`MARKS`), and shows a modes section (:func:`modes_view`, :func:`pole_svg`)
 when the study's data carry modes; :func:`headline` is the one-line summary on the results
 folder's page. docs/design/reports.md describes them.
 
@@ -36,8 +37,10 @@ import math
 from numbers import Integral, Real
 from pathlib import Path
 
+from .ranking import rank, tie_text
+
 __all__ = ["TEMPLATES", "template_digest", "cell", "table_view", "MARKS", "SCOREBOARD_MEASURES", "scoreboard_view",
-           "modes_glance",
+           "modes_glance", "HEADLINE_MEASURES",
            "headline", "modes_view", "pole_svg", "render_study", "render_index"]
 
 #: the folder of the page templates (package data)
@@ -118,6 +121,9 @@ MARKS = {
     "zero": "worse than zero: the error is at or above the full model's own norm, which the zero model T_r = 0 "
             "achieves",
     "fail": "the reduction failed: no values (the notes say why)",
+    "tie": "at the rounding level (an H2 value below its floor, or a relative error at most 1e-10, "
+           "morsuite.report.ranking): a tie with every value there, never ranked",
+    "≠": "not compared: no other method has this number of states (values are compared at equal states only)",
 }
 #: the scoreboard's columns: (key, heading, what it is, the summary columns it reads, first present wins,
 #: the name of the norm in ``worse_than_zero``)
@@ -148,6 +154,25 @@ def _ratio(q: float) -> str:
     return f"{q:.2f}" if q < 10 else f"{q:.3g}" if q < 1000 else f"{q:.0f}" if q < 1e6 else f"{q:.1e}"
 
 
+def _board_groups(rows, present) -> dict:
+    """Per scoreboard column, the rows' ranking (:func:`morsuite.report.ranking.rank`, rows named by their
+    index): ``{key: (groups, {row index: its group})}``. A row's value is its first present column of the
+    measure, ranked under the measure's first column (whose floor rules apply)."""
+    out = {}
+    for key, _, _, cols, _ in present:
+        proj = []
+        for i, r in enumerate(rows):
+            col, v = _value(r, cols)
+            proj.append({**r, "_i": i, cols[0]: v})
+        groups = rank(proj, cols[0], name=lambda row: row["_i"])
+        where = {}
+        for g in groups:
+            for i in [n for _, n in g["ranked"]] + g["rounding"] + g["untrusted"] + g["infinite"]:
+                where[i] = g
+        out[key] = (groups, where)
+    return out
+
+
 def scoreboard_view(board: dict) -> dict:
     """The view of one scoreboard: ``board`` is ``{"title", "where", "rows"}`` with summary rows (dicts of
     the summary's columns and ``label``, the method's label), as :func:`morsuite.studies.pages.study_page`
@@ -155,19 +180,20 @@ def scoreboard_view(board: dict) -> dict:
 
     Returns ``{"title", "where", "columns": [{"key", "heading", "title"}], "rows": [{"method", "label",
     "size", "marks": [(mark, meaning)], "cells": [{"text", "ratio", "best", "marks", "title"}]}]}``: a
-    column per measure of :data:`SCOREBOARD_MEASURES` that some row has; per column the smallest finite
-    value is the best (``best`` True, ties all best), every other finite value carries its ratio to the
-    best (``×1.34``; none when the best is 0); marks of :data:`MARKS` on the row (``nc``, ``unst``,
-    ``fail``) and on values (``≈``, ``≥``, ``✓``, ``zero``). Nothing is computed but the ratios.
+    column per measure of :data:`SCOREBOARD_MEASURES` that some row has. Values are compared by the rules of
+    :mod:`morsuite.report.ranking`: only with rows of the same number of states, and only values above their
+    floors. Per column and number of states the best (``best`` True, ties all best) is the smallest ranked
+    value when two or more were ranked and none is at the rounding level or untrusted; every other ranked
+    value carries its ratio to the smallest ranked one (``×1.34``; none when that is 0). Marks of
+    :data:`MARKS` on the row (``nc``, ``unst``, ``fail``) and on values (``≈``, ``≥``, ``✓``, ``zero``,
+    ``tie``: at the rounding level, ``≠``: no other row at its number of states). Nothing is computed but
+    the ratios.
     """
     rows = board["rows"]
     present = [m for m in SCOREBOARD_MEASURES if any(_value(r, m[3])[1] is not None for r in rows)]
-    best = {}
-    for key, _, _, cols, _ in present:
-        vals = [v for r in rows for v in [_value(r, cols)[1]] if v is not None and math.isfinite(v)]
-        best[key] = min(vals) if vals else None
+    ranking = _board_groups(rows, present)
     out = []
-    for r in rows:
+    for i, r in enumerate(rows):
         failed = r.get("status") not in (None, "ok")
         marks = [m for m, bad in (("fail", failed), ("nc", not failed and r.get("converged") is False),
                                   ("unst", not failed and r.get("stable") is False)) if bad]
@@ -186,9 +212,15 @@ def scoreboard_view(board: dict) -> dict:
                 vmarks.append("✓" if r.get("hinf_certified") is True else "≥")
             if norm in zero:
                 vmarks.append("zero")
-            b = best[key]
-            is_best = b is not None and math.isfinite(v) and v == b
-            ratio = "best" if is_best else (f"×{_ratio(v / b)}" if b and math.isfinite(v) else "")
+            g = ranking[key][1].get(i)
+            ranked = dict((n, val) for val, n in g["ranked"]) if g else {}
+            if g is not None and i in g["rounding"]:
+                vmarks.append("tie")
+            if g is not None and g["alone"] and len(ranking[key][0]) > 1:
+                vmarks.append("≠")
+            low = g["ranked"][0][0] if g and len(g["ranked"]) >= 2 else None
+            is_best = g is not None and g["best"] is not None and i in ranked and ranked[i] == low
+            ratio = "best" if is_best else (f"×{_ratio(v / low)}" if low and i in ranked and v != low else "")
             title = f"{col} = {v!r}" + "".join(f"; {m}: {MARKS[m]}" for m in vmarks)
             cells.append({"text": text, "ratio": ratio, "best": is_best,
                           "marks": [(m, MARKS[m]) for m in vmarks], "title": title})
@@ -200,24 +232,40 @@ def scoreboard_view(board: dict) -> dict:
             "columns": [{"key": k, "heading": h, "title": t} for k, h, t, _, _ in present], "rows": out}
 
 
+#: the measures a headline may be about, in preference: (name in the sentence, summary column)
+HEADLINE_MEASURES = (("H2 error", "h2_error"), ("band max error", "max_abs_error"), ("H∞ error found", "hinf_error"))
+
+
 def headline(board: dict) -> str:
-    """One sentence from a scoreboard: who has the smallest H2 error (else band max, else H-infinity) and
-    by how much below the next, e.g. ``"60 states: irka_fo has the smallest H2 error, 1.34x below so_h2"``
-    (methods by their aliases, as the scoreboard's rows name them);
-    "" when fewer than two methods have that value."""
-    for key, name, cols in (("h2", "H2 error", ("h2_error",)), ("band", "band max error", ("max_abs_error",)),
-                            ("hinf", "H∞ error found", ("hinf_error",))):
-        vals = sorted((v, r["method"]) for r in board["rows"]
-                      if r.get("status") in (None, "ok") for v in [_value(r, cols)[1]]
-                      if v is not None and math.isfinite(v))
-        if len(vals) < 2:
-            continue
-        (b, who), (second, nxt) = vals[0], vals[1]
-        by = ("tied with " if second == b else f"{_ratio(second / b)}x below " if b > 0 else "zero; next ") + nxt
-        flag = " (not accurate to four digits)" if key == "h2" and any(
-            r.get("h2_trusted") is False for r in board["rows"]) else ""
-        return f"{board['where']}: {who} has the smallest {name}, {by}{flag}"
-    return ""
+    """One sentence from a scoreboard, by the rules of :mod:`morsuite.report.ranking`: who has the smallest
+    H2 error (else band max, else H-infinity) among the rows of equal states whose values are above their
+    floors, and by how much below the next, e.g. ``"60 states: irka_fo has the smallest H2 error, 1.34x below
+    so_h2"`` (``"r = 30, 60 states: ..."`` when the board's rows differ in states; rows at other states are
+    named as not compared). Without such a ranking, a tie at the rounding level of two or more rows
+    (``"r = 40, 48 states, H2 error: tie at the rounding level: irka, bt"``); "" when there is neither.
+    Methods by their aliases, as the scoreboard's rows name them."""
+    rows = board["rows"]
+    mixed = len({r.get("states") for r in rows}) > 1
+    tie = ""
+    for name, col in HEADLINE_MEASURES:
+        groups = rank(rows, col)
+        ranked = [g for g in groups if g["best"] is not None]
+        if ranked:
+            g = max(ranked, key=lambda g: (len(g["ranked"]), g["states"] or 0))
+            at = f"{board['where']}, {g['states']} states" if mixed and g["states"] is not None else board["where"]
+            (b, who), (second, nxt) = g["ranked"][0], g["second"]
+            by = f"tied with {nxt}" if second == b else f"{_ratio(g['ratio'])}x below {nxt}"
+            others = [f"{n} ({h['states']} states)" for h in groups if h is not g
+                      for n in [n for _, n in h["ranked"]] + h["rounding"] + h["untrusted"] + h["infinite"]]
+            return f"{at}: {who} has the smallest {name}, {by}" + (
+                f"; not compared, at other states: {', '.join(others)}" if others else "")
+        if not tie:
+            g = next((h for h in groups if len(h["rounding"]) >= 2), None)
+            if g is not None:
+                at = f"{board['where']}, {g['states']} states" if mixed and g["states"] is not None else \
+                    board["where"]
+                tie = f"{at}, {name}: {tie_text(g['rounding'])}"
+    return tie
 
 
 #: the modes table's columns (see docs/design/reports.md, "Modes and poles")
@@ -348,6 +396,7 @@ def render_study(page: dict) -> str:
     import markupsafe
 
     tables = [{**t, "view": table_view(t["columns"], t["rows"])} for t in page["tables"]]
+    reach = [{**t, "view": table_view(t["columns"], t["rows"])} for t in page.get("tolerance") or []]
     boards = []  # per table: its open scoreboards and its folded ones, in page order
     for b in page.get("scoreboards") or []:
         if not boards or boards[-1]["table"] != b["table"]:
@@ -358,7 +407,7 @@ def render_study(page: dict) -> str:
     if poles is not None:
         poles["svg"] = markupsafe.Markup(poles["svg"])  # built here from numbers and escaped labels only
     return _environment().get_template("study.html.j2").render(
-        page=page, tables=tables, boards=boards, marks=MARKS, modes=modes_view(modes), poles=poles,
+        page=page, tables=tables, reach=reach, boards=boards, marks=MARKS, modes=modes_view(modes), poles=poles,
         modes_note=modes.get("note") or "", glance=modes_glance(modes))
 
 

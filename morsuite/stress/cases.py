@@ -9,20 +9,25 @@ A case names a model of :func:`~morsuite.models.random_constrained` (n1 in
 damping ratio :math:`\zeta = 10^{U(-6, 1)}`; mass and stiffness spreads of 0, 3,
 6 or 12 decades; physical units g and kN/mm for 20 %), one check family
 (weights reduce 5, agreement 2, nullspace 1, g-invariance 1.5, bt-bound 1.5),
-a method (for ``reduce``: irka, irka-projected or bt; in half of the reduce cases, drawn
-from the second stream ``default_rng([s, i, 34])`` so that every other draw of the case is
-unchanged, one of the engineering baselines modal, krylov, bt-fl), an order r in 1..12, an IRKA iteration count in 1..3 and a seed
-for the check's own draws. Drawing costs no factorization.
+a method (for ``reduce``: irka, irka-projected or bt; in half of the reduce cases, decided
+by the second stream ``default_rng([s, i, 34])`` so that every other draw of the case is
+unchanged, one of the engineering baselines that the reducers' registry names (:func:`engineering`:
+modal, krylov, bt-fl today), chosen by rendezvous hashing of the case and each name so that a
+reducer added later takes only the cases it wins), an order r in 1..12, an IRKA iteration count
+in 1..3 and a seed for the check's own draws. Drawing costs no factorization (the registry's
+discovery on first use).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import zlib
+
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["FAMILIES", "RUNNER_MAXIT", "BT_MAXITER", "ENGINEERING", "runner_options", "Case", "draw_model_params", "regime", "draw_case",
+__all__ = ["FAMILIES", "RUNNER_MAXIT", "BT_MAXITER", "CORE", "engineering", "runner_options", "Case", "draw_model_params", "regime", "draw_case",
            "given_shifts", "transformed_g"]
 
 FAMILIES = ("reduce", "agreement", "nullspace", "g-invariance", "bt-bound")
@@ -30,16 +35,32 @@ FAMILIES = ("reduce", "agreement", "nullspace", "g-invariance", "bt-bound")
 RUNNER_MAXIT = 40
 #: LR-ADI iteration cap of "bt" in the runner; a capped run ends converged=False with a ConvergenceWarning
 BT_MAXITER = 150
-#: the engineering baselines of issue 34, drawn in half of the reduce cases
-ENGINEERING = ("modal", "krylov", "bt-fl")
+#: the methods of the check families (agreement and g-invariance compare irka with irka-projected,
+#: bt-bound checks bt's bound): drawn in the other half of the reduce cases
+CORE = ("irka", "irka-projected", "bt")
+
+
+def engineering() -> tuple:
+    """The baselines drawn in half of the reduce cases: the package's reducers whose description
+    names options for the stress runner (``Description.stress``: today modal, krylov, bt-fl),
+    other than :data:`CORE`; plugins are never drawn. Sorted by name."""
+    from .. import reducers
+    return tuple(n for n in reducers.available() if n not in CORE and reducers.describe(n).stress is not None
+                 and reducers.get_class(n).__module__.startswith("morsuite.reducers."))
 
 
 def runner_options(method: str) -> dict:
-    """The options of ``method`` in the runner's reduce family: IRKA's cap, LR-ADI's cap, bt-fl's
-    largest quadrature rule (256 nodes: a case stays within seconds), the defaults otherwise."""
-    if method.startswith("irka"):
-        return {"maxit": RUNNER_MAXIT}
-    return {"bt": {"maxiter": BT_MAXITER}, "bt-fl": {"max_nodes": 256}}.get(method, {})
+    """The options of ``method`` in the runner's reduce family, from its description
+    (``Description.stress``: IRKA's cap :data:`RUNNER_MAXIT`, LR-ADI's cap :data:`BT_MAXITER`, bt-fl's
+    largest quadrature rule of 256 nodes, so that a case stays within seconds; the defaults otherwise)."""
+    from .. import reducers
+    return dict(reducers.describe(method).stress or {}) if method in reducers.available() else {}
+
+
+def _rendezvous(names, seed_key) -> str:
+    """The name whose own draw ``default_rng([*seed_key, crc32(name)])`` is largest: adding a name moves only
+    the cases it wins, and the choice does not depend on the names' order."""
+    return max(names, key=lambda n: np.random.default_rng([*seed_key, zlib.crc32(n.encode())]).random())
 
 
 def draw_model_params(rng: np.random.Generator, *, n1_range=(20, 300)) -> dict:
@@ -85,8 +106,9 @@ class Case:
 def draw_case(index: int, master_seed: int = 0, families=None) -> Case:
     r"""Case ``index`` of the seeded sequence (independent of the other cases).
 
-    The draw never depends on which reducers are registered, so a case index
-    names the same case whatever the installation; a case that needs a
+    The draw depends on morsuite's own reducers only (never on plugins), so a case
+    index names the same case on every installation of one version; a reducer added
+    to the package moves only the engineering cases it wins; a case that needs a
     missing reducer is run as ``skipped``. A ``bt-bound`` case is restricted
     to models on which LR-ADI converges within :data:`BT_MAXITER` (n1 <= 150,
     :math:`\zeta \in [10^{-1.5}, 1]`, spreads <= 3 decades).
@@ -97,7 +119,7 @@ def draw_case(index: int, master_seed: int = 0, families=None) -> Case:
     w = np.array([weights[f] for f in fams])
     family = str(rng.choice(fams, p=w / w.sum()))
     kw = draw_model_params(rng)
-    method = str(rng.choice(["irka", "irka-projected", "bt"])) if family == "reduce" else \
+    method = str(rng.choice(list(CORE))) if family == "reduce" else \
         ("bt" if family == "bt-bound" else "irka")
     r = int(rng.integers(1, 13))
     maxit = int(rng.integers(1, 4))
@@ -105,7 +127,7 @@ def draw_case(index: int, master_seed: int = 0, families=None) -> Case:
     if family == "reduce":
         extra = np.random.default_rng([master_seed, index, 34])
         if extra.random() < 0.5:
-            method = str(extra.choice(ENGINEERING))
+            method = _rendezvous(engineering(), (master_seed, index, 34))
     if family == "bt-bound":
         # the bound is a statement about converged Gramians; the reduce family runs bt on everything else
         kw.update(n1=min(kw["n1"], 150), n2=min(kw["n2"], min(kw["n1"], 150) // 2),

@@ -5,7 +5,9 @@ needs_data)``: ``call(tmp, data)`` must raise ``error`` (a subclass of
 :class:`~morsuite.errors.MorsuiteError`) with a message matching the regex
 ``match``; ``tmp`` is a scratch directory and ``data`` the directory holding
 :data:`DATA_FILE` (the M.E.S.S. DSMS file with g = 600), used only by the rows
-with ``needs_data``. tests/stress/test_refused_inputs.py runs one test per row;
+with ``needs_data``. Besides the rows written here, two per registered reducer of the
+package are read from the registry (an unknown option; ``reduce(r)`` above its largest
+order). tests/stress/test_refused_inputs.py runs one test per row;
 :func:`markdown_table` runs every row and prints the table (the one in the
 documentation's design note on refused inputs) with the actual messages::
 
@@ -34,9 +36,9 @@ from morsuite.linalg.eigen import constrained_modes
 
 from ..errors import (FileFormatError, InputError, MemoryBudgetError, ModelError, OptionError, ShapeError,
                       SingularShiftError, SpecError)
-from .refused_inputs import (DATA_FILE, _hdf5, _irka, _lradi, _modal, _mat_without, _model, _mtx_set, _nan_rom,
-                             _npz_without, _other_io_rom, _parts, _pole_model, _rom, _sim, _small, _spec,
-                             _time_spec, _write)
+from .refused_inputs import (DATA_FILE, _changed_rom_file, _hdf5, _irka, _lradi, _modal, _mat_without, _model,
+                             _mtx_set, _nan_rom, _npz_without, _other_io_rom, _parts, _pole_model, _rom, _sim, _small,
+                             _spec, _time_spec, _write)
 
 __all__ = ["Refusal", "CASES", "DATA_FILE", "default_data_dir", "table_rows", "markdown_table"]
 
@@ -209,6 +211,11 @@ _ROWS = [
     ("rom-kind", "file", "ROM .npz without 'kind'",
      lambda t, d: ms.rom.load_rom((np.savez(t / "r.npz", M=np.eye(1)), t / "r.npz")[1]),
      FileFormatError, r"entry 'kind' missing or unknown"),
+    ("rom-changed", "file", "load_rom of a .npz changed after save_rom", lambda t, d: _changed_rom_file(t),
+     FileFormatError, r"c\.npz'?: SHA-256 .* differs from .* recorded in .*c\.json"),
+    ("rom-formats", "argument", "save_rom(formats=('npz', 'hdf5'))",
+     lambda t, d: ms.romfiles.save_rom(_rom(), t / "r", formats=("npz", "hdf5")), InputError,
+     r"formats must be distinct names out of npz, mat; got \['npz', 'hdf5'\]"),
     ("rom-extension", "argument", "rom.save('rom.txt')",
      lambda t, d: ms.rom.SecondOrderROM(np.eye(1), np.eye(1), np.eye(1), np.ones(1), np.ones(1)).save(t / "r.txt"),
      InputError, r"extension must be \.npz or \.mat"),
@@ -384,8 +391,30 @@ _ROWS = [
 ]
 
 
+def _registry_rows() -> list:
+    """Two rows per reducer of the package, read from the registry (a reducer added later is covered with
+    nothing edited here): an unknown option, refused with the list of valid ones, and ``reduce(r)`` one
+    above the reducer's largest order. Cost: constructing each reducer on dsms(20) (no LU)."""
+    rows = []
+    for name in ms.reducers.available():
+        cls = ms.reducers.get_class(name)
+        if not cls.__module__.startswith("morsuite."):
+            continue  # plugins are not this table's
+        rows.append((f"registry-{name}-option", "option", f"{name}(nope=1): an unknown option",
+                     lambda t, d, n=name: ms.reducers.make(n, _small(), nope=1), OptionError,
+                     rf"{cls.__name__} got unknown option\(s\) 'nope'; valid options: "))
+        rows.append((f"registry-{name}-order", "argument", f"{name} reduce(r) one above its largest order",
+                     lambda t, d, n=name: _above_order(ms.reducers.make(n, _small())), InputError,
+                     r"r = \d+ exceeds"))
+    return rows
+
+
+def _above_order(red):
+    return red.reduce(red.max_order() + 1)
+
+
 _NEEDS_DATA = frozenset({"mat-G", "mat-sign", "mat-sign-option"})
-CASES = [Refusal(*row, needs_data=row[0] in _NEEDS_DATA) for row in _ROWS]
+CASES = [Refusal(*row, needs_data=row[0] in _NEEDS_DATA) for row in _ROWS + _registry_rows()]
 
 
 def table_rows(data_dir=None):

@@ -133,6 +133,16 @@ def _rom(fom=None, r=2):
     return ms.reducers.make("bt", fom or _small(), form="vv").reduce(r).rom
 
 
+def _changed_rom_file(tmp):
+    """``STEM.npz`` written by save_rom, then one bit of it flipped (its sidecar kept): what load_rom reads."""
+    from ..romfiles import load_rom, save_rom
+    npz = save_rom(ms.rom.SecondOrderROM(np.eye(2), np.eye(2), np.eye(2), np.ones(2), np.ones(2)), tmp / "c")[0]
+    data = bytearray(npz.read_bytes())
+    data[-40] ^= 1
+    npz.write_bytes(bytes(data))
+    return load_rom(npz)
+
+
 def _nan_rom():
     rom = _rom()
     rom.K[0, 0] = np.nan  # after construction: the ROM's own check has passed

@@ -1,7 +1,8 @@
 """Several studies computed together on worker processes, one core each, before their reports.
 
-``morsuite run A.toml B.toml ... --jobs 2`` (the command line's default on two or more
-cores) first computes what any of the studies lacks, all at once, with :func:`shared_compute`:
+``morsuite run A.toml B.toml ... --jobs N`` (N > 1; by default the usable cores as far as
+memory holds them, :func:`~morsuite.studies.workers.default_jobs`) first computes what any of
+the studies lacks, all at once, with :func:`shared_compute`:
 
 - every artifact is planned per study (:func:`~morsuite.studies.plan.build_plan`) and keyed by
   content, so what several studies or scenes share (a reduced model of the same model,
@@ -9,8 +10,8 @@ cores) first computes what any of the studies lacks, all at once, with :func:`sh
   full-model simulation) is one unit of work, done once;
 - units run on ``jobs`` worker processes, each pinned to a core of its own (so the
   reducers' automatic thread counts, e.g. IRKA's ``solver_threads``, resolve to 1: every
-  timing of such a run is a single-threaded run on a core of its own, the other core
-  running another single-threaded unit; the manifest records this as ``shared_compute``);
+  timing of such a run is a single-threaded run on a core of its own, the other cores
+  running other single-threaded units; the manifest records this as ``shared_compute``);
 - a reducer group's orders run in increasing order on one reducer instance, as in a study's
   own graph, except for reducers with no r-independent work (``irka``) or a small one
   (``irka-projected``: its projector), whose orders are split into chunks
@@ -31,14 +32,14 @@ cache, and the first study (in command-line order) that reads an artifact comput
 records it as computed, the later ones as reused, as in a sequential run. Failures are not
 cached; they are handed to the studies from memory, so that no study computes them again.
 
-A model's LR-ADI Gramian factors, which the ``bt``, ``so-h2`` and ``irka-fo`` reductions and
-the H2 norms read, are a unit of their own (:func:`~morsuite.studies.gramian_store.compute_factors`)
+A model's LR-ADI Gramian factors, which the ``bt``, ``so-h2`` and ``irka-fo`` reductions (their
+descriptions say so: :func:`gramian_use`) and the H2 norms read, are a unit of their own (:func:`~morsuite.studies.gramian_store.compute_factors`)
 that starts first; the units that read them wait for it and load them from the artifact cache
 (:class:`~morsuite.studies.gramian_store.GramianStore`, set in every worker; the model's Hinf norms
 wait for it too, and their start grid uses the factors' shifts, as in a study's own graph, where
 they run after the reductions), so that a run pays them once, not once per worker (at n1 = 20,577 they are 204 LUs and 26 minutes).
 The paper's IRKA reads them only to score its shortlist when it does not converge
-(:data:`GRAMIAN_WAITERS`): it waits for the unit when there is one, but does not call for one.
+(:func:`gramian_use` "waits"): it waits for the unit when there is one, but does not call for one.
 
 Cost: the units' own; each worker process builds the models it meets (once) and reads a model's
 Gramian factors from the store when a unit needs them (once per worker and model).
@@ -57,7 +58,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .plan import build_plan
-from .workers import terminate_on_exit, usable_cores, watch_parent
+from .unit_times import previous_times as _previous_times, report_estimate as _report_estimate
+from .workers import cpu_seconds, terminate_on_exit, usable_cores, watch_parent
 
 __all__ = ["Shared", "shared_compute", "split_claims", "SPLIT", "usable_cores"]
 
@@ -67,14 +69,15 @@ SPLIT = {"irka": 1, "irka-projected": 3}
 
 RUN_BY = "processes (shared)"
 
-#: Reducers that read the model's LR-ADI Gramian factors: they and the model's norm units (which read
-#: them too) start after the model's Gramian factors' unit (module docstring).
-GRAMIAN_READERS = ("bt", "so-h2", "irka-fo")
-#: Reducers that read the factors only when they do not converge (the exact H2 score of IRKA's
-#: shortlist): they wait for the model's Gramian factors' unit when there is one, but do not call
-#: for one (at n1 = 20,577 the paper's IRKA stalled before the unit had finished and paid the
-#: factors a second time: 171 LUs, 1,085 s, 2026-11-28)
-GRAMIAN_WAITERS = ("irka", "irka-projected")
+def gramian_use(reducer: str):
+    """How ``reducer`` uses the model's LR-ADI Gramian factors, as its description says
+    (``Description.gramians``): "reads" (bt, so-h2, irka-fo: they and the model's norm units start after
+    the model's Gramian factors' unit), "waits" (the paper's IRKA and irka-projected read the factors only
+    to score their shortlist when they do not converge: they wait for the unit when there is one, but do
+    not call for one; at n1 = 20,577 the paper's IRKA stalled before the unit had finished and paid the
+    factors a second time: 171 LUs, 1,085 s, 2026-11-28), or None (an unknown reducer too)."""
+    from .. import reducers
+    return reducers.describe(reducer).gramians if reducer in reducers.available() else None
 
 
 @dataclass
@@ -121,14 +124,16 @@ def _pin(counter, cores, store=None):
 
 
 def _run_unit(fn_name, args, kwargs):
-    """Run one unit in a worker: the task function ``fn_name`` (module:function) and its wall time."""
+    """Run one unit in a worker: the task function ``fn_name`` (module:function), its wall time and its
+    CPU time (``cpu_s``, :func:`~morsuite.studies.workers.cpu_seconds`: far less load-dependent than wall time)."""
     import importlib
 
     mod, _, fn = fn_name.partition(":")
-    started, t0 = time.time(), time.perf_counter()
+    started, t0, c0 = time.time(), time.perf_counter(), cpu_seconds()
     out = getattr(importlib.import_module(mod), fn)(*args, **kwargs)
     cores = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
-    return out, {"wall_s": time.perf_counter() - t0, "pid": os.getpid(), "cores": cores, "started": started}
+    return out, {"wall_s": time.perf_counter() - t0, "cpu_s": cpu_seconds() - c0, "pid": os.getpid(), "cores": cores,
+                 "started": started}
 
 
 @dataclass
@@ -143,31 +148,7 @@ class _Unit:
     rom_from: list = field(default_factory=list)   # (reduce unit ids or None, {r: key}) whose entries it needs
     keys: dict = field(default_factory=dict)       # r -> key (group units) or {None: key}
     label: str = ""
-    gramians: bool = False    # reads the model's Gramian factors (GRAMIAN_READERS, the H2 norms)
-
-
-def _previous_times(out: Path) -> dict:
-    """(model name, reducer, options JSON, r) -> time (s) of the reductions, and
-    ("norm", model, reducer, options, r, kind) of the error norms, in the manifests under ``out``."""
-    times = {}
-    for path in sorted(Path(out).glob("*/manifest.json")):
-        try:
-            arts = json.loads(path.read_text()).get("artifacts") or []
-        except (OSError, ValueError):
-            continue
-        arts = [a for a in arts if isinstance(a, dict)]
-        opts = {a.get("id"): json.dumps(a.get("options"), sort_keys=True) for a in arts if a.get("kind") == "reduction"}
-        for a in arts:
-            if a.get("kind") == "reduction" and a.get("reducer"):
-                k = (a.get("model"), a["reducer"], opts[a.get("id")], a.get("r_requested"))
-            elif a.get("kind") == "norm_error" and a.get("reduction") in opts:
-                k = ("norm", a.get("model"), a.get("reducer"), opts[a["reduction"]], a.get("r_requested"), a.get("norm"))
-            else:
-                continue
-            t = a.get("wall_s") or a.get("time_s")
-            if isinstance(t, (int, float)):
-                times[k] = max(times.get(k, 0.0), float(t))
-    return times
+    gramians: bool = False    # reads the model's Gramian factors (gramian_use "reads", the H2 norms)
 
 
 def _units(plans, cache, prev):
@@ -213,7 +194,7 @@ def _units(plans, cache, prev):
                        cache_root, RUN_BY), "reduction", g.model.model_id,
                       float("inf") if len(known) < len(part) else sum(known), keys={r: keys[r] for r in part},
                       label=f"{g.method.reducer} {g.model.name} r = {part}",
-                      gramians=g.method.reducer in GRAMIAN_READERS))
+                      gramians=gramian_use(g.method.reducer) == "reads"))
             for r in part:
                 reduce_unit[(gid, r)] = uid
     for plan in plans:
@@ -239,6 +220,20 @@ def _units(plans, cache, prev):
                           keys={r: ng.keys[r] for r in part}, rom_from=[(src, {r: red.keys[r] for r in part})],
                           label=f"{ng.kind} errors {red.method.reducer} {red.model.name} r = {part}",
                           gramians=ng.kind == "h2"))
+    for plan in plans:
+        for t in plan.tolerances.values():
+            uid = "tolerance-" + t.key
+            if uid in units or have("tolerance", t.key):
+                continue
+            fkey = plan.foms[t.fom].key if t.fom else None
+            add(_Unit(uid, "morsuite.studies.tolerance:tolerance_search",
+                      (t.model.source, t.method.reducer, t.method.options, t.settings, t.norm_options, t.key, None,
+                       fkey, cache_root, RUN_BY), "tolerance", t.model.model_id,
+                      prev.get(("tolerance", t.key), float("inf")), keys={None: t.key},
+                      label=f"tolerance {t.method.reducer} {t.model.name} ({t.settings['error']} "
+                            f"{', '.join(f'{x:g}' for x in t.settings['tol'])})",
+                      gramians=gramian_use(t.method.reducer) == "reads" or t.settings["error"] == "h2",
+                      deps={f"fom-{fkey}"} if fkey and f"fom-{fkey}" in units else set()))
     # a model's error norms wait for their reductions
     for u in units.values():
         if u.kind == "norm_error":
@@ -250,7 +245,7 @@ def _units(plans, cache, prev):
         uid = "gramians-" + model
         for u in units.values():
             if u.model == model and (u.gramians or u.kind in ("model_norm", "norm_error")
-                                     or (u.kind == "reduction" and u.args[1] in GRAMIAN_WAITERS)):
+                                     or (u.kind == "reduction" and gramian_use(u.args[1]) == "waits")):
                 u.deps.add(uid)
         add(_Unit(uid, "morsuite.studies.gramian_store:compute_factors", (source, RUN_BY), "gramians",
                   model, float("inf"), keys={None: uid}, label=f"Gramian factors {model}"))
@@ -309,7 +304,8 @@ def _store(cache, shared, u, value):
         shared.fresh.add((u.kind, key))
 
 
-def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, run_kwargs=None) -> Shared:
+def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, run_kwargs=None,
+                   jobs_rule=None) -> Shared:
     """Compute what ``studies`` lack, all at once, on ``jobs`` pinned worker processes (module docstring).
 
     Parameters
@@ -326,20 +322,26 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, 
         (figures and tables while other units still compute), with its share of what was
         computed (:func:`split_claims`); the results folder's index and ``run.json`` (the run's
         record below) are written at the end.
+    jobs_rule : dict or None
+        How ``jobs`` was chosen (:func:`~morsuite.studies.workers.default_jobs`' record), kept in the
+        record; None: given by the caller.
 
     Returns
     -------
     Shared
         the keys computed (for the studies' manifests), failures, and ``record``: jobs, cores,
-        units, wall time, the workers' summed busy time, and each unit's label, worker and time.
+        units, wall time, the workers' summed busy time (``busy_s``: wall s of the computing units), the CPU
+        time of every unit (``cpu_s``, study runs too), of this process (``cpu_main_s``) and of the workers
+        from spawn to exit (``cpu_workers_s``), and each unit's label, worker, wall and CPU time.
     """
-    t0 = time.perf_counter()
+    t0, main0, kids0 = time.perf_counter(), cpu_seconds("self"), cpu_seconds("children")
     plans = [build_plan(s) for s in studies]
     units = _units(plans, cache, _previous_times(out) if out is not None else {})
     n_units = len(units)
     shared = Shared(jobs)
     cores = usable_cores()
-    shared.record = {"jobs": jobs, "cores": cores, "pinned": True, "units": n_units, "run_by": RUN_BY}
+    shared.record = {"jobs": jobs, "cores": cores, "pinned": True, "units": n_units, "run_by": RUN_BY,
+                     "jobs_rule": jobs_rule if jobs_rule is not None else "given"}
     log, owners = [], {}
     if run_kwargs is not None and not units:  # all cached: the reports in this process, as without workers
         from .runner import run
@@ -352,7 +354,9 @@ def shared_compute(studies, cache, jobs: int = 2, out=None, quiet: bool = True, 
         _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0)
     busy = sum(e["wall_s"] for e in log if e["kind"] != "study")
     wall = time.perf_counter() - t0
-    shared.record = {**shared.record, "wall_s": wall, "busy_s": busy, "log": log}
+    shared.record = {**shared.record, "wall_s": wall, "busy_s": busy, "cpu_s": sum(e["cpu_s"] for e in log),
+                     "cpu_main_s": cpu_seconds("self") - main0, "cpu_workers_s": cpu_seconds("children") - kids0,
+                     "log": log}
     if run_kwargs is not None:
         from .pages import write_index
         write_index(run_kwargs["out"])
@@ -439,8 +443,8 @@ def _schedule(units, cache, shared, jobs, cores, log, quiet, owners, t0):
                 rec["start_s"] = rec.pop("started") - wall0
                 log.append({"unit": u.label, "kind": u.kind, **rec})
                 if not quiet:
-                    print(f"  {rec['wall_s']:7.1f} s  core {rec['cores']}  at {rec['start_s']:6.1f} s  {u.label}",
-                          file=sys.stderr)
+                    print(f"  {rec['wall_s']:7.1f} s ({rec['cpu_s']:6.1f} s CPU)  core {rec['cores']}  at "
+                          f"{rec['start_s']:6.1f} s  {u.label}", file=sys.stderr)
 
 
 # -- the studies' own runs ---------------------------------------------------------
@@ -451,6 +455,7 @@ def _claims(plan) -> list:
     out += [("model_norm", n.key) for n in plan.norms.values()]
     out += [("norm_error", g.keys[r]) for g in plan.norm_groups.values() for r in g.rs]
     out += [("simulation", s.key) for s in plan.sims.values()]
+    out += [("tolerance", t.key) for t in plan.tolerances.values()]
     return out
 
 
@@ -484,11 +489,3 @@ def _run_study(path, kwargs, shared):
         if pinned is not None:
             os.sched_setaffinity(0, pinned)
     return {"name": study.name, "timing": res.manifest["timing"], "files": len(res.files)}
-
-
-def _report_estimate(out, name) -> float:
-    """The last run's ``report_s`` of study ``name`` under ``out`` (inf when unknown)."""
-    try:
-        return float(json.loads((Path(out) / name / "manifest.json").read_text())["timing"]["report_s"])
-    except (OSError, ValueError, KeyError, TypeError):
-        return float("inf")

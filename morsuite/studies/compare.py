@@ -12,11 +12,19 @@ is written when an argument is wrong: the error names it), writes it as TOML int
 study's output folder (``OUT/NAME/NAME.toml``: edit it and ``morsuite run`` it again),
 runs it with the cache, and returns the run and the verdict lines that the command prints.
 
-The default methods are the five of the ``*_five_*`` scenes of ``studies/sweep.toml``:
-the paper's IRKA (``irka``, second-order), ``irka-fo`` (first-order tangential IRKA),
-``so-h2`` (second-order H2 descent), second-order BT at the velocity-velocity level
-(``bt-vv``) and first-order BT (``bt``). ``irka-projected`` (dense, n1 x n1) and the other
-BT levels (``bt-pp``, ``bt-pv``, ``bt-vp``, ``bt-fv``) can be asked for.
+The methods are read from the reducers' registry (:func:`morsuite.reducers.methods`: every
+registered reducer and its named variants, with label and states per order): the defaults
+are those whose description says so (the paper's IRKA, ``irka-fo``, ``so-h2``, second-order
+BT at the velocity-velocity level ``bt-vv``, first-order ``bt``, ``modal``, ``krylov``);
+``irka-projected`` (dense, n1 x n1), the other BT levels (``bt-pp``, ``bt-pv``, ``bt-vp``,
+``bt-fv``), ``bt-fl`` and any reducer added later can be asked for. A reducer that takes a
+band (``Description.band_option``) is given the comparison's band.
+
+With ``tol`` (``morsuite compare MODEL --tol 0.01``) the study leads with a ``tolerance`` scene
+(:mod:`morsuite.studies.tol_options`, :mod:`morsuite.analysis.tolerance`): each method's smallest
+model within each tolerance, the next smaller one, the search's cost, the cheapest and the
+smallest (:func:`tolerance_lines` prints them), and with ``save_roms`` the chosen models as files;
+``states`` may then be left out.
 """
 
 from __future__ import annotations
@@ -30,33 +38,38 @@ from ..errors import InputError
 from ..modelfiles import is_model_path
 from ..utils import atomic_write_text
 from .checks import suggest
+from .task_common import model_of
+from .tol_options import TOL_MEASURES
 
-__all__ = ["METHODS", "DEFAULT_METHODS", "INPUTS", "compare_spec", "compare", "to_toml", "verdict_lines", "verdict_row",
+__all__ = ["all_methods", "default_methods", "INPUTS", "compare_spec", "compare", "to_toml", "verdict_lines", "verdict_row",
            "rigid_line"]
 
-#: method name -> (reducer, options, first-order states per order, label)
-METHODS = {
-    "irka": ("irka", {}, 2, "IRKA (paper, second-order)"),
-    "irka-fo": ("irka-fo", {}, 1, "irka-fo (first-order IRKA)"),
-    "so-h2": ("so-h2", {}, 2, "so-h2 (second-order H2 descent)"),
-    "bt": ("bt", {}, 1, "BT, first-order"),
-    "irka-projected": ("irka-projected", {}, 2, "IRKA, Pi-projected (dense)"),
-    **{f"bt-{lvl}": ("bt", {"form": lvl}, 2, f"BT ({lvl}, second-order)") for lvl in ("pp", "pv", "vp", "vv", "fv")},
-    "bt-fl": ("bt-fl", {"limited": "controllability"}, 1, "BT, frequency-limited to the band (one-sided: stable)"),
-    "modal": ("modal", {}, 2, "modal truncation + static correction"),
-    "krylov": ("krylov", {}, 2, "Krylov moment matching (SOAR)"),
-}
-#: the H2/BT family and the engineering baselines (modal truncation, Krylov moment matching: one LU each)
-DEFAULT_METHODS = ("irka", "irka-fo", "so-h2", "bt-vv", "bt", "modal", "krylov")
 #: the H-infinity searches' ``skip_factor`` (:func:`morsuite.analysis.hinf_error`) in a comparison
 SKIP_FACTOR = 0.5
 #: the inputs of ``--input`` besides a CSV file (columns t, u1..um)
 INPUTS = ("step", "impulse", "chirp")
 
 
-def _options(method: str, band) -> dict:
-    """The method's options in a comparison on ``band``: frequency-limited BT limited to it."""
-    return {**METHODS[method][1], **({"band": list(band)} if method == "bt-fl" else {})}
+def all_methods() -> dict:
+    """The methods a comparison offers, by name: every registered reducer and every variant
+    (:func:`morsuite.reducers.methods`, each a :class:`~morsuite.reducers.Method`: reducer, options,
+    label, first-order states per order). Cost: the registry's discovery on first use."""
+    from .. import reducers
+    return reducers.methods()
+
+
+def default_methods() -> tuple:
+    """The methods compared when none are named: those whose reducer's description says so
+    (:attr:`Description.default <morsuite.reducers.Description>`; today the paper's IRKA, irka-fo,
+    so-h2, bt-vv, bt, modal and krylov), in the registry's order."""
+    return tuple(name for name, m in all_methods().items() if m.default)
+
+
+def _options(method, band) -> dict:
+    """The method's options in a comparison on ``band``: its variant's, and the band for a reducer
+    that takes one (``Description.band_option``: frequency-limited BT)."""
+    opt = method.description.band_option
+    return {**method.options, **({opt: list(band)} if opt else {})}
 
 
 def _alias(name: str) -> str:
@@ -67,6 +80,13 @@ def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_.") or "model"
 
 
+def _source(model) -> str:
+    """The model's source as the study names it: a catalog spec as given, a file by its absolute path
+    (the key of :func:`~morsuite.studies.task_common.model_of`, so that every step builds it once)."""
+    source = str(model)
+    return str(Path(source).expanduser().resolve()) if is_model_path(source) else source
+
+
 def _file_band(fom) -> tuple:
     from ..models.random import default_band, eigenfrequency_range
 
@@ -74,8 +94,10 @@ def _file_band(fom) -> tuple:
     return default_band(lo, hi, 0.0)
 
 
-def compare_spec(model: str, states, methods=None, band=None, input=None, name=None) -> dict:
-    """The study (a dict, as its TOML reads) comparing ``methods`` on ``model`` at ``states``.
+def compare_spec(model: str, states=None, methods=None, band=None, input=None, name=None, *, tol=None,
+                 error: str = "band", budget_lus=None, budget_s=None, max_states=None, save_roms: bool = False) -> dict:
+    """The study (a dict, as its TOML reads) comparing ``methods`` on ``model`` at ``states`` and/or by the
+    smallest model within each tolerance of ``tol``.
 
     Parameters
     ----------
@@ -86,7 +108,8 @@ def compare_spec(model: str, states, methods=None, band=None, input=None, name=N
         compared: its order is r = N / 2); at most 2 (n1 - n2), and N / 2 <= n1 - n2 for
         second-order methods.
     methods : sequence of str, optional
-        Names from :data:`METHODS`; default :data:`DEFAULT_METHODS`.
+        Names from :func:`all_methods` (registered reducers and their variants); default
+        :func:`default_methods`.
     band : (float, float), optional
         Frequency band (rad/s) of the error figures and band errors; default the catalog
         model's band, or for a model file a decade beyond its undamped eigenfrequency range
@@ -95,6 +118,12 @@ def compare_spec(model: str, states, methods=None, band=None, input=None, name=N
         ``step``, ``impulse``, ``chirp`` or a CSV file (t, u1..um): adds a time scene per N.
     name : str, optional
         The study's name (its output folder); default ``compare_`` and the model's name.
+    tol : sequence of float, optional
+        Relative tolerances in (0, 1): a ``tolerance`` scene first (:mod:`morsuite.studies.tol_options`),
+        each method's smallest model meeting each (``error``: ``band``, ``h2`` or ``hinf``), searched
+        within ``budget_lus`` / ``budget_s`` per method and ``max_states``; ``save_roms`` writes the chosen
+        models (.npz, .mat, .json) into the study's ``roms/`` folder. At least one of ``states`` and
+        ``tol`` is needed.
 
     Raises
     ------
@@ -102,22 +131,33 @@ def compare_spec(model: str, states, methods=None, band=None, input=None, name=N
         Naming the argument at fault: ``MODEL`` unreadable, ``--states`` out of range or odd,
         ``--methods`` unknown, ``--band`` not 0 < lo < hi, ``--input`` unknown or missing.
 
-    Cost: building the model once (and, for a file without ``band``, one sparse LU of K).
+    Cost: building the model (once per process: :func:`~morsuite.studies.task_common.model_of`, which
+    the study's validation and its tasks share) and, for a file without ``band``, one sparse LU of K.
     """
-    from .. import models
-
-    methods = list(DEFAULT_METHODS if not methods else methods)
+    offered = all_methods()
+    methods = list(default_methods() if not methods else methods)
     for m in methods:
-        if m not in METHODS:
-            raise InputError(f"--methods: unknown method {m!r}{suggest(m, METHODS)}; valid: {', '.join(METHODS)}")
+        if m not in offered:
+            raise InputError(f"--methods: unknown method {m!r}{suggest(m, offered)}; valid: {', '.join(offered)}")
     if len(set(methods)) != len(methods):
         raise InputError(f"--methods: a method is named twice in {methods}")
+    if not states and not tol:
+        raise InputError("give --states N ... (a comparison at those sizes) or --tol TOL ... (the smallest model "
+                         "within each tolerance), or both")
+    if error not in TOL_MEASURES:
+        raise InputError(f"--error: expected one of {', '.join(TOL_MEASURES)}; got {error!r}")
+    tols = sorted({float(t) for t in (tol or [])}, reverse=True)
+    if any(not (0 < t < 1) for t in tols):
+        raise InputError(f"--tol: expected relative tolerances in (0, 1); got {tol}")
+    for flag, v in (("--budget-lus", budget_lus), ("--budget-s", budget_s), ("--max-states", max_states)):
+        if v is not None and not (v > 0):
+            raise InputError(f"{flag}: expected a positive number; got {v}")
     try:
-        fom = models.parse(str(model))
+        fom = model_of(_source(model))
     except (InputError, OSError, ValueError) as exc:
         raise InputError(f"MODEL {str(model)!r} cannot be read: {exc}") from exc
-    states = sorted(set(int(n) for n in states))
-    second = [m for m in methods if METHODS[m][2] == 2]
+    states = sorted(set(int(n) for n in (states or [])))
+    second = [m for m in methods if offered[m].states_per_order == 2]
     for n in states:
         if n < (2 if second else 1):
             raise InputError(f"--states: {n} is too small (at least {2 if second else 1})")
@@ -137,37 +177,46 @@ def compare_spec(model: str, states, methods=None, band=None, input=None, name=N
         band = [float(b) for b in _file_band(fom)]
     else:
         band = [float(b) for b in fom.band]
-    source = str(model)
-    if is_model_path(source):  # absolute here; relative to the TOML file when written (to_toml)
-        source = str(Path(source).expanduser().resolve())
+    source = _source(model)  # a file: absolute here; relative to the TOML file when written (to_toml)
     name = name or _slug("compare_" + fom.name.replace("(", "_").replace(")", "").replace("=", ""))
 
-    spec = {"name": name, "title": f"{fom.name}: " + ", ".join(methods) + " at " +
-            ", ".join(str(n) for n in states) + " states",
+    asked = ([f"the smallest model within {', '.join(f'{t:g}' for t in tols)} ({error} error)"] if tols else []) + \
+        ([", ".join(str(n) for n in states) + " states"] if states else [])
+    spec = {"name": name, "title": f"{fom.name}: " + ", ".join(methods) + ": " + "; ".join(asked),
             "description": f"Written by morsuite compare: {len(methods)} methods on {fom.name} (n1 = {fom.n1}, "
-                           f"n2 = {fom.n2}) at equal first-order states {states}; band [{band[0]:.3g}, "
-                           f"{band[1]:.3g}] rad/s; exact H2 and Hinf errors of every reduction.",
-            "norms": ["h2", "hinf"], "models": {"model": source},
+                           f"n2 = {fom.n2}): " + "; ".join(asked) + f"; band [{band[0]:.3g}, {band[1]:.3g}] rad/s"
+                           + ("; exact H2 and Hinf errors of every reduction at those sizes." if states else "."),
+            "norms": ["h2", "hinf"] if states else [], "models": {"model": source},
             "grids": {"band": {"band": band, "n": 200}},
             # the H-infinity searches sample the band response's grid too: one memo of T(jw), no second LU
             # and refine only the maxima that may beat the best peak found, sample only the resonances
             # whose surrogate may (screen)
             "norm_options": {"hinf": {"band_grid": [band[0], band[1], 200], "skip_factor": SKIP_FACTOR,
                                       "screen": True}},
-            "methods": {_alias(m): {"reducer": METHODS[m][0], **({"options": _options(m, band)} if _options(m, band)
-                                                              else {}),
-                                    "label": METHODS[m][3]} for m in methods},
+            "methods": {_alias(m): {"reducer": offered[m].reducer,
+                                    **({"options": _options(offered[m], band)} if _options(offered[m], band) else {}),
+                                    "label": offered[m].label} for m in methods},
             "scenes": []}
 
     def orders(ns):
         """``r`` of the scene and ``r_by_method`` for the methods whose order counts otherwise."""
         base = 2 if second else 1
         rs = [n // base for n in ns]
-        other = {_alias(m): ([n // METHODS[m][2] for n in ns] if len(ns) > 1 else ns[0] // METHODS[m][2])
-                 for m in methods if METHODS[m][2] != base}
+        spo = {m: offered[m].states_per_order for m in methods}
+        other = {_alias(m): ([n // spo[m] for n in ns] if len(ns) > 1 else ns[0] // spo[m])
+                 for m in methods if spo[m] != base}
         return (rs if len(rs) > 1 else rs[0]), other
 
     aliases = [_alias(m) for m in methods]
+    if tols:
+        extra = {k: v for k, v in (("budget_lus", budget_lus), ("budget_s", budget_s), ("max_states", max_states))
+                 if v is not None}
+        spec["scenes"].append({"name": "to_reach", "kind": "tolerance", "model": "model", "methods": aliases,
+                               **({"grid": "band"} if error == "band" else {}), "tol": tols, "error": error,
+                               **{k: (int(v) if k != "budget_s" else float(v)) for k, v in extra.items()},
+                               **({"save_roms": True} if save_roms else {}),
+                               "title": f"{fom.name}: the smallest model within "
+                                        f"{', '.join(f'{t:g}' for t in tols)} ({error} error)"})
     for n in states:
         r, other = orders([n])
         extra = {"r_by_method": other} if other else {}
@@ -185,6 +234,8 @@ def compare_spec(model: str, states, methods=None, band=None, input=None, name=N
                                    **extra, "input": _input(input),
                                    "title": f"{fom.name}: {input if input in INPUTS else 'measured input'}, "
                                             f"{n} states"})
+    if not states:
+        return spec
     r, other = orders([states[-1]])
     spec["scenes"].append({"name": f"modes_{states[-1]}", "kind": "modes", "model": "model", "grid": "band",
                            "methods": aliases, "r": r, **({"r_by_method": other} if other else {}),
@@ -251,10 +302,37 @@ def to_toml(spec: dict, relative_to=None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def verdict_lines(result) -> list:
-    """What ``morsuite compare`` prints: per table, a row per method (states, flags, errors, time)
-    and the table's verdict."""
+def tolerance_lines(result) -> list:
+    """What ``morsuite compare --tol`` prints: per tolerance scene, a row per tolerance and method (status,
+    states, error, the next smaller model's states and error, LUs, time) and the headline."""
+    from .tolerance_scene import headline, tolerance_rows
+
     out = []
+    for scene in result.study.scenes:
+        if scene.kind != "tolerance":
+            continue
+        rows = tolerance_rows(scene, result.study, result.results)
+        out.append(f"== {scene.title or scene.name}")
+        out.append(f"{'tol':>8} {'method':<16}{'status':>9} {'states':>7} {'error':>11} {'smaller':>8} "
+                   f"{'its error':>11} {'LUs':>6} {'time (s)':>9}")
+        for r in rows:
+            def num(v, f):
+                return "" if v is None else format(v, f)
+            out.append(f"{r['tol']:>8.3g} {r['method']:<16}{r['status']:>9} {num(r['states'], 'd'):>7} "
+                       f"{num(r['error'], '.4g'):>11} {num(r['smaller_states'], 'd'):>8} "
+                       f"{num(r['smaller_error'], '.4g'):>11} {num(r['lu_count'], 'd'):>6} "
+                       f"{num(r['time_s'], '.3g'):>9}")
+        out.append(headline(rows, {m: m for m in scene.methods}))
+        out.append("")
+    return out
+
+
+def verdict_lines(result) -> list:
+    """What ``morsuite compare`` prints: the tolerance scenes' rows and headlines (:func:`tolerance_lines`),
+    then per table a row per method (states, flags, errors, time) and the table's verdict."""
+    out = tolerance_lines(result)
+    if not any(scene.kind == "table" for scene in result.study.scenes):
+        return out
     for scene in result.study.scenes:
         if scene.kind != "table":
             continue
@@ -294,24 +372,26 @@ def verdict_row(r: dict) -> str:
 
 
 def _table_note(result, name) -> str:
+    """The table's verdict (its note, :func:`morsuite.studies.scenes._verdict`: ranked at equal states and
+    above the floors only, ties at the rounding level said as ties), as its Markdown file holds it."""
     md = result.outdir / f"{name}.md"
     try:
         lines = md.read_text().splitlines()
     except OSError:
         return ""
-    return next((ln for ln in lines if "Smallest error" in ln), "")
+    return next((ln for ln in lines if ln.strip() and not ln.startswith(("#", "|"))), "")
 
 
 def rigid_line(model: str) -> str | None:
     """The one line saying that ``model`` (a spec or file) has rigid-body modes and how the
     comparison treats them (:mod:`morsuite.models.rigid`), or None if it has none (or cannot be
-    read: :func:`compare` then says why). Cost: building the model and its detection (one
-    sparse LU unless K is positive definite by diagonal dominance)."""
-    from .. import models
+    read: :func:`compare` then says why). Cost: building the model (shared with the comparison:
+    :func:`~morsuite.studies.task_common.model_of`) and its detection, kept on the model for the
+    reducers (one sparse LU unless K is positive definite by diagonal dominance)."""
     from ..models.rigid import rigid_body_modes
 
     try:
-        fom = models.parse(str(model))
+        fom = model_of(_source(model))
     except (InputError, OSError, ValueError):
         return None
     rigid = rigid_body_modes(fom)
@@ -319,8 +399,13 @@ def rigid_line(model: str) -> str | None:
             "errors and norms are the flexible part's") if rigid.k else None
 
 
-def compare(model, states, methods=None, band=None, input=None, out="results", name=None, quiet=False):
-    """Build, write and run the comparison study (see :func:`compare_spec`); returns ``(RunResult, toml_path)``.
+def compare(model, states=None, methods=None, band=None, input=None, out="results", name=None, quiet=False, *,
+            jobs: int = 1, **tolerance):
+    """Build, write and run the comparison study (see :func:`compare_spec`; ``tolerance``: its keyword
+    arguments ``tol``, ``error``, ``budget_lus``, ``budget_s``, ``max_states``, ``save_roms``); returns
+    ``(RunResult, toml_path)``. ``jobs`` > 1 computes the study's units on that many pinned worker
+    processes first (:func:`~morsuite.studies.batch.shared_compute`, as ``morsuite run`` does), then
+    writes its report in this process.
 
     The spec is validated in full before anything is written, so a refused argument leaves
     nothing behind. The TOML goes to ``out/NAME/NAME.toml`` (atomically; file paths in it
@@ -333,9 +418,11 @@ def compare(model, states, methods=None, band=None, input=None, out="results", n
     from .cache import Cache
     from .memo import SpecMemo
     from .runner import run
-    from .spec import load_spec, study_from_dict
+    import tomllib
 
-    spec = compare_spec(model, states, methods, band, input, name)
+    from .spec import study_from_dict
+
+    spec = compare_spec(model, states, methods, band, input, name, **tolerance)
     study_from_dict(spec, source="morsuite compare")      # every check before anything is written
     out = Path(out)
     folder = out / spec["name"]
@@ -343,9 +430,20 @@ def compare(model, states, methods=None, band=None, input=None, out="results", n
     old = path.read_text() if path.is_file() else None
     created = [d for d in (folder, out) if not d.exists()]  # the study folder first: it is inside out
     folder.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(path, to_toml(spec, relative_to=folder))
+    text = to_toml(spec, relative_to=folder)
+    atomic_write_text(path, text)
     try:
-        result = run(load_spec(path, memo=SpecMemo(Cache(out / ".cache"))), out=out, quiet=quiet)
+        cache = Cache(out / ".cache")
+        memo = SpecMemo(cache)
+        # the study as its file reads (paths relative to it), from the text written: no second read, and
+        # its model is the one built above (model_of), not a new one
+        study = study_from_dict(tomllib.loads(text), path=path, memo=memo)
+        shared = None
+        if jobs > 1:
+            from .batch import shared_compute, split_claims
+            memo.flush()
+            shared = split_claims([study], shared_compute([study], cache, jobs, out=out, quiet=quiet))[0]
+        result = run(study, out=out, quiet=quiet, shared=shared)
     except BaseException:
         if old is not None:
             atomic_write_text(path, old)

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from .checks import subset_of
 from .norm_options import NORM_KINDS, NORM_MEASURES
 from .time_options import TIME_KEYS
+from .tol_options import TOL_KEYS
 
 __all__ = ["KINDS", "COMMON_KEYS", "Kind", "needs", "output_names", "orders_text", "check_output_names",
            "MEASURES", "AXES", "TIMES", "MAX_POINTS", "SUMMARY"]
@@ -42,14 +43,16 @@ class Kind:
     one_r: bool
     min_methods: int = 1
     with_full: bool = False
+    needs_r: bool = True       # False: the scene has no ``r`` (a tolerance scene finds its orders)
 
     def curve_names(self, methods) -> list:
         """The scene's curves: ``"full"`` first if the kind draws the full model, then one per method alias."""
         return (["full"] if self.with_full else []) + list(methods)
 
     def grid_needed(self, params) -> bool:
-        """A grid unless the scene's measure is an exact norm (over the whole axis)."""
-        return self.uses_grid and params.get("measure") not in NORM_MEASURES
+        """A grid unless the scene's measure is an exact norm (over the whole axis), or its
+        tolerance's error is one."""
+        return self.uses_grid and params.get("measure") not in NORM_MEASURES and params.get("error") not in NORM_KINDS
 
 
 KINDS = {
@@ -78,13 +81,20 @@ KINDS = {
                   "and the reduced models' structure checks", {"r": _R, "grid": _GRID}, True, True, with_full=True),
     "time": Kind("output of the full and reduced models over time, and the output error",
                  {"r": _R, **TIME_KEYS}, False, True),
+    "tolerance": Kind("for each method, the smallest reduced model whose error meets each tolerance, and its cost",
+                      {"grid": _GRID, **TOL_KEYS}, True, False, needs_r=False),
 }
 
 
 def needs(scene):
     """Artifacts the scene reads: ("metrics", model, grid, method, r), ("reduce", model, method, r),
-    ("norm", model, method, r, kind) (an exact error norm and the model's norm) or
-    ("time", model, method, r) (the scene's simulations)."""
+    ("norm", model, method, r, kind) (an exact error norm and the model's norm),
+    ("time", model, method, r) (the scene's simulations) or ("tolerance", model, grid, method) (a
+    tolerance scene's search; grid None for a norm's tolerance)."""
+    if scene.kind == "tolerance":
+        for m in scene.methods:
+            yield ("tolerance", scene.model, scene.grid, m)
+        return
     norms = list(scene.params.get("norms") or [])
     if scene.params.get("measure") in NORM_MEASURES:
         norms.append(NORM_MEASURES[scene.params["measure"]][0])
@@ -101,6 +111,8 @@ def output_names(scene) -> list:
     """The names of the scene's outputs (figures or a table)."""
     if scene.kind == "modes":
         return [scene.name, f"{scene.name}_structure"]
+    if scene.kind == "tolerance":
+        return [scene.name, f"{scene.name}_states", f"{scene.name}_time", f"{scene.name}_bode"]
     return [scene.name, f"{scene.name}_error"] if scene.kind == "time" else [scene.name]
 
 

@@ -6,7 +6,10 @@ their cache or content key and ``reused``: taken from the cache (the computed ki
 also ``cached``) or left as the last run wrote them (figures and tables,
 :mod:`.outputs`). A norm's record says how it was computed (route, LUs, estimated
 accuracy ``floor``/``rel_floor``, ``trusted``, warnings); a simulation's, its LUs,
-solves, growth flag and output errors. ``reused`` and ``computed`` at the
+solves, growth flag and output errors. The full response, the reductions and the norms
+carry ``solve_backward_error`` and ``solve_accuracy``: what their checked saddle-point
+solves reached (:mod:`morsuite.linalg.accuracy`; None for an entry cached before
+2026-12-02). ``reused`` and ``computed`` at the
 top level list the ids of each.
 """
 
@@ -27,8 +30,9 @@ def _artifacts(plan, res) -> list:
         e = foms[fid]
         arts.append({"id": fid, "kind": "fom_response", "model": f.model.name, "grid": list(f.bounds),
                      "aliases": sorted(map(list, f.aliases)), "key": f.key, "cached": bool(e.get("cached")),
-                     "time_s": e.get("time_s"), "lu_count": e.get("lu_count"), "scheduler": e.get("scheduler"),
-                     "host": e.get("host"),
+                     "time_s": e.get("time_s"), "lu_count": e.get("lu_count"),
+                     "solve_backward_error": e.get("solve_backward_error"), "solve_accuracy": e.get("solve_accuracy"),
+                     "scheduler": e.get("scheduler"), "host": e.get("host"),
                      "created": e.get("created")})
     for gid, g in plan.reduces.items():
         for r in g.rs:
@@ -43,6 +47,8 @@ def _artifacts(plan, res) -> list:
                          "converged": info.get("converged"), "status": info.get("status"),
                          "iterations": info.get("iterations"), "lu_count": info.get("lu_count"),
                          "lu_count_shared": info.get("lu_count_shared"), "lu_backend": info.get("lu_backend"),
+                         "solve_backward_error": info.get("solve_backward_error"),
+                         "solve_accuracy": info.get("solve_accuracy"),
                          "time_breakdown": info.get("time_breakdown"),
                          "warnings": info.get("warnings"), "error": e.get("error"), "scheduler": e.get("scheduler"),
                          "host": e.get("host"),
@@ -55,7 +61,7 @@ def _artifacts(plan, res) -> list:
                          "r_requested": r, "grid": list(plan.foms[mg.fom].bounds), "fom": mg.fom,
                          "reduction": f"{mg.reduce}/r{r}", "key": mg.keys[r], "cached": bool(e.get("cached")),
                          "time_s": e.get("time_s"), "error": e.get("error")})
-    arts += _norm_artifacts(plan, res) + _time_artifacts(plan, res)
+    arts += _norm_artifacts(plan, res) + _time_artifacts(plan, res) + _tolerance_artifacts(plan, res)
     for a in arts:
         a["reused"] = a["cached"]
     return arts
@@ -64,7 +70,7 @@ def _artifacts(plan, res) -> list:
 #: what the manifest keeps of a norm entry (the route, LUs, accuracy, warnings), and of a simulation's
 _NORM_FIELDS = ("value", "route", "lu_count", "trusted", "floor", "rel_floor", "rtol_met", "nodes", "peak_frequency",
                 "lower_bound", "upper_bound", "certified", "samples", "factor_rank", "adi_converged", "reason", "options", "time_s", "warnings", "error",
-                "scheduler", "host", "created")
+                "solve_backward_error", "solve_accuracy", "scheduler", "host", "created")
 _SIM_FIELDS = ("integrator", "steps", "lu_count", "solves", "time_s", "growth", "unstable_poles", "growth_factor",
                "finite", "constraint_residual", "warnings", "error", "scheduler", "host", "created")
 _SIM_ERRORS = ("max_output_error", "l2_output_error", "max_output_rel_error", "l2_output_rel_error", "max_output",
@@ -85,6 +91,22 @@ def _norm_artifacts(plan, res) -> list:
                          "reducer": red.method.reducer, "norm": g.kind, "r_requested": r,
                          "reduction": f"{g.reduce}/r{r}", "model_norm": g.norm, "key": g.keys[r],
                          "cached": bool(e.get("cached")), **{k: e.get(k) for k in _NORM_FIELDS}})
+    return arts
+
+
+def _tolerance_artifacts(plan, res) -> list:
+    """A record per tolerance search: its settings, every order it evaluated, one outcome per tolerance."""
+    arts = []
+    for tid, t in plan.tolerances.items():
+        e = res._tol.get(tid, {})
+        search = e.get("search") or {}
+        arts.append({"id": tid, "kind": "tolerance", "model": t.model.name, "reducer": t.method.reducer,
+                     "options": t.method.full_options, "settings": t.settings, "norm_options": t.norm_options,
+                     "fom": t.fom, "scenes": t.scenes, "key": t.key, "cached": bool(e.get("cached")),
+                     "time_s": e.get("time_s"), "lus": search.get("lus"), "scale": search.get("scale"),
+                     "outcomes": search.get("outcomes"), "candidates": search.get("candidates"),
+                     "warnings": e.get("warnings"), "error": e.get("error"), "scheduler": e.get("scheduler"),
+                     "host": e.get("host"), "created": e.get("created")})
     return arts
 
 

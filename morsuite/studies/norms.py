@@ -31,6 +31,7 @@ from __future__ import annotations
 import time
 import warnings
 
+from ..linalg.accuracy import recording
 from .norm_options import ADI_KEYS, NORM_KINDS, NORM_MEASURES, NORM_OPTIONS, full_options
 from .task_common import CAUGHT, model_of as _model, rom_from_payload, stamp as _stamp
 
@@ -46,12 +47,12 @@ def model_norm(source: str, kind: str, options: dict, key: str, run_by: str = ""
     base = {"kind": "model_norm", "norm": kind, "key": key, "cached": False, "scheduler": run_by}
     t0 = time.perf_counter()
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), recording() as solves:
             warnings.simplefilter("ignore")  # recorded in rec["warnings"]
             rec = compute(_model(source), kind, options)
     except CAUGHT as exc:
         return {**base, "error": f"{type(exc).__name__}: {exc}", "time_s": time.perf_counter() - t0, **_stamp()}
-    return {**base, **{k: v for k, v in rec.items() if k != "kind"}, **_stamp()}
+    return {**base, **{k: v for k, v in rec.items() if k != "kind"}, **_solves(solves), **_stamp()}
 
 
 def error_norms(source: str, kind: str, options: dict, rs, keys: dict, run_by: str, *rom_dicts, after=None) -> dict:
@@ -79,12 +80,18 @@ def error_norms(source: str, kind: str, options: dict, rs, keys: dict, run_by: s
             continue
         t0 = time.perf_counter()
         try:
-            with warnings.catch_warnings():
+            with warnings.catch_warnings(), recording() as solves:
                 warnings.simplefilter("ignore")  # recorded in rec["warnings"]
                 rec = error_norm(fom, rom_from_payload(entry["rom"]), kind, options)
         except CAUGHT as exc:
             out[r] = {**base, "error": f"{type(exc).__name__}: {exc}", "time_s": time.perf_counter() - t0,
                       **_stamp()}
             continue
-        out[r] = {**base, **{k: v for k, v in rec.items() if k != "kind"}, **_stamp()}
+        out[r] = {**base, **{k: v for k, v in rec.items() if k != "kind"}, **_solves(solves), **_stamp()}
     return out
+
+
+def _solves(record) -> dict:
+    """What a norm task's own saddle-point solves reached (:mod:`morsuite.linalg.accuracy`; samples kept in
+    the model's memo were checked where they were computed: the full response's task)."""
+    return {"solve_accuracy": record.as_info(), "solve_backward_error": record.worst}

@@ -113,12 +113,13 @@ def _cache_counts(artifacts) -> dict:
 
 #: the summary columns a scoreboard row carries (what :func:`morsuite.report.html.scoreboard_view` reads)
 _BOARD_COLUMNS = ("method", "r_requested", "r", "states", "status", "converged", "stable", "max_abs_error",
-                  "h2_error", "h2_trusted", "hinf_error", "hinf_certified", "max_output_error", "time_standalone_s",
-                  "time_s", "lu_count_standalone", "lu_count", "worse_than_zero")
+                  "max_rel_error", "h2_error", "h2_rel_error", "h2_trusted", "hinf_error", "hinf_rel_error",
+                  "hinf_certified", "max_output_error", "max_output_rel_error", "time_standalone_s", "time_s",
+                  "lu_count_standalone", "lu_count", "worse_than_zero")
 #: a table with more sizes than this shows only its largest size's scoreboard open, the others folded
 _OPEN_SIZES = 3
 #: scene kinds whose figure is a study's key figure (its thumbnail on the results folder's page), in preference
-_KEY_KINDS = ("sigma", "compare", "error", "error_vs_r", "pareto")
+_KEY_KINDS = ("tolerance", "sigma", "compare", "error", "error_vs_r", "pareto")
 
 
 def scoreboards(study, tables) -> list:
@@ -139,6 +140,25 @@ def scoreboards(study, tables) -> list:
                         "rows": [{**{c: row.get(c) for c in _BOARD_COLUMNS},
                                   "label": study.methods[row["method"]].label if row["method"] in study.methods
                                   else row["method"]} for row in rows]})
+    return out
+
+
+def _tolerance_sections(study, tables, figures) -> list:
+    """The page's first section, one per ``tolerance`` scene: its title, headline (the table's note up to
+    its definitions), its "to reach" table and its three figures (``{"name", "title", "src"}``)."""
+    out = []
+    for scene in study.scenes:
+        if scene.kind != "tolerance":
+            continue
+        t = next((t for t in tables if t["name"] == scene.name), None)
+        if t is None:
+            continue
+        note = t["note"] or ""
+        cut = note.find(" Error: ")
+        figs = [f for f in figures if f["name"] in (f"{scene.name}_states", f"{scene.name}_time", f"{scene.name}_bode")]
+        out.append({"name": scene.name, "title": t["title"], "headline": note[:cut] if cut >= 0 else note,
+                    "definitions": note[cut + 1:] if cut >= 0 else "", "columns": t["columns"], "rows": t["rows"],
+                    "files": t["files"], "figures": figs})
     return out
 
 
@@ -194,11 +214,16 @@ def study_page(study, outputs, summary, manifest: dict, modes=None) -> dict:
              "cache": _cache_counts(manifest["artifacts"]), "norms": manifest["norms"]["summary"],
              "norm_options": {k: v for k, v in manifest["norms"]["options"].items()
                               if k in manifest["norms"]["summary"]}}
+    reach = _tolerance_sections(study, tables, figures)
     summaries = {s.name for s in study.scenes if s.kind == "table"}  # the reductions' tables, not modes tables
     boards = scoreboards(study, [t for t in tables if t["name"] != summary.name and t["name"] in summaries])
     heads = [h for h in (headline(b) for b in boards if b["table"] == boards[0]["table"]) if h]
+    head = heads[-1] if heads else ""
+    if reach:  # a tolerance scene leads: its headline is the study's (results folder's page too)
+        head = reach[0]["headline"]
     return plain({
-        "scoreboards": boards, "headline": heads[-1] if heads else "", "key_figure": _key_figure(study, figures),
+        "tolerance": reach,
+        "scoreboards": boards, "headline": head, "key_figure": _key_figure(study, figures),
         "modes": modes or None,
         "study": study.name, "title": study.title, "description": study.description,
         "spec": study.path.name if study.path is not None else None,

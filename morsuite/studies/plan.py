@@ -16,6 +16,9 @@ one thing share one artifact:
   input settings), shared by the methods and scenes that simulate the same, and a
   simulation group per (simulation, reducer group, rom_method) with each r's output
   and errors;
+- a tolerance search per (model, reducer, options, grid, settings) (:mod:`morsuite.studies.tolerance`):
+  one reducer instance reduces at the orders the search needs, shared by every tolerance scene
+  that asks the same; a band search reads the model's full-order response on its grid;
 - an output per scene (a figure or a table) and the summary table: the last
   nodes of the graph, keyed by their content once their inputs exist (see
   :mod:`morsuite.studies.outputs`).
@@ -31,9 +34,10 @@ from dataclasses import dataclass, field
 from .cache import cache_key, source_digest
 from .kinds import SUMMARY, needs, output_names
 from .time_options import settings as time_settings
+from .tol_options import settings as tol_settings
 
 __all__ = ["Plan", "FomArtifact", "ReduceGroup", "MetricsGroup", "NormArtifact", "NormGroup", "SimArtifact",
-           "SimGroup", "OutputArtifact", "build_plan", "SUMMARY"]
+           "SimGroup", "ToleranceArtifact", "OutputArtifact", "build_plan", "SUMMARY"]
 
 @dataclass
 class FomArtifact:
@@ -105,6 +109,18 @@ class SimGroup:
 
 
 @dataclass
+class ToleranceArtifact:
+    id: str
+    model: object          # ModelEntry
+    method: object         # MethodEntry
+    settings: dict         # tol (list), error, budget_lus, budget_s, max_states (tol_options.settings)
+    fom: str | None        # FomArtifact id of a band search's grid, else None
+    norm_options: dict     # the study's options of the error's norm (h2, hinf searches)
+    key: str
+    scenes: list = field(default_factory=list)
+
+
+@dataclass
 class OutputArtifact:
     id: str                # "figure/NAME" or "table/NAME"
     kind: str              # "figure" or "table"
@@ -129,6 +145,8 @@ class Plan:
     norm_group_of: dict = field(default_factory=dict)  # (model alias, method alias, kind) -> norm group id
     sim_of: dict = field(default_factory=dict)         # scene name -> simulation id
     sim_group_of: dict = field(default_factory=dict)   # (scene name, method alias) -> simulation group id
+    tolerances: dict = field(default_factory=dict)     # id -> ToleranceArtifact
+    tolerance_of: dict = field(default_factory=dict)   # (scene name, method alias) -> tolerance id
 
     def describe(self) -> list[str]:
         """One line per artifact the plan computes (full-order responses, reducer runs, metrics, norms, simulations, outputs), as ``morsuite run --dry-run`` prints them."""
@@ -154,6 +172,10 @@ class Plan:
         for g in self.sim_groups.values():
             red = self.reduces[g.reduce]
             lines.append(f"reduced simulations  {red.model.name} {red.method.reducer} r = {g.rs}")
+        for t in self.tolerances.values():
+            st = t.settings
+            lines.append(f"tolerance search     {t.model.name} {t.method.reducer} ({st['error']} error, tol "
+                         f"{', '.join(f'{x:g}' for x in st['tol'])})")
         for o in self.outputs.values():
             lines.append(f"{o.kind:<20} {o.id.partition('/')[2]} (from {len(o.inputs)} artifacts; "
                          f"reused when its data did not change)")
@@ -188,6 +210,13 @@ def _sim_key(model, setup):
 def _sim_error_key(sim_key, reduction_key, rom_method):
     return cache_key("sim_error", simulation=sim_key, reduction=reduction_key, rom_method=rom_method,
                      tasks=source_digest("studies/timedomain.py", "studies/task_common.py"))
+
+
+def _tolerance_key(model, method, settings, fom_key, norm_options):
+    # the search's code (analysis/tolerance.py is in the code digest of every key) and its task's
+    return cache_key("tolerance", model=model.model_id, reducer=method.reducer, options=method.full_options,
+                     settings=settings, fom=fom_key, norm_options=norm_options,
+                     tasks=source_digest("studies/tolerance.py", "studies/task_common.py"))
 
 
 def build_plan(study) -> Plan:
@@ -245,9 +274,38 @@ def build_plan(study) -> Plan:
         plan.sim_group_of[(scene.name, method_alias)] = sgid
         return [sid, f"{g.id}/r{r}", f"{sgid}/r{r}"]
 
+    def fom_need(model_alias, grid):
+        model = study.models[model_alias]
+        bounds = study.grids[grid].bounds_for(model)
+        fkey = cache_key("fom", model=model.model_id, grid=bounds)
+        fid = "fom-" + fkey[:16]
+        f = foms.get(fid)
+        if f is None:
+            f = foms[fid] = FomArtifact(fid, model, bounds, fkey)
+        f.aliases.add((model_alias, grid))
+        plan.fom_of[(model_alias, grid)] = fid
+        return f
+
+    def tolerance_need(scene, method_alias):
+        model, method = study.models[scene.model], study.methods[method_alias]
+        setup = tol_settings(scene.params)
+        f = fom_need(scene.model, scene.grid) if scene.grid else None
+        nopts = study.norm_options.get(setup["error"], {}) if setup["error"] != "band" else {}
+        key = _tolerance_key(model, method, setup, f.key if f else None, nopts)
+        tid = "tolerance-" + key[:16]
+        t = plan.tolerances.setdefault(tid, ToleranceArtifact(tid, model, method, setup, f.id if f else None,
+                                                              nopts, key))
+        if scene.name not in t.scenes:
+            t.scenes.append(scene.name)
+        plan.tolerance_of[(scene.name, method_alias)] = tid
+        return [tid] + ([f.id] if f else [])
+
     for scene in study.scenes:
         inputs = []
         for need in needs(scene):
+            if need[0] == "tolerance":
+                inputs += tolerance_need(scene, need[3])
+                continue
             if need[0] == "reduce":
                 _, model_alias, method_alias, r = need
                 inputs.append(f"{reduce_group(model_alias, method_alias, r).id}/r{r}")
@@ -259,15 +317,8 @@ def build_plan(study) -> Plan:
                 inputs += time_need(scene, need[2], need[3])
                 continue
             _, model_alias, grid, method_alias, r = need
-            model = study.models[model_alias]
-            bounds = study.grids[grid].bounds_for(model)
-            fkey = cache_key("fom", model=model.model_id, grid=bounds)
-            fid = "fom-" + fkey[:16]
-            f = foms.get(fid)
-            if f is None:
-                f = foms[fid] = FomArtifact(fid, model, bounds, fkey)
-            f.aliases.add((model_alias, grid))
-            plan.fom_of[(model_alias, grid)] = fid
+            f = fom_need(model_alias, grid)
+            fid, fkey = f.id, f.key
             g = reduce_group(model_alias, method_alias, r)
             mid = "metrics-" + cache_key("metrics", fom=fkey, group=g.id)[:16]
             mg = metrics.get(mid)
@@ -279,8 +330,9 @@ def build_plan(study) -> Plan:
             mg.aliases.add((model_alias, grid, method_alias))
             plan.metrics_of[(model_alias, grid, method_alias)] = mid
             inputs += [fid, f"{g.id}/r{r}", f"{mid}/r{r}"]
-        kind = "table" if scene.kind in ("table", "modes") else "figure"
         for name in output_names(scene):
+            kind = "table" if scene.kind in ("table", "modes") or (scene.kind == "tolerance" and name == scene.name) \
+                else "figure"
             outputs[f"{kind}/{name}"] = OutputArtifact(f"{kind}/{name}", kind, scene.name, sorted(set(inputs)))
     # the study's own norms: for every reduction some scene needs
     for (model_alias, method_alias), gid in list(plan.reduce_of.items()):

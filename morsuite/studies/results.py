@@ -39,7 +39,7 @@ TIME_NOTE = ("time_s is the reducer's own timing of reduce(r) (info['time_s']); 
              "them), lu_count_standalone the LUs of reducing to this r alone.")
 STATUS_NOTE = ("converged is True only when the method's own optimality or fixed-point test passed on the full "
                "model; reducer_status says how the run ended (converged, direct, cap, cycle, stalled, "
-               "uncertified, skipped, stopped: morsuite.reducers.outcome.STATUS). worse_than_zero names the "
+               "uncertified, skipped, partial, detection-failed, stopped: morsuite.reducers.outcome.STATUS). worse_than_zero names the "
                "norms (band, h2, hinf, max_output, l2_output) in which the error is at or above the full "
                "model's own norm, the error of the zero model T_r = 0.")
 BAND_NOTE = ("max_abs_error and max_rel_error are band quantities: the maximum of sigma_max(T - T_r) (over "
@@ -66,7 +66,7 @@ class Results:
     """Read access to a run's artifacts by the study's aliases (what scenes see)."""
 
     def __init__(self, study, plan, foms, reductions, metrics, norms=None, norm_errors=None, sims=None,
-                 sim_errors=None, modes=None):
+                 sim_errors=None, modes=None, tolerances=None):
         self.study, self.plan = study, plan
         #: the study's modes and poles as the page shows them (``{"rows", "poles", "note"}``, see
         #: docs/design/reports.md "Modes and poles"), or None: no modes section on the page
@@ -76,6 +76,11 @@ class Results:
         self._foms, self._red, self._met = foms, reductions, metrics
         self._norms, self._nerr = norms or {}, norm_errors or {}
         self._sims, self._serr = sims or {}, sim_errors or {}
+        self._tol = tolerances or {}
+
+    def tolerance(self, scene, method):
+        """The tolerance search entry of ``method`` in tolerance scene ``scene`` (names), or None."""
+        return self._tol.get(self.plan.tolerance_of.get((scene, method)))
 
     def fom(self, model, grid):
         """The full-order response entry of ``model`` on ``grid`` (aliases), or None."""

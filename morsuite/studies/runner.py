@@ -57,6 +57,8 @@ class RunResult:
     summary_table: TableData
     files: list
     notes: list
+    #: the run's artifacts by the study's aliases (:class:`~morsuite.studies.results.Results`)
+    results: object = None
 
     @functools.cached_property
     def summary(self):
@@ -153,12 +155,15 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
             if (hit := cache.get("simulation", sim.key)) is not None}
     sim_errors, missing_sims = _lookup(cache, "sim_error", plan.sim_groups,
                                        lambda arrays, meta: {**meta, **arrays, "cached": True})
+    from .tolerance import entry_from_cache
+    tolerances = {tid: entry_from_cache(*hit) for tid, t in plan.tolerances.items()
+                  if (hit := cache.get("tolerance", t.key)) is not None}
     if shared is not None:
-        _take_shared(shared, plan, foms, (reductions, missing), norms, (norm_errors, missing_norms), sims)
+        _take_shared(shared, plan, foms, (reductions, missing), norms, (norm_errors, missing_norms), sims, tolerances)
 
     # -- the graph: only what is missing (nothing at all, and no dask, for a cached study)
     t0 = time.perf_counter()
-    have = {"foms": foms, "reductions": reductions, "norms": norms, "sims": sims}
+    have = {"foms": foms, "reductions": reductions, "norms": norms, "sims": sims, "tolerances": tolerances}
     todo = {"reduce": missing, "metrics": missing_metrics, "norm_error": missing_norms, "sim_error": missing_sims}
     computed = _compute_missing(plan, cache, choice, bars, study.name, have, todo)
     t_compute = time.perf_counter() - t0
@@ -189,7 +194,15 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
                 cache.put("metrics", plan.metrics[mid].keys[r], {k: e[k] for k in METRIC_ARRAYS},
                           {k: v for k, v in e.items() if k not in METRIC_ARRAYS})
     _store_new(cache, plan, computed, norms, norm_errors, missing_norms, sims, sim_errors, missing_sims)
-    res = Results(study, plan, foms, reductions, metrics, norms, norm_errors, sims, sim_errors)
+    for tid in plan.tolerances:
+        if tid in computed:
+            tolerances[tid] = e = computed[tid]
+            if cache_root is None and "error" not in e:
+                from .tolerance import entry_arrays
+                cache.put("tolerance", e["key"], entry_arrays(e), {k: v for k, v in e.items()
+                                                                  if k not in ("roms", "cached")})
+    res = Results(study, plan, foms, reductions, metrics, norms, norm_errors, sims, sim_errors,
+                  tolerances=tolerances)
     _modes(study, res, cache)
 
     # -- outputs: figures and tables, each reused when its content did not change
@@ -219,6 +232,9 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
                 notes.append(f"{who} at r = {r} did not converge (status {e['info'].get('status', 'stopped')!r}, "
                              f"{e['info'].get('iterations')} iterations; best iterate returned)")
     notes += _norm_notes(plan, norms, norm_errors)
+    from .tolerance_scene import save_roms, tolerance_notes
+    notes += tolerance_notes(plan, tolerances)
+    files += save_roms(study, res, outdir)
     t_report = time.perf_counter() - t1
 
     from .manifest import manifest as make_manifest
@@ -241,7 +257,7 @@ def run(spec, *, out="results", cache_dir=None, use_cache: bool = True, jobs: in
     _log(quiet, f"morsuite run {study.name}: {len(files)} files in {outdir} ({drawn} of {len(records)} figures "
                 f"and tables made, the others unchanged; {manifest['timing']['total_s']:.1f} s, computing "
                 f"{t_compute:.1f} s)")
-    return RunResult(study, outdir, manifest, summary, files, notes)
+    return RunResult(study, outdir, manifest, summary, files, notes, res)
 
 
 def _modes(study, res, cache=None):
@@ -276,8 +292,13 @@ def _page(study, shown, summary, manifest, outdir, old, files, rerender, modes=N
     files.append(outdir / PAGE)
 
 
-def _take_shared(shared, plan, foms, reductions, norms, norm_errors, sims):
+def _take_shared(shared, plan, foms, reductions, norms, norm_errors, sims, tolerances=None):
     """Mark what ``shared`` computed as computed (first study to use it), and add its failures."""
+    for tid, t in plan.tolerances.items():
+        if tolerances is not None and tid in tolerances and shared.claim("tolerance", t.key):
+            tolerances[tid]["cached"] = False
+        elif tolerances is not None and tid not in tolerances and ("tolerance", t.key) in shared.failed:
+            tolerances[tid] = dict(shared.failed[("tolerance", t.key)])
     for fid, f in plan.foms.items():
         if fid in foms and shared.claim("fom", f.key):
             foms[fid]["cached"] = False
@@ -382,12 +403,13 @@ def _norm_notes(plan, norms, norm_errors) -> list:
 def _compute_missing(plan, cache, choice, bars, desc, have, todo) -> dict:
     """Build and compute the Dask graph of what the cache lacks; {} (and no dask import) when nothing does."""
     foms, reductions, norms, sims = have["foms"], have["reductions"], have["norms"], have["sims"]
+    tolerances = have["tolerances"]
     if not (any(todo.values()) or len(foms) < len(plan.foms) or len(norms) < len(plan.norms)
-            or len(sims) < len(plan.sims)):
+            or len(sims) < len(plan.sims) or len(tolerances) < len(plan.tolerances)):
         return {}
     from dask import delayed
 
-    from . import norms as N, timedomain as TD
+    from . import norms as N, timedomain as TD, tolerance as TOL
 
     cache_root = str(cache.root) if choice.local_files else None
     graph, fom_nodes, red_nodes, sim_nodes = {}, dict(foms), {}, dict(sims)
@@ -442,4 +464,13 @@ def _compute_missing(plan, cache, choice, bars, desc, have, todo) -> dict:
         graph[gid] = delayed(TD.rom_simulations, pure=False)(
             sim_nodes[g.sim], list(model.band), model.m, g.rom_method, rs, {r: g.keys[r] for r in rs}, choice.name,
             literal(reductions[g.reduce], gid), red_nodes.get(g.reduce, {}), dask_key_name=gid)
+    for tid, t in plan.tolerances.items():
+        if tid in tolerances:
+            continue
+        fom = None
+        if t.fom is not None:
+            fom = fom_nodes[t.fom] if t.fom not in foms else literal(foms[t.fom], f"{tid}-fom")
+        graph[tid] = delayed(TOL.tolerance_search, pure=False)(
+            t.model.source, t.method.reducer, t.method.options, t.settings, t.norm_options, t.key, fom,
+            plan.foms[t.fom].key if t.fom else None, cache_root, choice.name, dask_key_name=tid)
     return compute(graph, choice, progress=bars, desc=desc)

@@ -47,7 +47,8 @@ second-order ROMs meet on the states axis: ``r_by_method = { fo = { from = 4, to
 step = 4 } }`` gives a method orders of its own (every scene kind; one per method in
 the kinds that show one r), so that a first-order reducer runs at 2r states beside
 second-order ones at r. A table whose methods differ in the states per order
-compares them in its verdict at equal requested states.
+compares them in its verdict at equal requested states; within that, its verdict ranks only
+rows of equal states and values above their floors (:mod:`morsuite.report.ranking`).
 
 A scene's curves are plain columns (name -> values), no DataFrames: building a
 scene is cheap and imports neither pandas nor matplotlib, so that a study can key
@@ -61,10 +62,12 @@ import csv
 import numpy as np
 
 from ..report.figures import Curve, CsvSource, FigureData
+from ..report.ranking import excluded_text, rank
 from ..report.tables import TableData
 from .kinds import AXES, COMMON_KEYS, KINDS, MAX_POINTS, MEASURES, TIMES, Kind, needs, orders_text, output_names
 from .norm_options import NORM_MEASURES
 from .time_figures import time_figures
+from .tolerance_scene import build_tolerance
 
 __all__ = ["KINDS", "COMMON_KEYS", "Kind", "TableData", "needs", "build", "output_names", "MEASURES", "AXES",
            "TIMES", "MAX_POINTS", "order_groups"]
@@ -363,32 +366,46 @@ def _verdict(rows, study) -> str:
     """Which method has the smallest error, per r and measure, among the table's methods.
 
     When the methods' ROMs differ in states per order (first-order beside second-order),
-    reductions are compared at equal requested first-order states instead of equal r."""
-    lines = []
+    reductions are compared at equal requested first-order states instead of equal r. Within
+    a group, values are ranked by the rules of :mod:`morsuite.report.ranking`: only at equal
+    states (a method that returned fewer states than asked is compared with nobody, and named
+    so) and only above their floors (values at the rounding level are a tie, said as one)."""
+    lines, alone = [], []
     ok = [row for row in rows if row["status"] == "ok"]
     by_states = len({row["states"] // row["r"] for row in ok if row.get("r")}) > 1
     orders = []
+
+    def label(m):
+        return study.methods[m].label
+
     for where, at in order_groups(ok):
         orders.append(f"{where}: " + ", ".join(f"{row['method']} r = {row['r_requested']}" for row in at))
+        states = {row.get("states") for row in at}
+        for row in at:
+            if len(states) > 1 and sum(other.get("states") == row.get("states") for other in at) == 1:
+                alone.append(f"{label(row['method'])} at {where} ({row.get('states')} states)")
         for col in VERDICT_COLUMNS:
-            vals = [(row[col], row["method"]) for row in at if isinstance(row.get(col), float) and row[col] == row[col]]
-            if len(vals) < 2:
-                continue
-            vals.sort()
-            (best, who), (second, _) = vals[0], vals[1]
-            ratio = ("tied with the next" if second == best else
-                     f"{second / best:.3g}x smaller than the next" if best > 0 else "zero")
-            flag = " (an untrusted value among them)" if col == "h2_error" and any(
-                row.get("h2_trusted") is False for row in at) else ""
-            if col == "hinf_error":
-                flag = _hinf_flag([row for row in at if row["method"] == who][0],
-                                  [row for row in at if row["method"] != who and row.get(col) == second][0])
-            lines.append(f"{where}, {col}: {study.methods[who].label} ({best:.3g}; {ratio}){flag}")
+            for g in rank(at, col):
+                if g["alone"]:
+                    continue
+                head = f"{where}" + (f", {g['states']} states" if len(states) > 1 else "") + f", {col}: "
+                if g["best"] is not None:
+                    (best, who), (second, nxt) = g["ranked"][0], g["second"]
+                    ratio = "tied with the next" if second == best else f"{g['ratio']:.3g}x smaller than the next"
+                    flag = ""
+                    if col == "hinf_error":
+                        flag = _hinf_flag([row for row in at if row["method"] == who][0],
+                                          [row for row in at if row["method"] == nxt][0])
+                    lines.append(f"{head}{label(who)} ({best:.3g}; {ratio}){flag}")
+                left = excluded_text({k: [label(m) for m in g[k]] for k in ("rounding", "untrusted", "infinite")})
+                if left:
+                    lines.append(head + left)
+    tail = (" Not compared (no other method at their number of states): " + "; ".join(alone) + ".") if alone else ""
     if not lines:
-        return _zero_note(ok, study).strip()
+        return (tail + _zero_note(ok, study)).strip()
     head = ("Compared at equal first-order states (a second-order ROM of order r has 2r): " + "; ".join(orders)
             + ". ") if by_states else ""
-    return head + "Smallest error per measure: " + "; ".join(lines) + "." + _zero_note(ok, study)
+    return head + "Smallest error per measure: " + "; ".join(lines) + "." + tail + _zero_note(ok, study)
 
 
 def _zero_note(rows, study) -> str:
@@ -428,7 +445,7 @@ def _time_scene(scene, study, res):
 _BUILDERS = {"sigma": _freq_scene, "error": _freq_scene, "compare": _freq_scene,
              "error_vs_r": _against_r_scene, "time_vs_r": _against_r_scene, "pareto": _pareto_scene,
              "convergence": _convergence_scene, "hsv": _hsv_scene, "table": _table_scene, "time": _time_scene,
-             "modes": _modes_scene}
+             "modes": _modes_scene, "tolerance": build_tolerance}
 
 
 def build(scene, study, res) -> list:

@@ -29,7 +29,7 @@ choices. Example::
     r = 30                               # int, list, or { from = 2, to = 40, step = 2 }
     # r_by_method = { irka_fo = 60 }     # other orders for some methods (first-order ROMs at 2r states)
     error = "abs"
-    paper_csv = "../shared/paper_figures/dsms_r30_abs_error_irka.csv"
+    paper_csv = "studies/paper_figures/dsms_r30_abs_error_irka.csv"
 
 Exact error norms (:mod:`morsuite.studies.norms`) are computed only where asked: the
 top-level ``norms = ["h2", "hinf"]`` (every reduction of the study; summary columns),
@@ -233,8 +233,10 @@ def _model_entry(ctx, alias, spec, root, memo=None):
             ctx.fail(where, f"unknown model {name!r}{_suggest(name, catalog.available())}; catalog models: "
                             f"{', '.join(catalog.available())} (or a path: .mat, .npz, a Matrix Market set)")
         model_id = "catalog:" + catalog.canonical(spec)
+    from .task_common import model_of
+
     try:
-        fom = catalog.parse(source)
+        fom = model_of(source)  # built once per process: the tasks and a second validation reuse it
     except InputError as exc:
         ctx.fail(where, f"model {spec!r} cannot be built: {exc}")
     entry = ModelEntry(alias=alias, spec=spec, source=source, model_id=model_id, name=fom.name,
@@ -272,14 +274,20 @@ def _method_entry(ctx, alias, table, memo=None):
         ctx.fail(f"{where}.reducer", f"unknown reducer {name!r}{_suggest(name, avail)}; registered reducers: "
                                      f"{', '.join(avail)}")
     cls = reducers.get_class(name)
-    ctx.keys(f"{where}.options", opts, tuple(cls.OPTIONS))
+    groups = getattr(cls, "GROUPS", {})
+    ctx.keys(f"{where}.options", opts, tuple(cls.OPTIONS) + tuple(groups))
     full = {}
     from ..errors import OptionError
+    from ..reducers.options import expand_options
+    try:  # a group's table ([methods.ALIAS.options.GROUP]) to the options' own names, as they are recorded
+        flat, given_as = expand_options(cls.__name__, cls.OPTIONS, groups, opts)
+    except OptionError as exc:
+        ctx.fail(f"{where}.options", str(exc))
     for key, opt in cls.OPTIONS.items():
         try:
-            full[key] = opt.validate(cls.__name__, key, opts.get(key, opt.default))
+            full[key] = opt.validate(cls.__name__, given_as.get(key, key), flat.get(key, opt.default))
         except OptionError as exc:
-            ctx.fail(f"{where}.options.{key}", str(exc))
+            ctx.fail(f"{where}.options.{given_as.get(key, key)}", str(exc))
     full = plain(full)
     if memo is not None:
         memo.store("method", material, {"full_options": list(full.items())}, getattr(cls, "__module__", ""))
@@ -337,12 +345,20 @@ def _scene_entry(ctx, i, table, study_models, grids, methods, root):
         ctx.fail(f"{where}.methods", f"duplicate method in {mlist!r}")
     if len(mlist) < spec.min_methods:
         ctx.fail(f"{where}.methods", f"a {kind!r} scene needs at least {spec.min_methods} methods; got {mlist!r}")
-    if "r" not in table:
-        ctx.fail(where, "missing key 'r'")
-    rs = _r_values(ctx, f"{where}.r", table["r"])
-    if spec.one_r and len(rs) != 1:
-        ctx.fail(f"{where}.r", f"a {kind!r} scene shows one reduced order; got r = {list(rs)}")
-    by_method = _r_by_method(ctx, f"{where}.r_by_method", table.get("r_by_method", {}), mlist, spec, kind)
+    if not spec.needs_r:
+        for key in ("r", "r_by_method"):
+            if key in table:
+                ctx.fail(f"{where}.{key}", f"a {kind!r} scene finds its orders itself; remove {key!r}")
+        if kind == "tolerance" and "tol" not in table:
+            ctx.fail(where, "missing key 'tol' (a relative tolerance in (0, 1), or a list of them)")
+        rs, by_method = (), {}
+    else:
+        if "r" not in table:
+            ctx.fail(where, "missing key 'r'")
+        rs = _r_values(ctx, f"{where}.r", table["r"])
+        if spec.one_r and len(rs) != 1:
+            ctx.fail(f"{where}.r", f"a {kind!r} scene shows one reduced order; got r = {list(rs)}")
+        by_method = _r_by_method(ctx, f"{where}.r_by_method", table.get("r_by_method", {}), mlist, spec, kind)
     params = {}
     for key, (default, check) in spec.keys.items():
         if key in ("r", "grid", "paper_csv"):
@@ -362,8 +378,8 @@ def _scene_entry(ctx, i, table, study_models, grids, methods, root):
         grid = table.get("grid", DEFAULT_GRID)
         ctx.ref(f"{where}.grid", grid, grids, "grid")
     elif "grid" in table and spec.uses_grid:
-        ctx.fail(f"{where}.grid", f"measure {params.get('measure')!r} is a norm over the whole frequency axis "
-                                  "and uses no grid; remove 'grid'")
+        what = f"error {params.get('error')!r}" if kind == "tolerance" else f"measure {params.get('measure')!r}"
+        ctx.fail(f"{where}.grid", f"{what} is a norm over the whole frequency axis and uses no grid; remove 'grid'")
     title = table.get("title", "")
     ctx.string(f"{where}.title", title, empty=True)
     paper = {}
@@ -444,7 +460,7 @@ def study_from_dict(data: dict, *, path=None, source: str | None = None, memo=No
     models = {a: _model_entry(ctx, a, data["models"][a], root, memo) for a in data["models"] if a in used}
     for i, s in enumerate(scenes):
         order = models[s.model].order
-        if s.rs[-1] > order:
+        if s.rs and s.rs[-1] > order:
             ctx.fail(f"scenes[{i}] ({s.name!r}).r", f"r = {s.rs[-1]} exceeds the order n1 - n2 = {order} "
                                                     f"of model {s.model!r} ({models[s.model].name})")
         for alias, rs in s.r_by_method.items():

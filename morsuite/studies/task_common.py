@@ -29,13 +29,36 @@ __all__ = ["CAUGHT", "model_of", "stamp", "rom_payload", "rom_from_payload"]
 CAUGHT = (MorsuiteError, ArithmeticError, ValueError, RuntimeError, MemoryError, np.linalg.LinAlgError)
 
 
-@functools.lru_cache(maxsize=4)
 def model_of(source: str):
     """The full model of ``source`` (catalog string or file path), via
-    :func:`morsuite.models.catalog.parse`; the last 4 are kept (``model_of.cache_clear()``
-    forgets them)."""
+    :func:`morsuite.models.catalog.parse`, built once per process: a study's validation, its tasks and
+    ``morsuite compare`` share it (and what is kept on it: the rigid-body detection, the Gramian
+    factors, the memo of T(jw)). The last 4 are kept (``model_of.cache_clear()`` forgets them); a file
+    is known by its path, size and modification time, so a file written anew is read anew."""
+    return _model_of(source, _file_stamp(source))
+
+
+def _file_stamp(source: str):
+    """``(size, mtime_ns)`` of the file(s) of a model path (a Matrix Market set: of its folder), None for a
+    catalog spec."""
+    from ..modelfiles import is_model_path
+
+    if not is_model_path(source):
+        return None
+    try:
+        st = os.stat(source)
+    except OSError:
+        return None  # the build says what is wrong
+    return (st.st_size, st.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=4)
+def _model_of(source: str, stamp):
     from ..models import catalog
     return catalog.parse(source)
+
+
+model_of.cache_clear = _model_of.cache_clear
 
 
 def stamp() -> dict:

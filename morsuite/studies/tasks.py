@@ -42,9 +42,11 @@ def fom_response(source: str, lo: float, hi: float, n: int, key: str, cache_root
                  run_by: str = "") -> dict:
     r"""Full-order response ``H`` on ``n`` log-spaced frequencies ``omega`` in [lo, hi] (rad/s),
     and ``sigma_full`` = :math:`\sigma_{\max}(H(j\omega))` (kept with it: a cached study then
-    needs no linear algebra)."""
+    needs no linear algebra); ``solve_accuracy`` and ``solve_backward_error``, what its solves
+    reached (:mod:`morsuite.linalg.accuracy`)."""
     from ..analysis import sigma_max
     from ..analysis.response import band_response
+    from ..linalg.accuracy import recording
     from ..utils import default_threads
 
     fom = _model(source)
@@ -53,11 +55,12 @@ def fom_response(source: str, lo: float, hi: float, n: int, key: str, cache_root
     # through the model's memo of T(jw): the H-infinity searches with this band grid draw on it; the
     # frequencies on the solver threads IRKA's shift solves use (the values do not depend on them)
     threads = default_threads(fom.solver.backend)
-    H, lus = band_response(fom, omega, progress=progress, threads=threads)
+    with recording() as solves:
+        H, lus = band_response(fom, omega, progress=progress, threads=threads)
     elapsed = time.perf_counter() - t0
     out = {"kind": "fom", "key": key, "model": fom.name, "omega": omega, "H": H, "sigma_full": sigma_max(H),
            "time_s": elapsed, "lu_count": lus, "solver_threads": threads, "cached": False, "scheduler": run_by,
-           **_stamp()}
+           "solve_accuracy": solves.as_info(), "solve_backward_error": solves.worst, **_stamp()}
     if cache_root is not None:
         from .cache import Cache
         Cache(cache_root, read=False).put("fom", key, {k: out[k] for k in FOM_ARRAYS},

@@ -59,9 +59,6 @@ reached without ``tol``; "converged": the estimate met ``tol``; "budget": ``max_
 ``definite``. Design note and measurements: ``docs/design/adaptive.md``.
 """
 
-from ..base import register
 from .reducer import Adaptive
 
 __all__ = ["Adaptive"]
-
-register("adaptive", Adaptive)

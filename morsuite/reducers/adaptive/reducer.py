@@ -15,6 +15,7 @@ from ...errors import ConvergenceWarning, OptionError, RankWarning, SingularShif
 from ...linalg.dense import sigma_max
 from ...rom import SecondOrderROM
 from ..base import Option, Reducer
+from ..registry import Description
 from ..krylov.reducer import definiteness, is_symmetric
 from ..krylov.soar import KernelProjector, RealBasis
 from .estimate import ReducedResponse, band_estimate, band_option, local_maxima
@@ -47,6 +48,15 @@ class Adaptive(Reducer):
 
     name = "adaptive"
 
+    DESCRIPTION = Description(
+        label="adaptive interpolation (estimate-driven points)", result="by-option",
+        targets="band error below tol, estimated from a richer model and validated by true samples",
+        cost="one per greedy point (and per validation sample), released before the next",
+        use_for="large finite-element models to a band tolerance at a few LUs; with compress, an "
+                "H2-optimal model at a few LUs",
+        options=("tol", "max_lus", "levels", "validate", "compress"), stress={"max_lus": 8}, page="adaptive",
+        order=75)
+
     OPTIONS = {
         "tol": Option(None, "float", "target of the estimated band error, max over the band of sigma_max(T - T_r) "
                       "relative to the band peak of sigma_max(T); None: grow to r columns",
@@ -76,6 +86,11 @@ class Adaptive(Reducer):
     def __init__(self, fom, **options):
         super().__init__(fom, **options)
         self._state = None
+
+    @classmethod
+    def states_for(cls, options: dict) -> int:
+        """2 (a second-order model of order r), or 1 with ``compress`` (r first-order states). Cost: none."""
+        return 1 if options.get("compress") else 2
 
     def _check_options(self):
         o = self.options

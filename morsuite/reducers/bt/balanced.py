@@ -83,8 +83,9 @@ shifts, rank, columns, LUs reused and dropped, ``shift_reuse``, ``lu_pool_mib``,
 ``compress_tol``),
 ``compress_tol`` (the column compression used: option ``compress_tol``, by default 0 below
 :attr:`BT.COMPRESS_MIN_N1` positions and :attr:`BT.COMPRESS_AUTO_TOL` from there on, where the
-plain factors no longer fit in memory; a compressed factor cannot serve the exact H2 error's
-error-Gramian route, which then runs its own LR-ADI),
+plain factors may no longer fit in memory; a factor is compressed only once it exceeds lradi's
+``compress_from_mib``, 1024 MiB, and ``info["adi"]`` records its ``compressions``; a compressed
+factor cannot serve the exact H2 error's error-Gramian route, which then runs its own LR-ADI),
 ``adi_iterations``, ``residual_history``, ``factor_ranks``,
 ``lu_count`` (the LR-ADI's LUs when this call ran it, else 0), ``lu_count_shared`` (the
 LR-ADI's LUs, whoever paid them), ``time_breakdown`` (adi, of which lu, solves, shifts; svd;
@@ -107,7 +108,9 @@ import scipy.linalg as sla
 from ...errors import ConvergenceWarning, InputError, OptionError, RankWarning, StabilityWarning
 from ...linalg.gramians import ADI_DEFAULTS, gramian_factors
 from ...rom import FirstOrderROM, SecondOrderROM
-from ..base import Option, Reducer, register
+from ..base import Group, Option, Reducer
+from ..cost import cost_record
+from ..registry import Description, Variant
 
 __all__ = ["BT", "FORMS", "SquareRootBT", "level_products"]
 
@@ -146,6 +149,27 @@ class SquareRootBT(Reducer):
         """Largest admissible r: :math:`2(n_1 - n_2)` states for ``form="first-order"``, else :math:`n_1 - n_2`."""
         order = self.fom.order
         return 2 * order if self.options["form"] == "first-order" else order
+
+    @classmethod
+    def states_for(cls, options: dict) -> int:
+        """1 for ``form="first-order"`` (r counts states), else 2 (a second-order model of order r)."""
+        return 1 if options["form"] == "first-order" else 2
+
+    def order_guess(self, tol: float, *, measure: str, scale: float) -> int | None:
+        r"""The smallest order whose first discarded Hankel singular value is at most ``tol * scale``:
+        :math:`N = \min\{N : \sigma_{N+1} \le \text{tol}\cdot\text{scale}\}` states (r = N, or
+        :math:`\lceil N/2\rceil` for a second-order level). A guess, not a bound (the first-order
+        bound is :math:`2\sum_{k>N}\sigma_k`). Cost: the Gramian factors when they do not exist yet (what
+        the first reduction pays anyway; it then reports them as reused shared work)."""
+        if getattr(self, "_gram", None) is None:
+            self._gramians()
+        hsv = np.asarray(self._svd("fo")[1])
+        if hsv.size == 0 or not (scale > 0):
+            return None
+        above = np.flatnonzero(hsv > tol * scale)
+        n = int(above[-1]) + 1 if above.size else 1
+        n = max(1, min(n, hsv.size))
+        return n if self.options["form"] == "first-order" else max(1, -(-n // 2))
 
     def _validate_r(self, r):
         if self.options["form"] == "first-order" and isinstance(r, Integral) and not isinstance(r, bool) \
@@ -292,6 +316,13 @@ class BT(SquareRootBT):
     """
 
     name = "bt"
+    DESCRIPTION = Description(
+        label="BT, first-order", result="by-option",
+        targets="Hankel singular values; Hinf bound (first order)", cost="LR-ADI: one per ADI shift, once per model",
+        use_for="a reliable default, every r at once", options=("form", "tol", "maxiter", "hsv_tol"),
+        variants=tuple(Variant(f"bt-{lvl}", {"form": lvl}, f"BT ({lvl}, second-order)", order)
+                       for lvl, order in (("vv", 40), ("pp", 90), ("pv", 91), ("vp", 92), ("fv", 93))),
+        default=True, default_variants=("bt-vv",), gramians="reads", stress={"maxiter": 150}, page="reducers", order=50)
 
     OPTIONS = {
         "form": Option("first-order", "choice", "first-order square-root BT (stable, error bound) or a "
@@ -330,8 +361,8 @@ class BT(SquareRootBT):
                                "directions below compress_tol times the factor's largest singular value are "
                                "dropped (0: none); None (default): 0 below COMPRESS_MIN_N1 positions (the exact "
                                "H2 error's error-Gramian route shares uncompressed factors), COMPRESS_AUTO_TOL "
-                               "from there on (tcom at n1 = 1e6: about 1300 columns per factor, 42 GB plain); "
-                               "the value used is info['compress_tol']", low=0, high=1, open_high=True,
+                               "from there on (tcom at n1 = 1e6: about 1300 columns per factor, 42 GB plain), "
+                               "applied once a factor exceeds 1024 MiB; the value used is info['compress_tol']", low=0, high=1, open_high=True,
                                nullable=True),
         "gramian_cache": Option("model", "choice", "where the LR-ADI factors are kept: in the model's cache, "
                                 "shared with every bt reducer and analysis.h2_norm / h2_error on the same model "
@@ -341,6 +372,9 @@ class BT(SquareRootBT):
         "hsv_tol": Option(1e-13, "float", "singular values below hsv_tol times the largest are never kept "
                           "(caps r)", low=0, high=1, open_high=True),
     }
+    GROUPS = {"adi": Group("LR-ADI of the Gramian factors: shifts, refinement, the kept LUs",
+                           ("shifts", "num_shifts", "selection", "refine", "shift_reuse", "lu_pool_mib",
+                            "pool_full_reuse"))}
 
     #: compress_tol=None: the LR-ADI factors are compressed at COMPRESS_AUTO_TOL from COMPRESS_MIN_N1
     #: positions on (on tcom(3334), n1 = 1e4: 313 and 325 columns of 1294 and 1336 kept, the reduced
@@ -414,21 +448,19 @@ class BT(SquareRootBT):
             "residual_history": {"controllability": c.residuals, "observability": ob.residuals},
             "adi": {"controllability": c.summary(history=False), "observability": ob.summary(history=False)},
             "factor_ranks": {"controllability": c.rank, "observability": ob.rank},
-            "lu_count": c.lu_count if adi_fresh else 0,
-            "lu_count_shared": c.lu_count,  # the Gramian factors' LR-ADI, whoever paid it
             "lu_reused": c.lu_reused,  # LR-ADI steps served by a kept LU (shift_reuse)
             **extra,
-            "time_breakdown": {"adi": times["adi"] if adi_fresh else 0.0,
-                               "lu": st_c["factor"] if adi_fresh else 0.0,
-                               "solves": (c.times["solve"] + ob.times["solve"]) if adi_fresh else 0.0,
-                               "shifts": st_c["shifts"] if adi_fresh else 0.0,
-                               "compress": (c.times["compress"] + ob.times["compress"]) if adi_fresh else 0.0,
-                               "products": times["products"] if fresh else 0.0,
-                               "svd": tt["svd"], "projection": tt["projection"]},
-            # r-independent work paid once per reducer (studies add it back for 'standalone' times)
-            "setup_reused": not adi_fresh,
-            "setup_cost": {"adi": times["adi"], "products": times["products"],
-                           "svd": tt["svd_setup"]},
+            # the Gramian factors' LR-ADI (whoever paid it), their products and the SVDs: r-independent work
+            # paid once per reducer or model (studies add it back for 'standalone' times)
+            **cost_record(lus_shared=c.lu_count, lus_paid=c.lu_count if adi_fresh else 0,
+                          setup_cost={"adi": times["adi"], "products": times["products"], "svd": tt["svd_setup"]},
+                          paid={"adi": times["adi"] if adi_fresh else 0.0,
+                                "products": times["products"] if fresh else 0.0, "svd": tt["svd"]},
+                          breakdown={"lu": st_c["factor"] if adi_fresh else 0.0,
+                                     "solves": (c.times["solve"] + ob.times["solve"]) if adi_fresh else 0.0,
+                                     "shifts": st_c["shifts"] if adi_fresh else 0.0,
+                                     "compress": (c.times["compress"] + ob.times["compress"]) if adi_fresh else 0.0,
+                                     "projection": tt["projection"]}),
         }
         return rom, info
 
@@ -457,5 +489,3 @@ def _orthonormal(X):
     Q, _ = np.linalg.qr(X)
     return Q
 
-
-register("bt", BT)

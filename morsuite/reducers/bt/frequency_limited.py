@@ -81,8 +81,12 @@ quadrature plus bt's LR-ADI (lock-step, both equations).
 change; None with fixed nodes), ``quad_tol``, ``lu_count`` (the LUs this call paid:
 ``nodes_evaluated``, plus the LR-ADI's with ``limited="controllability"``, on the first
 call, 0 after), ``lu_count_shared`` (the same count, whoever paid it),
-``factor_ranks`` (after compression), ``factor_columns`` (before), ``hsv`` (band Hankel
-singular values), ``time_breakdown`` (quadrature, with the LR-ADI if any, of which lu,
+``factor_ranks`` (after compression), ``factor_columns`` (before), ``hsv`` (the singular
+values of the pair balanced: with ``limited="controllability"``, the default, those of the
+band controllability Gramian and the full observability one, Enns' one-sided weighted
+values :math:`\sqrt{\lambda_i(P_\Omega Q)}`; with ``"both"`` the band Hankel singular values
+:math:`\sqrt{\lambda_i(P_\Omega Q_\Omega)}`, which the doubling test measures in either case),
+``time_breakdown`` (quadrature, with the LR-ADI if any, of which lu,
 solves, compression and products, over every level; svd; projection), ``setup_reused``, ``setup_cost`` (quadrature, svd).
 """
 
@@ -98,7 +102,9 @@ import scipy.linalg as sla
 from ...errors import ConvergenceWarning, InputError
 from ...utils import band_pair
 from ...linalg.gramians import gramian_factors
-from ..base import Option, register
+from ..base import Group, Option
+from ..cost import cost_record
+from ..registry import Description
 from .balanced import FORMS, SquareRootBT, level_products
 from ..irka.shift_solves import default_threads, map_threads
 
@@ -241,6 +247,11 @@ class BTFL(SquareRootBT):
     """
 
     name = "bt-fl"
+    DESCRIPTION = Description(
+        label="BT, frequency-limited to the band (one-sided: stable)", result="by-option",
+        targets="Hankel singular values of the band-limited Gramians", cost="one per quadrature node (32 to 1024)",
+        use_for="a band that matters more than the rest of the axis", options=("band", "form", "nodes", "limited"),
+        band_option="band", stress={"max_nodes": 256}, page="bt_fl", order=95)
 
     OPTIONS = {
         "band": Option(None, "any", "frequency band (w1, w2) in rad/s, 0 <= w1 < w2 < inf, whose error is "
@@ -269,6 +280,9 @@ class BTFL(SquareRootBT):
                           "Enns' one-sided weighting: first-order models stable), or both (the two-sided FL-BT "
                           "of the literature: no stability guarantee)", choices=("controllability", "both")),
     }
+    GROUPS = {"quadrature": Group("the Gauss-Legendre rule of the band Gramians, its doubling test and the factors' "
+                                  "compression", ("nodes_start", "max_nodes", "quad_tol", "quad_hsv", "variable",
+                                                  "compress_tol"))}
 
     def __init__(self, fom, **options):
         super().__init__(fom, **options)
@@ -382,15 +396,14 @@ class BTFL(SquareRootBT):
             "status": "direct" if g["quad_converged"] and adi_ok else "cap",
             "iterations": len(g["levels"]), "nodes": g["nodes"], "nodes_evaluated": nodes_evaluated,
             "omega": g["omega"], "quad_levels": g["levels"], "quad_change": g["change"], "quad_tol": o["quad_tol"],
-            "lu_count": g["lu_count"] if fresh else 0, "lu_count_shared": g["lu_count"],
             "solver_threads": g["threads"],
             "factor_ranks": {"controllability": g["c"].rank, "observability": g["o"].rank},
             "factor_columns": g["columns"], **extra,
-            "time_breakdown": {**paid, "svd": tt["svd"], "projection": tt["projection"]},
-            "setup_reused": not fresh,
-            "setup_cost": {"quadrature": times["quadrature"], "svd": tt["svd_setup"]},
+            # the band Gramians (their nodes' LUs) and the SVDs: r-independent, paid on the first call
+            **cost_record(lus_shared=g["lu_count"], lus_paid=g["lu_count"] if fresh else 0,
+                          setup_cost={"quadrature": times["quadrature"], "svd": tt["svd_setup"]},
+                          paid={"quadrature": paid.pop("quadrature"), "svd": tt["svd"]},
+                          breakdown={**paid, "projection": tt["projection"]}),
         }
         return rom, info
 
-
-register("bt-fl", BTFL)

@@ -35,9 +35,6 @@ pairs (three sparse products each). ``info``: ``poles``, ``dominance``, ``pole_r
 Design note and measurements: ``docs/design/adaptive.md``.
 """
 
-from ..base import register
 from .reducer import Dominant
 
 __all__ = ["Dominant"]
-
-register("dominant", Dominant)

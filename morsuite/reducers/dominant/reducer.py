@@ -14,6 +14,7 @@ from ...errors import ConvergenceWarning, OptionError, RankWarning
 from ...rom import SecondOrderROM
 from ..adaptive.estimate import ReducedResponse, band_estimate, band_option
 from ..base import Option, Reducer
+from ..registry import Description
 from ..krylov.reducer import definiteness, is_symmetric
 from ..krylov.soar import RealBasis
 from .qdpa import SAQDPA
@@ -31,6 +32,13 @@ class Dominant(Reducer):
     """
 
     name = "dominant"
+
+    DESCRIPTION = Description(
+        label="dominant poles (SAQDPA) + static correction", result="second-order",
+        targets="the damped poles of largest dominance over the band, and T(0)",
+        cost="one per Newton step (the first, at s = 0, gives the static correction)",
+        use_for="models carried by a few well-separated poles (not pole clusters, not FE blocks)",
+        options=("tol", "max_lus"), stress={"max_lus": 8}, page="adaptive", order=76)
 
     OPTIONS = {
         "tol": Option(None, "float", "target of the estimated band error (relative to the band peak of "

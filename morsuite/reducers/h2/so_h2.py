@@ -74,7 +74,8 @@ from .gradient import FullTarget, gauss_newton_diagonal, h2_objective, h2_value
 from .stationarity import full_stationarity
 from .lbfgs import Evaluation, lbfgs_descent
 from ...utils import blas_threads
-from ..base import Option, Reducer, register
+from ..base import Group, Option, Reducer
+from ..registry import Description
 from ..h2_decision import decision_h2
 from .params import PARAMETRISATIONS
 from .siso import pole_phase
@@ -100,6 +101,12 @@ class SOH2(Reducer):
     :class:`~morsuite.rom.SecondOrderROM` of order r (2r states) with :math:`\\hat M = I`."""
 
     name = "so-h2"
+    DESCRIPTION = Description(
+        label="so-h2 (second-order H2 descent)", result="second-order",
+        targets="minimum H2 error among second-order models", cost="Gramians, then tens to hundreds",
+        use_for="second-order structure with the smallest H2 error",
+        options=("start", "descent", "gtol", "maxit", "starts"), default=True, gramians="reads", page="so_h2", order=30)
+    costly_orders = True  # each order is a descent of its own: a tolerance search steers it by a proxy
 
     OPTIONS = {
         "start": Option("best", "choice", "start model: the best by exact H2 error of the candidates, or one "
@@ -160,6 +167,17 @@ class SOH2(Reducer):
                             choices=("residual", "gain")),
         "refine": Option(ADI_DEFAULTS["refine"], "int", "long-double refinement steps of each shifted LR-ADI "
                          "solve (as bt)", low=0),
+    }
+    GROUPS = {
+        "varpro": Group("the variable-projection Newton descent (descent='varpro')",
+                        ("newton_maxit", "simo_maxit", "chord_maxit", "cluster_rounds", "cluster_polish")),
+        "surrogate": Group("the surrogate model the descent runs against",
+                           ("surrogate_tol", "surrogate_states", "refinements"), prefix="surrogate_"),
+        "full_model": Group("the iterations against the full model after the surrogate phase",
+                            ("full_maxit", "full_backtracks"), prefix="full_"),
+        "lbfgs": Group("the L-BFGS descent (descent='lbfgs') and its stopping rule",
+                       ("rtol", "window", "memory", "precondition", "precond_every")),
+        "adi": Group("LR-ADI of the Gramian factors (as bt's)", ADI_OPTIONS),
     }
 
     def __init__(self, fom, **options):
@@ -463,5 +481,3 @@ class SOH2(Reducer):
                       f"{o['gtol']:g} against the full model (H2 error {e:.4e}, start {start} {e0:.4e})",
                       ConvergenceWarning)
         return rom, info
-
-register("so-h2", SOH2)

@@ -28,7 +28,7 @@ import numpy as np
 from ...errors import ConvergenceWarning, RankWarning, StabilityWarning
 from ...linalg.h2 import modal_form
 from .gradient import ModalTarget, h2_value, second_order_realization
-from ..base import make
+from ..registry import make
 from ..outcome import SetupLedger
 
 __all__ = ["LEVELS", "STARTS", "candidate_roms", "Surrogates", "standard_realization"]

@@ -42,7 +42,9 @@ with matched hysteresis and a tabu list, relaxed adaptively in shifts and direct
 also picks the returned iterate: the stable one of smallest exact H2 error among a shortlist (option
 ``shortlist_score``, :mod:`~morsuite.reducers.irka.score`; :attr:`IRKABase.iterate_score` overrides).
 
-Options and defaults: :attr:`IRKABase.OPTIONS`. Cost per iteration: one factorization per real shift or
+Options and defaults: :attr:`IRKABase.OPTIONS`, the advanced ones in :attr:`IRKABase.GROUPS` (shift_update,
+stopping, safeguards, bases, solves: :mod:`morsuite.reducers.options`); the loop in named phases:
+:mod:`~morsuite.reducers.irka.iteration`. Cost per iteration: one factorization per real shift or
 conjugate pair (``info["lu_count"]``), two solves with it (one right, one transposed), and dense work on n1 x r
 bases and r x r matrices. A variant is a subclass that defines the hooks (section ``hooks`` of
 :class:`IRKABase`); design notes: ``docs/design/irka.md``.
@@ -50,21 +52,18 @@ bases and r x r matrices. A variant is a subclass that defines the hooks (sectio
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from ...errors import (ConvergenceWarning, InputError, MorsuiteWarning, RankWarning, SingularShiftError,
                        StabilityWarning)
-from ...linalg.dense import shift_distance, sigma_max
 from ...rom import SecondOrderROM
-from ..base import Option, Reducer
-from .safeguards import (GUARD_CYCLES, GUARD_OPTIONS, ITERATE_CYCLE, CycleGuard, Shortlist, ban_culprit, ill_conditioned,
-                         is_cycle, oblique_selection, orthonormal_basis, perturb_shifts, zero_transfer_error)
-from .score import iterate_scorer, score_cost
+from ..base import Group, Option, Reducer
+from .continuation import Continuation
+from .iteration import Iteration
+from .safeguards import (GUARD_OPTIONS, ill_conditioned, oblique_selection, orthonormal_basis, perturb_shifts,
+                         zero_transfer_error)
 from .shift_solves import raw_bases
-from .shift_update import (COMPLEX_TOL, UpdateSchedule, bt_rule, initial_shifts, relaxed_update, residue_rule,
-                           resolve_stage_stall, shifts_from_poles)
+from .shift_update import bt_rule, initial_shifts, relaxed_update, residue_rule, shifts_from_poles
 
 __all__ = ["IRKABase"]
 
@@ -73,9 +72,9 @@ _HISTORY_KEYS = ("measure", "shift_change", "response_change", "criterion", "n_s
                  "refined", "gram_schmidt", "stable", "max_pole_real", "update", "mirrored", "step", "shifts")
 
 
-class IRKABase(Reducer):
+class IRKABase(Continuation, Reducer):
     """Shared IRKA iteration; subclasses say how V and W are computed and projected."""
-
+    costly_orders = True
     OPTIONS = {
         "tol": Option(1e-6, "float", "relative change of the matched shifts that counts as converged",
                       low=0, high=1, open_low=True, open_high=True),
@@ -137,6 +136,21 @@ class IRKABase(Reducer):
                             "(0: only exact singularity and non-finite solves count)", low=0, high=1),
         "shift_perturbation": Option(1e-6, "float", "relative perturbation applied to a shift whose "
                                      "saddle matrix is singular", low=0, high=1, open_low=True),
+    }
+
+    #: the advanced options, in groups (:mod:`morsuite.reducers.options`); the rest are top-level
+    GROUPS = {
+        "shift_update": Group("how the next shifts follow from the reduced model's poles (update='residue' and "
+                              "the stages of 'auto')",
+                              ("residue_hysteresis", "hysteresis_radius", "relaxation", "stage_stall")),
+        "stopping": Group("the convergence measure and the cycle test",
+                          ("criterion", "response_tol", "n_check", "cycle_tol", "cycle_window")),
+        "safeguards": Group("the safeguard against cycles and unstable fixed points (option safeguard) and the "
+                            "shortlist it returns from", tuple(k for k in GUARD_OPTIONS if k != "safeguard"),
+                            prefix="safeguard_"),
+        "bases": Group("the orthonormal bases, their rank and the oblique projection",
+                       ("projection", "orthonormalization", "ill_cond_tol", "rank_tol", "oblique_tol", "hsv_tol")),
+        "solves": Group("the shifted solves: poles hit by a shift", ("pivot_tol", "shift_perturbation")),
     }
 
     #: Score of the shortlisted stable iterates when the iteration does not converge (safeguard
@@ -312,6 +326,8 @@ class IRKABase(Reducer):
 
     def _initial(self, r):
         o, fom = self.options, self.fom
+        if (warm := self._take_warm()) is not None:
+            return self._continued(warm, r, lambda k: initial_shifts(k, fom.band, fom.m, fom.p))
         return initial_shifts(r, fom.band, fom.m, fom.p, init=o["init"], seed=o["seed"], shifts=o["init_shifts"],
                               b=o["init_b"], c=o["init_c"])
 
@@ -327,146 +343,9 @@ class IRKABase(Reducer):
         return crit
 
     def _reduce(self, r):
-        o = self.options
-        t_setup0 = time.perf_counter()
-        setup_times = self._setup()
-        t_setup = time.perf_counter() - t_setup0
-        alpha, bdir, cdir = self._initial(r)
-        left = o["projection"] == "petrov"
-        history, recent = [], []
-        shortlist = Shortlist(o["shortlist"])
-        guard = CycleGuard.from_options(o)
-        chosen = None
-        converged = cycled = False
-        stalled = forget = False
-        t_proj = t_upd = 0.0
-        cap = r
-        schedule = UpdateSchedule(o["update"], o["relaxation"], o["maxit"],
-                                  resolve_stage_stall(o["stage_stall"], self.fom.n1))
-        how, relax = schedule.rule
-        lost_rank = False
-        check_grid = np.logspace(np.log10(self.fom.band[0]), np.log10(self.fom.band[1]), o["n_check"])
-        H_prev = None
-        it = perturbed = 0
-        prev_change = np.inf
-        self._ill_conditioned = False  # read by the solves of the next iteration (IRKA: refine_when)
-        for it in range(1, o["maxit"] + 1):
-            refined = self._refining()
-            alpha, Vraw, Wraw, npert = self._bases_safe(alpha, bdir, cdir, left)
-            perturbed += npert
-            t0 = time.perf_counter()
-            rom, k, k_rank, ill, gs = self._rom_from_raw(Vraw, Wraw, left)
-            poles = rom.poles()
-            stable = bool(np.all(poles.real < 0))
-            max_pole_real = float(poles.real.max()) if poles.size else -np.inf
-            t1 = time.perf_counter()
-            rank_short = it > 1 and k_rank < alpha.size
-            if rank_short:
-                # the shifts of this iteration ask for more than the model holds:
-                # shrink the shift count for good (it never grows back)
-                cap = min(cap, k_rank)
-            # the guard is passed only when engaged: an override of _update without it still works
-            extra = {"guard": guard} if guard.engaged else {}
-            new_alpha, new_b, new_c, uinfo = self._update(rom, min(cap, rom.states),
-                                                          "guarded" if guard.engaged else how, current=alpha, **extra)
-            t2 = time.perf_counter()
-            t_proj += t1 - t0
-            t_upd += t2 - t1
-            d_shift = shift_distance(new_alpha, alpha)
-            H = rom.freqresp(check_grid)
-            d_resp = (float(np.max(sigma_max(H - H_prev)) / max(np.max(sigma_max(H)), np.finfo(float).tiny))
-                      if H_prev is not None else np.inf)
-            H_prev = H
-            lost_rank = lost_rank or rank_short
-            crit = self._criterion(lost_rank, d_resp)
-            measure = d_resp if crit == "response" else d_shift
-            self._ill_conditioned = bool(ill)
-            history.append({"iteration": it, "shifts": alpha.copy(), "n_shifts": int(alpha.size), "rank": int(k),
-                            "ill_conditioned": bool(ill), "refined": bool(refined), "gram_schmidt": gs,
-                            "measure": measure, "shift_change": d_shift, "response_change": d_resp,
-                            "criterion": crit, "stable": stable, "max_pole_real": max_pole_real,
-                            "update": uinfo["update"], "mirrored": uinfo["mirrored"], "step": 1.0})
-            shortlist.add(measure, it, stable, (rom, alpha.copy(), bdir.copy(), cdir.copy()))
-            if measure < o["tol"] and stable:
-                # an unstable iterate is not a fixed point worth returning: iterate on
-                converged = True
-                chosen = (it, (rom, alpha.copy(), bdir.copy(), cdir.copy()), {})
-                break
-            reason = None
-            guard.observe(measure)
-            if guard.active and not stable and measure < guard.settle:
-                reason = "unstable fixed point"  # the criterion never accepts it: move away
-            elif crit == "shifts" and (is_cycle(new_alpha, d_shift, recent, o)
-                                       or (guard.engaged and o["safeguard_stop"]
-                                           and is_cycle(alpha, d_shift, recent, o, ITERATE_CYCLE))):
-                # engaged, the relaxed iterates can cycle while no proposed set repeats: both are watched
-                if guard.engaged and o["safeguard_stop"] and guard.cycles >= GUARD_CYCLES:
-                    cycled = True  # it cycles on through its stronger hysteresis and smaller steps: stop
-                    guard.events.append((it, f"cycle after {guard.cycles} reactions: stopped"))
-                    break
-                if guard.engaged:
-                    guard.on_cycle(it)
-                    # stopping: the answer is judged on the iterates that follow it, not on the old cycle
-                    forget = bool(o["safeguard_stop"])
-                    prev_change = np.inf  # the step was just halved: no second adaptation
-                elif schedule.can_switch():
-                    schedule.switch(it)
-                    guard.new_stage()
-                elif guard.active:
-                    reason = "cycle"
-                else:
-                    cycled = True
-                    break
-            elif why := schedule.stage_over(it, guard):  # its share of maxit used up, or stalled
-                schedule.switch(it, why)
-                guard.new_stage()
-            elif guard.active and not guard.engaged and not schedule.can_switch() and guard.stalled():
-                reason = "stall"
-            elif guard.engaged and o["safeguard_stop"] and (stalled := guard.stop_reason(o, it)):
-                break  # engaged: no progress in a window, or tol out of reach at its rate
-            how, relax = schedule.rule
-            if reason is not None:
-                if reason == "unstable fixed point":
-                    ban_culprit(guard, it, alpha, self._rom_from_raw, Vraw, Wraw, left)
-                    guard.step = 1.0  # jump off the banned shift, do not creep away from it
-                if not guard.engaged:
-                    guard.engage(it, reason)
-                new_alpha, new_b, new_c, uinfo = self._update(rom, min(cap, rom.states), "guarded", current=alpha,
-                                                              guard=guard)
-                history[-1]["update"] = uinfo["update"]
-            elif guard.engaged:
-                relax = guard.adapt_step(d_shift, prev_change) if np.isfinite(prev_change) else guard.step
-            prev_change = d_shift
-            history[-1]["step"] = relax
-            recent = (recent + [alpha.copy()])[-o["cycle_window"]:] if o["cycle_window"] and not forget else []
-            forget = False
-            alpha, bdir, cdir = self._next_data(it, (alpha, bdir, cdir), (new_alpha, new_b, new_c), relax,
-                                                blend=guard.engaged)
-        score = None
-        if chosen is None:
-            score = iterate_scorer(self) if guard.active else None
-            chosen = shortlist.choose(None if score is None else (lambda m: score(self.fom, m)))
-        times = {"setup": t_setup, **setup_times, **self._phase_times(), "projection": t_proj,
-                 "shift_update": t_upd}
-        self._stalled = stalled  # read by _outcome (its signature is shared with the variants)
-        rom, info = self._outcome(r, chosen, history, it, converged, cycled, times=times, perturbed=perturbed,
-                                  switched=schedule.switched_at)
-        info.update(update_switch_reasons=list(schedule.switch_reasons), stage_stall=schedule.stall)
-        info["safeguard"] = {**guard.info(), "active": guard.active,
-                             "scored_by": "iterate_score" if chosen[2] else "measure",
-                             "scores": {str(i): v for i, v in chosen[2].items()}, **score_cost(score)}
-        sg = info["safeguard"]
-        info["lu_count"] += sg["score_lu_count"] + sg["score_gramian_lu_count"]
-        if "lu_count_shared" not in info:  # a variant may overrule
-            # the scores' r-independent Gramian factors, whoever paid them (reducers.outcome): the same
-            # count whatever ran before on the model; a call that found them cached reused them
-            info["lu_count_shared"] = sg["score_gramian_lu_relied"]
-            if sg["score_gramian_lu_relied"] and not sg["score_gramian_lu_count"]:
-                info["setup_reused"] = True
-                info["setup_cost"] = {"score_gramians": sg["score_gramian_time_relied"]}
-        info.setdefault("status", "converged" if info["converged"] else "cycle" if cycled  # a variant may overrule
-                        else "stalled" if stalled else "uncertified" if converged else "cap")
-        return rom, info
+        """The iteration in its named phases (:class:`~morsuite.reducers.irka.iteration.Iteration`: start, per
+        iteration step, decide and advance, then finish); ``(rom, info)``."""
+        return Iteration(self, r).run()
 
     def _outcome(self, r, best, history, it, converged, cycled, *, times, perturbed, switched):
         """The best iterate, the warnings its state calls for, and the info record."""

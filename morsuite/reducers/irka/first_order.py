@@ -99,7 +99,8 @@ import numpy as np
 from ...errors import ConvergenceWarning, InputError, SingularShiftError
 from ...linalg.h2 import modal_form, norm_squared, pole_residue_squared
 from ...rom import FirstOrderROM
-from ..base import Option, make, register
+from ..base import Group, Option
+from ..registry import Description, make
 from ..h2_decision import decision_h2
 from .second_order import IRKA
 from .first_order_surrogate import SurrogatePhase
@@ -119,6 +120,11 @@ class IRKAFO(SurrogatePhase, IRKA):
     """
 
     name = "irka-fo"
+    DESCRIPTION = Description(
+        label="irka-fo (first-order IRKA)", result="first-order", targets="H2-optimality conditions",
+        cost="Gramians, then 10 to 60", use_for="the smallest H2 error per state",
+        options=("tol", "maxit", "init", "strategy", "track_h2"), default=True, gramians="reads", page="irka_fo",
+        order=20)
 
     OPTIONS = {
         **IRKA.OPTIONS,
@@ -164,6 +170,14 @@ class IRKAFO(SurrogatePhase, IRKA):
                                   "which a converged iterate counts as converged", low=0, high=1,
                                   open_low=True, open_high=True),
     }
+    GROUPS = {**IRKA.GROUPS,
+              "surrogate": Group("the dense first-order BT surrogate iterated against first (strategy='surrogate')",
+                                 ("surrogate_states", "surrogate_tol", "surrogate_max_states", "surrogate_maxit",
+                                  "surrogate_stall", "surrogate_plain", "surrogate_relaxation"), prefix="surrogate_"),
+              "newton": Group("Newton's method on the fixed-point map against the surrogate",
+                              ("newton_switch", "newton_starts", "newton_maxit", "newton_early"), prefix="newton_"),
+              "certificate": Group("the interpolation certificate of a converged iterate on the full model",
+                                   ("refine_certificate", "certificate_tol"))}
 
     def __init__(self, fom, **options):
         super().__init__(fom, **options)
@@ -258,6 +272,22 @@ class IRKAFO(SurrogatePhase, IRKA):
         if self._bt is None:
             self._bt = make("bt", self.fom)
         return self._bt
+
+    def order_guess(self, tol: float, *, measure: str, scale: float) -> int | None:
+        """The start's BT guess (:meth:`~morsuite.reducers.bt.balanced.SquareRootBT.order_guess`; its Gramian
+        factors computed if needed, which the start pays anyway) with ``init="bt"``; None otherwise."""
+        if self.options["init"] != "bt":
+            return None
+        return self._bt_reducer().order_guess(tol, measure=measure, scale=scale)
+
+    #: its orders are steered by its BT start's Hankel singular values (order_guess), not a proxy
+    costly_orders = False
+
+    def continue_from(self, rom) -> bool:
+        """No continuation: the start at every order is the BT model of that order from the cached Gramian
+        factors (r-independent work, paid once), which measured the better start (the earlier model's poles
+        completed by BT's cycled where BT's converged: ``docs/design/tolerance.md``). Returns False."""
+        return False
 
     def _initial(self, r):
         o = self.options
@@ -464,5 +494,3 @@ def _rel(x, y) -> float:
     x, y = np.atleast_1d(x), np.atleast_1d(y)
     return float(np.linalg.norm(x - y) / max(np.linalg.norm(x), np.finfo(float).tiny))
 
-
-register("irka-fo", IRKAFO)

@@ -100,7 +100,8 @@ from scipy.linalg import lapack
 from ...errors import MemoryBudgetError, ModelError, SingularShiftError
 from ...linalg import kernels
 from .. import base as _base
-from ..base import Option, register
+from ..base import Option
+from ..registry import Description
 from .engine import IRKABase
 
 __all__ = ["IRKAProjected", "ProjectedModel", "form_projector", "split_projector", "memory_estimate"]
@@ -271,6 +272,11 @@ class IRKAProjected(IRKABase):
     """
 
     name = "irka-projected"
+    DESCRIPTION = Description(
+        label="IRKA, Pi-projected (dense)", result="second-order",
+        targets="the same as irka, on the dense Pi-projected model", cost="O(n1^3) dense work",
+        use_for="measuring what the paper avoids", options=("tol", "maxit", "init", "memory_budget_gib"),
+        gramians="waits", stress={"maxit": 40}, page="irka", order=80)
     saddle_lu = False  # dense LUs of the projected pencil
 
     OPTIONS = {
@@ -412,5 +418,3 @@ class IRKAProjected(IRKABase):
         info["split"] = dict(pm.split)
         return rom, info
 
-
-register("irka-projected", IRKAProjected)

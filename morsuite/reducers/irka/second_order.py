@@ -46,7 +46,8 @@ from ...errors import SingularShiftError
 from ...linalg.dense import cholesky_qr2, right_solve
 from ...linalg.orthonormal import gram_schmidt
 from ...linalg.refine import SaddleOperator, refined_solve
-from ..base import Option, register
+from ..base import Option
+from ..registry import Description
 from .engine import IRKABase
 from .shift_solves import default_threads, map_dask, map_threads
 
@@ -62,6 +63,12 @@ class IRKA(IRKABase):
     """
 
     name = "irka"
+    DESCRIPTION = Description(
+        label="IRKA (paper, second-order)", result="second-order",
+        targets="interpolation at r mirrored poles (the paper)",
+        cost="one per real shift or pair per iteration", use_for="reproducing the paper; cheap when it converges",
+        options=("tol", "maxit", "init", "init_shifts", "update", "safeguard", "refine"), default=True,
+        gramians="waits", stress={"maxit": 40}, page="irka", order=10)
 
     OPTIONS = {
         **IRKABase.OPTIONS,
@@ -92,6 +99,10 @@ class IRKA(IRKABase):
                            "or the current dask.distributed client ('dask'); the result does not depend on it",
                            choices=("threads", "dask")),
     }
+
+    GROUPS = {**IRKABase.GROUPS,
+              "solves": IRKABase.GROUPS["solves"].extended("refine_when", "refine_precision", "kernel_projection",
+                                                           "kernel_tol", "check_solves", "executor")}
 
     #: bases with fewer entries are made orthonormal in order (``_map_bases``)
     PARALLEL_BASES_MIN = 1 << 20
@@ -239,5 +250,3 @@ class IRKA(IRKABase):
             exc.shift = a
             raise
 
-
-register("irka", IRKA)

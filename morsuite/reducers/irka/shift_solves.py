@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import InputError, SingularShiftError
+from ...linalg import accuracy
 from ...linalg.refine import SaddleOperator, refined_solve
 from ...utils import default_threads, map_threads  # noqa: F401 (re-exported: IRKA's executors)
 from .shift_update import COMPLEX_TOL
@@ -139,5 +140,6 @@ def map_dask(red, jobs, steps: int, ext: bool, check_all: bool) -> list:
     for fut in futures:
         x, w, counts = fut.result()
         red._solver.stats.add(**counts)
+        accuracy.note_stats(counts)  # the worker's solves, in this run's record
         out.append((x, w))
     return out

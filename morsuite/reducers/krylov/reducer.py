@@ -9,12 +9,14 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ...errors import AccuracyWarning, OptionError, RankWarning, SingularShiftError, StabilityWarning
 from ...rom import SecondOrderROM
 from ..base import Option, Reducer
+from ..registry import Description
 from .soar import SOAR, KernelProjector, RealBasis
 
 __all__ = ["Krylov", "expansion_points"]
@@ -24,6 +26,8 @@ KERNEL_WARN = 1e-8
 #: a reduced matrix A_r(s0) with a condition number above this is warned about (AccuracyWarning): its
 #: moments then hold to less than about 1e-8 relative
 COND_WARN = 1e8
+#: the default of the ``moment_tol`` option: a moment counts as matched when measured to this relative error
+MOMENT_TOL = 1e-8
 
 
 def expansion_points(points, npoints: int, band) -> np.ndarray:
@@ -161,6 +165,11 @@ class Krylov(Reducer):
     """
 
     name = "krylov"
+    DESCRIPTION = Description(
+        label="Krylov moment matching (SOAR)", result="second-order",
+        targets="moments of T at one or a few expansion points", cost="one per expansion point (a conjugate pair one)",
+        use_for="the engineering baseline at one LU, accurate near its points",
+        options=("points", "npoints", "sided", "directions"), default=True, stress={}, page="krylov", order=70)
 
     OPTIONS = {
         "points": Option("auto", "any", "expansion points: 'auto' (one real point, the band's geometric mean), "
@@ -184,6 +193,12 @@ class Krylov(Reducer):
                            "accuracy)", low=0, high=1, open_low=True, open_high=True),
         "reorth": Option(2, "int", "Gram-Schmidt passes per column (2: classical Gram-Schmidt twice, orthogonal "
                          "to rounding)", low=1, high=3),
+        "check_moments": Option(True, "bool", "measure the moments the basis spans against the full model's Taylor "
+                                "recurrence (one more solve per moment and column); False: info['moments'] counts "
+                                "them unmeasured"),
+        "moment_tol": Option(MOMENT_TOL, "float", "a moment counts as matched (info['moments']) when its relative "
+                             "error, measured against the full model's Taylor recurrence, is at most this",
+                             low=0, high=1, open_low=True, open_high=True),
     }
 
     def __init__(self, fom, **options):
@@ -255,7 +270,8 @@ class Krylov(Reducer):
             sides[side] = _Side(soars, RealBasis(fom.n1, o["orth_tol"], o["reorth"], project))
         st = solver.stats
         self._state = {"solver": solver, "lus": lus, "sides": sides, "symmetric": symmetric, "directions": dirs,
-                       "lu_time": st.factor_time_s + st.assemble_time_s, "setup_time": time.perf_counter() - t0}
+                       "lu_time": st.factor_time_s + st.assemble_time_s, "setup_time": time.perf_counter() - t0,
+                       "taylor": [None] * len(lus)}
         return self._state
 
     # -- reduction ----------------------------------------------------------
@@ -301,15 +317,35 @@ class Krylov(Reducer):
                       StabilityWarning)
         t2 = time.perf_counter()
         matched = {k: s.levels_within(r_used) for k, s in sides.items()}
-        moments = []
+        moments, check_solves, short = [], 0, []
+        paid_before = sum(ref["seconds"][-1] for ref in state["taylor"] if ref)
+        tol = self.options["moment_tol"]
         for i, (s, _) in enumerate(state["lus"]):
             row = {"point": complex(s), "right_levels": matched["right"][i]}
             if not one:
                 row["left_levels"] = matched["left"][i]
-            row["moments"] = sum(m[i] for m in matched.values())
+            spanned = sum(m[i] for m in matched.values())
             # the moments of the reduced model come from solves with A_r(s0): accurate to about cond * eps
             row["condition"] = float(np.linalg.cond(s * s * Mr + s * Dr + Kr)) if r_used else 1.0
+            if not self.options["check_moments"]:
+                row.update(moments_spanned=int(spanned), moments=int(spanned), moment_errors=None, moment_error=None)
+                moments.append(row)
+                continue
+            errs, n = self._moment_errors(i, spanned, rom) if spanned else ([], 0)
+            check_solves += n
+            good = next((j for j, e in enumerate(errs) if not e <= tol), len(errs))
+            row.update(moments_spanned=int(spanned), moments=int(good), moment_errors=errs,
+                       moment_error=float(max(errs[:good], default=0.0)))
+            if good < spanned:
+                short.append(f"{good} of {spanned} at s0 = {complex(s):.4g} (the next off by {errs[good]:.1e})")
             moments.append(row)
+        t3 = time.perf_counter()
+        refs = [(ref, row["moments_spanned"]) for ref, row in zip(state["taylor"], moments) if ref]
+        reference_paid = sum(ref["seconds"][-1] for ref, _ in refs) - paid_before  # the full model's moments
+        reference_cost = sum(ref["seconds"][k - 1] for ref, k in refs if k)  # what this r alone would pay
+        if short:
+            self.warn(f"krylov: of the moments its basis spans, the reduced model matches to moment_tol = {tol:g} "
+                      f"(measured against the full model's Taylor recurrence) only " + "; ".join(short), AccuracyWarning)
         worst = max(row["condition"] for row in moments)
         if worst > COND_WARN:
             self.warn(f"krylov: the reduced matrix s0^2 M_r + s0 D_r + K_r has condition {worst:.1e} at an expansion "
@@ -327,15 +363,71 @@ class Krylov(Reducer):
             "basis_columns": {k: s.basis.cols for k, s in sides.items()},
             "lu_count": nlu if fresh else 0, "lu_count_shared": nlu, "setup_reused": not fresh,
             "solves": sum(s.solves() - before[k][1] for k, s in sides.items()),
+            "moment_check_solves": int(check_solves),
             "solves_total": sum(s.solves() for s in sides.values()),
             "time_breakdown": {"lu": t_lu, "setup_other": t_setup - t_lu, "basis": basis_now,
-                               "projection": t2 - t1},
+                               "projection": t2 - t1, "moment_reference": reference_paid,
+                               "moment_check": t3 - t2 - reference_paid},
             # the work a sweep over r shares: the LUs (with the rest of the setup) and the nested basis
             "setup_cost": {"lu": state["lu_time"], "setup_other": state["setup_time"] - state["lu_time"],
-                           "basis": sum(s.seconds_to(r_used) for s in sides.values())},
+                           "basis": sum(s.seconds_to(r_used) for s in sides.values()),
+                           "moment_reference": reference_cost},
             "solver_stats": state["solver"].stats.as_dict(),
         }
         return rom, info
+
+    def _moment_errors(self, i, count, rom):
+        r"""Relative errors of the first ``count`` moments at point i that the basis spans, and the solves paid.
+
+        The moments :math:`\gamma^jq(X_j)` of the full model (the Taylor recurrence of the module
+        docstring with the point's LU, scaled by the right basis's :math:`\gamma` so that they neither
+        overflow nor vanish; cached on the reducer and extended as r grows: one solve per moment and
+        column) against the same recurrence of the reduced model with a dense LU of
+        :math:`A_r(s_0)`. :math:`q(X) = LX` (block), :math:`LXb` (tangential) or :math:`c^TLXb`
+        (two-sided tangential: the bitangential moments the two bases match)."""
+        st = self._state
+        s, lu = st["lus"][i]
+        fom, dirs = self.fom, st["directions"]
+        g = st["sides"]["right"].soars[i].gamma
+        b = dirs["right"][:, i:i + 1] if "right" in dirs else None
+        c = dirs["left"][:, i:i + 1] if "left" in dirs else None
+
+        def out(L, X):  # X already carries b (the recurrences start from F b)
+            return L @ X if c is None else c.T @ (L @ X)
+
+        ref = st["taylor"][i]
+        solves, t0 = 0, time.perf_counter()
+        if ref is None:
+            X0 = lu.solve(fom.F if b is None else fom.F @ b)
+            ref = st["taylor"][i] = {"prev": (np.zeros_like(X0), X0), "out": [out(fom.L, X0)], "seconds": []}
+            solves += X0.shape[1]
+            ref["seconds"].append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+        A1 = 2 * s * fom.M + fom.D
+        while len(ref["out"]) < count:
+            Xm, X = ref["prev"]
+            Xn = -lu.solve(g * (A1 @ X) + (g * g) * (fom.M @ Xm))
+            solves += Xn.shape[1]
+            ref["prev"] = (X, Xn)
+            ref["out"].append(out(fom.L, Xn))
+            ref["seconds"].append(ref["seconds"][-1] + time.perf_counter() - t0)
+            t0 = time.perf_counter()
+        Ar = s * s * rom.M + s * rom.D + rom.K
+        A1r = 2 * s * rom.M + rom.D
+        Fr = rom.F if b is None else rom.F @ b
+        try:
+            lur = sla.lu_factor(Ar)
+        except (ValueError, np.linalg.LinAlgError):
+            return [float("inf")] * count, solves
+        Xm, X = np.zeros_like(Fr, dtype=complex), sla.lu_solve(lur, Fr.astype(complex))
+        errs = []
+        for j in range(count):
+            if j:
+                Xm, X = X, -sla.lu_solve(lur, g * (A1r @ X) + (g * g) * (rom.M @ Xm))
+            want, got = ref["out"][j], out(rom.L, X)
+            scale = np.linalg.norm(want)
+            errs.append(float(np.linalg.norm(got - want) / scale) if scale > 0 else float(np.linalg.norm(got)))
+        return errs, solves
 
     def _kernel_residual(self, bases) -> float:
         """:math:`\\max \\|GV\\|_F / (\\|G\\|_F \\sqrt{r})` over the bases (0 without constraints)."""

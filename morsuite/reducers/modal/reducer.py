@@ -4,7 +4,8 @@ The undamped constrained modes :math:`K\varphi + G^T\mu = \omega^2M\varphi`, :ma
 come from shift-invert Lanczos with the saddle matrix :math:`[[K - \sigma M, G^T], [G, 0]]`
 factored once (:func:`morsuite.linalg.eigen.constrained_modes`); :math:`\Pi` is never formed.
 ``selection`` chooses k of them (:mod:`morsuite.reducers.modal.selection`): the lowest, those
-in a band, or the most dominant. The basis is
+in a band, the most dominant, or (``"cutoff"``, the engineers' rule) every mode up to ``cutoff``
+times the band's upper end, r capping their number. The basis is
 
 .. math::
 
@@ -36,6 +37,13 @@ columns (at most m). The modes are computed on the first call for the largest k 
 and kept on the reducer, with the reducer's solver and its LU; a later call that needs more
 modes repeats only the Lanczos run (twice the modes, the same LU).
 
+Status: ``direct`` when every mode asked for converged (and a band was covered); ``partial``
+when ARPACK converged only some of them within ``maxiter`` restarts (the reduced model is built
+from those: fewer modes than asked, not necessarily the lowest), ``cap`` when a band was not
+covered within the modes' cap; both with ``converged=False``, ``status_reason`` and a
+:class:`~morsuite.errors.ConvergenceWarning` recorded in ``info["warnings"]`` on every call that
+uses the pool.
+
 Cost: one sparse LU (two with the static correction and :math:`\sigma \ne 0`), the Lanczos
 solves (about 2k to 4k, k more for the refinement), m static solves and O(n1 r²) dense work.
 Design note and measurements: ``docs/design/modal.md``.
@@ -45,30 +53,42 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from numbers import Integral
 
 import numpy as np
 import scipy.linalg as sla
 
-from ...errors import InputError, RankWarning, SingularShiftError
+from ...errors import ConvergenceWarning, InputError, RankWarning, SingularShiftError
 from ...linalg.eigen import constrained_modes
 from ...rom import SecondOrderROM
-from ..base import Option, Reducer, register
+from ..base import Option, Reducer
+from ..cost import cost_record
+from ..registry import Description
 from .selection import band_order, dominance, dominance_order, lowest_order
 
 __all__ = ["Modal", "SELECTIONS"]
 
-SELECTIONS = ("lowest", "band", "dominance")
+SELECTIONS = ("lowest", "band", "dominance", "cutoff")
 
 
 class Modal(Reducer):
     """Constrained modal truncation (module docstring); r is the second-order order (2r states)."""
 
     name = "modal"
+    DESCRIPTION = Description(
+        label="modal truncation + static correction", result="second-order",
+        targets="the undamped modes (lowest, in a band, dominant), T(0)",
+        cost="one (two with a shift != 0 and the static correction)", use_for="the engineering baseline at one LU",
+        options=("selection", "band", "sigma", "static_correction"), default=True, stress={}, page="modal", order=60)
 
     OPTIONS = {
         "selection": Option("lowest", "choice", "which modes: the lowest, those in the band (then its nearest), "
-                            "or the most dominant in the band (largest modal-term gain)", choices=SELECTIONS),
+                            "the most dominant in the band (largest modal-term gain), or every mode up to cutoff "
+                            "times the band's upper end (the engineers' rule; r caps their number)",
+                            choices=SELECTIONS),
+        "cutoff": Option(2.0, "float", "'cutoff': keep the modes below cutoff times the band's upper end",
+                         low=1.0),
         "band": Option(None, "array", "band (w1, w2) in rad/s of 'band' and 'dominance' (default: the model's band)",
                        nullable=True),
         "sigma": Option(None, "float", "shift (rad^2/s^2) of the one LU of K - sigma M; default 0 for 'lowest' and "
@@ -80,6 +100,7 @@ class Modal(Reducer):
         "pool": Option(2.0, "float", "'dominance' chooses among the lowest ceil(pool * r) modes", low=1.0),
         "tol": Option(0.0, "float", "ARPACK's relative accuracy of the eigenvalues (0: machine precision)",
                       low=0, high=1, open_high=True),
+        "maxiter": Option(None, "int", "ARPACK's restart cap (default max(1000, 10 k))", low=1, nullable=True),
     }
 
     def __init__(self, fom, **options):
@@ -146,10 +167,14 @@ class Modal(Reducer):
             self.warn(f"modal: K - sigma M is singular at sigma = {old:g} (rigid-body modes?); shift moved to "
                       f"sigma = {sigma:g}")
             lu = self._factor(sigma)
-        kw = {"sigma": sigma, "tol": self.options["tol"], "factorization": lu}
+        kw = {"sigma": sigma, "tol": self.options["tol"], "maxiter": self.options["maxiter"], "factorization": lu}
         if sel == "band":
             kw.update(band=self._band(), within_band=False)
-        res = constrained_modes(fom, k=max(k, 1), **kw)
+        elif sel == "cutoff":  # every mode from 0 to cutoff * w2 (k grows until they are covered)
+            kw.update(band=(0.0, self.options["cutoff"] * self._band()[1]), within_band=False)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)  # said by _reduce on every call that uses them
+            res = constrained_modes(fom, k=max(k, 1), **kw)
         self._modes = {"omega": res.omega, "shapes": res.shapes, "residuals": res.residuals, "sigma": sigma,
                        "info": res.info, "time": time.perf_counter() - t0}
         if sel == "dominance":
@@ -173,6 +198,9 @@ class Modal(Reducer):
         sel = self.options["selection"]
         if sel == "lowest":
             return lowest_order(modes["omega"])
+        if sel == "cutoff":
+            low = lowest_order(modes["omega"])
+            return low[modes["omega"][low] <= self.options["cutoff"] * self._band()[1]]
         if sel == "band":
             return band_order(modes["omega"], self._band(), modes["sigma"])
         pool = min(modes["omega"].size, math.ceil(self.options["pool"] * r))
@@ -215,20 +243,29 @@ class Modal(Reducer):
         self._lu_total += paid
         shared = self._lu_total
         covered = bool(modes["info"]["covered"])
+        status, reason = "direct", None
+        if not covered:  # ARPACK converged only part of the pool, or a band was not covered within k_max
+            status = "partial" if modes["info"]["status"] == "partial" else "cap"
+            reason = f"modal: {modes['info']['reason']}"
+            self.warn(reason, ConvergenceWarning)
+        if k and chosen.size < k:
+            self.warn(f"modal: {chosen.size} modes available of the {k} asked for; the reduced order is "
+                      f"{rom.order}, not {r}", ConvergenceWarning)
         if n_static < m_static:
             self.warn(f"modal: {m_static - n_static} static column(s) lie in the span of the modes (below "
                       f"static_tol = {o['static_tol']:g}); the reduced order is {rom.order}, not {r}", RankWarning)
         info = {
-            "selection": o["selection"], "sigma": modes["sigma"], "modes": int(k), "static_columns": int(n_static),
+            "selection": o["selection"], "sigma": modes["sigma"], "modes": int(chosen.size),
+            "static_columns": int(n_static),
             "omega": modes["omega"][chosen], "modes_computed": int(modes["omega"].size),
             "static_dropped": bool(o["static_correction"] and not m_static),  # K singular on ker G
-            "max_residual": float(modes["residuals"][chosen].max()) if k else 0.0,
-            "converged": covered, "status": "direct" if covered else "cap",
-            "lu_count": int(paid), "lu_count_shared": int(shared),
-            "setup_reused": paid < shared,  # this call did not pay the r-independent LUs
-            "setup_cost": {"modes": modes["time"], "static": st["time"] if st is not None else 0.0},
-            "time_breakdown": {"static": t1 - t0 if static_fresh else 0.0, "modes": t2 - t1 if grown else 0.0,
-                               "projection": t3 - t2},
+            "max_residual": float(modes["residuals"][chosen].max(initial=0.0)),
+            "converged": covered, "status": status, "status_reason": reason,
+            # the LUs of the modes and the static response: r-independent, kept across calls
+            **cost_record(lus_shared=shared, lus_paid=paid,
+                          setup_cost={"modes": modes["time"], "static": st["time"] if st is not None else 0.0},
+                          paid={"static": t1 - t0 if static_fresh else 0.0, "modes": t2 - t1 if grown else 0.0},
+                          breakdown={"projection": t3 - t2}),
         }
         if o["selection"] == "dominance":
             info["dominance"] = modes["dominance"][chosen]
@@ -252,5 +289,3 @@ def _static_block(fom, Phi, X0, tol):
         X = X @ C
     return X
 
-
-register("modal", Modal)
