@@ -394,7 +394,7 @@ class Adaptive(Reducer):
         import scipy.sparse as sp
 
         from ...models.index3 import Index3Model
-        from ..base import get_class
+        from ..registry import get_class
 
         o = self.options
         k = surrogate.order
