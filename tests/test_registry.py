@@ -75,7 +75,8 @@ def test_compare_offers_what_its_table_held():
         full = {k: o.validate(reducer, k, {**m.options}.get(k, o.default)) for k, o in cls.OPTIONS.items()}
         old = {k: o.validate(reducer, k, options.get(k, o.default)) for k, o in cls.OPTIONS.items()}
         assert (m.reducer, m.states_per_order, m.label) == (reducer, spo, label) and full == old, name
-    assert default_methods() == OLD_DEFAULTS
+    # the old defaults in their order, then the two of issue 46 (item 4: in compare by default)
+    assert default_methods() == OLD_DEFAULTS + ("adaptive", "dominant")
 
 
 def test_a_variant_must_fit_its_reducer(monkeypatch):

@@ -33,7 +33,7 @@ import scipy.linalg as sla
 
 from ...linalg.dense import sigma_max
 
-__all__ = ["ReducedResponse", "BandEstimate", "band_estimate", "band_option", "local_maxima"]
+__all__ = ["ReducedResponse", "BandEstimate", "band_estimate", "band_option", "local_maxima", "order_at_tol"]
 
 #: the pole-residue values must agree with direct solves to this, relative to the largest response
 #: at the check frequencies, or every frequency is solved directly
@@ -209,3 +209,27 @@ def local_maxima(values) -> np.ndarray:
     right = np.concatenate([v[:-1] >= v[1:], [True]])
     idx = np.flatnonzero(left & right)
     return idx[np.argsort(-v[idx], kind="stable")]
+
+
+def order_at_tol(reducer, tol: float, measure: str) -> int | None:
+    """The order at which ``reducer`` (adaptive or dominant, ``tol`` option None) stops by its own band
+    estimate at ``tol``: it runs ``reducer.reduce`` with the option ``tol`` set (the greedy's points, or
+    the Newton steps, are kept for the calls that follow: they pay no LU again) and returns the order
+    of that model. The hook :meth:`~morsuite.reducers.Reducer.order_guess` of both reducers, for a band
+    tolerance only (the estimate is of the band error relative to the band peak: ``measure="band"``;
+    None for "h2", "hinf", or when ``tol`` or ``compress`` is set already). A guess: the tolerance search
+    verifies it against the true band error. Cost: the LUs of the greedy up to ``tol``, which the
+    next calls report as shared work (``lu_count_shared``)."""
+    import warnings
+
+    o = reducer.options
+    if measure != "band" or o.get("tol") is not None or o.get("compress"):
+        return None
+    o["tol"] = float(tol)
+    try:
+        with warnings.catch_warnings():  # a budget or a cap is the search's to report, at its own orders
+            warnings.simplefilter("ignore")
+            res = reducer.reduce(reducer.max_order())
+    finally:
+        o["tol"] = None
+    return int(res.rom.order)

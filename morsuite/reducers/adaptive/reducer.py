@@ -18,7 +18,7 @@ from ..base import Option, Reducer
 from ..registry import Description
 from ..krylov.reducer import definiteness, is_symmetric
 from ..krylov.soar import KernelProjector, RealBasis
-from .estimate import ReducedResponse, band_estimate, band_option, local_maxima
+from .estimate import ReducedResponse, band_estimate, band_option, local_maxima, order_at_tol
 from .points import make_point
 
 __all__ = ["Adaptive"]
@@ -54,8 +54,8 @@ class Adaptive(Reducer):
         cost="one per greedy point (and per validation sample), released before the next",
         use_for="large finite-element models to a band tolerance at a few LUs; with compress, an "
                 "H2-optimal model at a few LUs",
-        options=("tol", "max_lus", "levels", "validate", "compress"), stress={"max_lus": 8}, page="adaptive",
-        order=75)
+        options=("tol", "max_lus", "levels", "validate", "compress"), stress={"max_lus": 8}, default=True,
+        band_option="band", page="adaptive", order=75)
 
     OPTIONS = {
         "tol": Option(None, "float", "target of the estimated band error, max over the band of sigma_max(T - T_r) "
@@ -458,6 +458,11 @@ class Adaptive(Reducer):
     @staticmethod
     def _plain_row(row):
         return {k: (v if not isinstance(v, dict) else dict(v)) for k, v in row.items()}
+
+    def order_guess(self, tol: float, *, measure: str, scale: float) -> int | None:
+        """The order at which the estimate meets a band tolerance (:func:`~morsuite.reducers.adaptive.estimate.order_at_tol`:
+        the LUs it pays are reused by the reductions that follow); None for "h2" and "hinf"."""
+        return order_at_tol(self, tol, measure)
 
     def max_order(self) -> int:
         """Largest admissible r: the dimension of the hidden manifold, n1 - n2."""

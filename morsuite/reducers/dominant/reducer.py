@@ -12,7 +12,7 @@ import numpy as np
 
 from ...errors import ConvergenceWarning, OptionError, RankWarning
 from ...rom import SecondOrderROM
-from ..adaptive.estimate import ReducedResponse, band_estimate, band_option
+from ..adaptive.estimate import ReducedResponse, band_estimate, band_option, order_at_tol
 from ..base import Option, Reducer
 from ..registry import Description
 from ..krylov.reducer import definiteness, is_symmetric
@@ -38,7 +38,8 @@ class Dominant(Reducer):
         targets="the damped poles of largest dominance over the band, and T(0)",
         cost="one per Newton step (the first, at s = 0, gives the static correction)",
         use_for="models carried by a few well-separated poles (not pole clusters, not FE blocks)",
-        options=("tol", "max_lus"), stress={"max_lus": 8}, page="adaptive", order=76)
+        options=("tol", "max_lus"), stress={"max_lus": 8}, default=True, band_option="band", page="adaptive",
+        order=76)
 
     OPTIONS = {
         "tol": Option(None, "float", "target of the estimated band error (relative to the band peak of "
@@ -72,6 +73,11 @@ class Dominant(Reducer):
     def _band(self):
         b = self.options["band"]
         return tuple(float(x) for x in (b if b is not None else self.fom.band))
+
+    def order_guess(self, tol: float, *, measure: str, scale: float) -> int | None:
+        """The order at which the estimate meets a band tolerance (:func:`~morsuite.reducers.adaptive.estimate.order_at_tol`:
+        the LUs it pays are reused by the reductions that follow); None for "h2" and "hinf"."""
+        return order_at_tol(self, tol, measure)
 
     def max_order(self) -> int:
         """Largest admissible r: the dimension of the hidden manifold, n1 - n2."""
