@@ -133,6 +133,32 @@ def test_budget_stops_with_the_best_model(tcom):
     assert o.chosen is best
 
 
+@pytest.mark.parametrize("method", ["irka", "irka-fo"])
+def test_a_deadline_stops_an_iterating_reduction_with_its_best_iterate(tcom, method):
+    """Reducer.deadline (a time budget inside a run): past it, the IRKA family stops after the iteration in
+    progress with status "budget", converged=False and a warning, where the same reduction without it
+    iterates on (r = 3: three iterations for both here)."""
+    import time
+
+    fresh = ms.reducers.make(method, tcom).reduce(3)
+    assert fresh.info["iterations"] > 1
+    red = ms.reducers.make(method, tcom)
+    red.deadline = time.perf_counter()
+    res = red.reduce(3)
+    assert res.info["status"] == "budget" and not res.info["converged"] and res.info["iterations"] == 1
+    assert any("the time budget ran out (deadline)" in w for w in res.info["warnings"])
+
+
+def test_a_time_budget_binds_inside_the_searchs_first_run(tcom):
+    """The search sets the deadline from budget_s for each reduction and clears it after: with the budget
+    spent before the first run, that run stops on its first iteration and the search on its budget."""
+    outcomes, search = reach_tolerance(tcom, "irka", 1e-8, measure="band", budget_s=1e-9, proxy=None)
+    first = min(search.candidates.values(), key=lambda c: c.index)
+    assert first.status == "budget" and first.info["iterations"] == 1
+    assert outcomes[0].status == "budget" and "budget of 1e-09 s" in outcomes[0].reason
+    assert search.red.deadline is None
+
+
 def test_cap_and_untrusted_say_so(tcom):
     outcomes, _ = reach_tolerance(tcom, "krylov", 1e-9, measure="band", max_states=8)
     assert outcomes[0].status == "cap" and "8 states" in outcomes[0].reason

@@ -283,15 +283,19 @@ class ToleranceSearch:
             self.red.continue_from(min(near, key=lambda c: (abs(c.states - r * self.spo), c.states > r * self.spo)).rom)
         cand = Candidate(r=int(r), index=len(self.candidates))
         t0 = time.perf_counter()
+        # the time budget binds inside a long run too: an iterative reducer stops at this deadline (Reducer.deadline)
+        self.red.deadline = None if self.budget_s is None else t0 + max(0.0, self.budget_s - self._cum_time)
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # the reducer records its warnings in info["warnings"]
                 res = self.red.reduce(int(r))
         except _CAUGHT as exc:
+            self.red.deadline = None
             cand.error = f"{type(exc).__name__}: {exc}"
             cand.time_s = time.perf_counter() - t0
             self._failures += 1
         else:
+            self.red.deadline = None
             self._failures = 0
             info = res.info
             cand.rom, cand.info = res.rom, info

@@ -26,7 +26,7 @@ __all__ = ["bench_tolerance", "PLANS", "CONTINUATION_TARGET"]
 CONTINUATION_TARGET = 1.5
 
 PLANS = {"full": {"models": ["tcom:nc=2000", "dsms:g=1000"], "tol": 1e-3, "measure": "h2",
-                  "methods": ["bt", "irka-fo", "irka", "krylov", "so-h2", "modal"]},
+                  "methods": ["bt", "irka-fo", "irka", "krylov", "so-h2", "modal", "adaptive", "dominant"]},
          "quick": {"models": ["tcom:nc=200", "dsms:g=200"], "tol": 1e-3, "measure": "h2",
                    "methods": ["bt", "irka"]}}
 

@@ -74,6 +74,11 @@ class Reducer:
     #: named groups of advanced options (:class:`~morsuite.reducers.options.Group`): every option not in a
     #: group is a top-level one
     GROUPS: ClassVar[dict[str, Group]] = {}
+    #: a :func:`time.perf_counter` value after which an iterative reducer stops at the end of its current
+    #: iteration with status ``"budget"`` and its best iterate (the IRKA family reads it); None: no deadline.
+    #: Set by :class:`~morsuite.analysis.tolerance.ToleranceSearch` from its ``budget_s`` for each reduction,
+    #: so that a time budget binds inside a long run, not only between runs.
+    deadline: float | None = None
 
     def __init__(self, fom, **options):
         from ..models.index3 import Index3Model

@@ -62,8 +62,8 @@ STATUS = {
                "window of steps) before the test passed",
     "uncertified": "the iteration's own stopping rule held, but the method's test on the full model "
                    "failed or could not be made",
-    "budget": "the method's budget of sparse LUs (its max_lus) ran out before its test passed; the best model "
-              "within the budget is returned",
+    "budget": "the method's budget ran out before its test passed (its LUs, max_lus, or the time of a "
+              "tolerance search, Reducer.deadline); the best model within the budget is returned",
     "skipped": "the method did not iterate (e.g. its start is below the objective's resolution); "
                "its start is returned",
     "partial": "an inner eigensolver converged only some of what was asked (ARPACK within its restart cap: "

@@ -359,7 +359,8 @@ class IRKABase(Continuation, Reducer):
                       RankWarning, stacklevel=4)
         if not converged:
             why = ("a cycle of shift sets was detected" if cycled else getattr(self, "_stalled", False)
-                   or f"maxit = {o['maxit']} was reached")
+                   or ("the time budget ran out (deadline)" if getattr(self, "_out_of_time", False)
+                       else f"maxit = {o['maxit']} was reached"))
             what = (f"iteration {best_it} (shift change {history[best_it - 1]['measure']:.2e}, tol {o['tol']:g})"
                     if best_it else "its start")
             self.warn(f"{self.name} did not converge at r = {r}: {why}; returning {what}",

@@ -72,7 +72,7 @@ class Iteration:
         self.guard = CycleGuard.from_options(o)
         self.chosen = None
         self.converged = self.cycled = False
-        self.stalled = self.forget = False
+        self.stalled = self.forget = self.out_of_time = False
         self.t_proj = self.t_upd = 0.0
         self.cap = self.r
         self.schedule = UpdateSchedule(o["update"], o["relaxation"], o["maxit"],
@@ -92,6 +92,9 @@ class Iteration:
             step = self.step(it)
             if self.decide(it, step):
                 break
+            if self.red.deadline is not None and time.perf_counter() >= self.red.deadline:
+                self.out_of_time = True  # a caller's time budget (Reducer.deadline): the best iterate so far
+                break  # _outcome's warning says why
             self.advance(it, step)
         return self.finish()
 
@@ -227,6 +230,7 @@ class Iteration:
         times = {"setup": self.t_setup, **self.setup_times, **red._phase_times(), "projection": self.t_proj,
                  "shift_update": self.t_upd}
         red._stalled = self.stalled  # read by _outcome (its signature is shared with the variants)
+        red._out_of_time = self.out_of_time
         rom, info = red._outcome(self.r, chosen, self.history, self.it, self.converged, self.cycled, times=times,
                                  perturbed=self.perturbed, switched=schedule.switched_at)
         info.update(update_switch_reasons=list(schedule.switch_reasons), stage_stall=schedule.stall)
@@ -243,5 +247,6 @@ class Iteration:
                 info["setup_reused"] = True
                 info["setup_cost"] = {"score_gramians": sg["score_gramian_time_relied"]}
         info.setdefault("status", "converged" if info["converged"] else "cycle" if self.cycled  # a variant may
-                        else "stalled" if self.stalled else "uncertified" if self.converged else "cap")  # overrule
+                        else "stalled" if self.stalled else "uncertified" if self.converged  # overrule
+                        else "budget" if self.out_of_time else "cap")
         return rom, info
