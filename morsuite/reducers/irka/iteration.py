@@ -225,7 +225,8 @@ class Iteration:
         red, guard, schedule = self.red, self.guard, self.schedule
         chosen, score = self.chosen, None
         if chosen is None:
-            score = iterate_scorer(red) if guard.active else None
+            # out of time: the iterates are chosen by the measure (scoring them may need the Gramian factors)
+            score = iterate_scorer(red) if guard.active and not self.out_of_time else None
             chosen = self.shortlist.choose(None if score is None else (lambda m: score(red.fom, m)))
         times = {"setup": self.t_setup, **self.setup_times, **red._phase_times(), "projection": self.t_proj,
                  "shift_update": self.t_upd}
