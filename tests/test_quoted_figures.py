@@ -93,7 +93,7 @@ def test_the_readme_python_example_prints_what_the_readme_says(tmp_path):
 
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     code = text.split("```python\n", 1)[1].split("```", 1)[0]
-    shown = text.split("prints (a test runs it and compares)\n", 1)[1].split("\n\n", 2)[1]
+    shown = text.split("prints (a test runs it and compares)\n", 1)[1].lstrip("\n").split("\n\n", 1)[0]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env,
                          timeout=600)

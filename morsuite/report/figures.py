@@ -32,11 +32,15 @@ __all__ = ["Curve", "FigureData", "CsvSource", "plot", "render", "save", "pgfplo
 STYLES = ("line", "points", "paper", "full", "flagged", "level", "chosen", "steps")
 
 #: Bump when the look of the figures changes in a way their data and :func:`style` do not show.
-STYLE_VERSION = 3  # 3 (2026-12-02): titles wrapped (TITLE_WIDTH), point labels thinned (MAX_LABELS); 2: plain ticks
+STYLE_VERSION = 4  # 4 (2026-12-02): a long legend beside the axes (LEGEND_INSIDE); 3: titles wrapped (TITLE_WIDTH),
+# point labels thinned (MAX_LABELS); 2: plain ticks
 #: titles longer than this many characters are wrapped (a title wider than the axes was cut)
 TITLE_WIDTH = 64
 #: a curve's point labels (``annotate``) are drawn at most this many times, evenly spread
 MAX_LABELS = 5
+#: a legend of more entries than this is drawn beside the axes, the figure widened by LEGEND_WIDTH inches
+#: (the axes keep their size): inside, eight entries covered the curves
+LEGEND_INSIDE, LEGEND_WIDTH = 5, 3.3
 #: rc settings on top of matplotlib's defaults; the SVG salt fixes the ids that would be random.
 STYLE_RC = {"svg.hashsalt": "morsuite"}
 FIGSIZE = (6.4, 4.2)
@@ -49,7 +53,7 @@ METADATA = {"pdf": {"CreationDate": None}, "svg": {"Date": None}}
 def style() -> dict:
     """Everything besides the data and matplotlib's version that decides a figure's pixels."""
     return {"version": STYLE_VERSION, "rc": STYLE_RC, "figsize": FIGSIZE, "margins": MARGINS, "dpi": DPI,
-            "title_width": TITLE_WIDTH, "max_labels": MAX_LABELS,
+            "title_width": TITLE_WIDTH, "max_labels": MAX_LABELS, "legend": [LEGEND_INSIDE, LEGEND_WIDTH],
             "metadata": {k: sorted(v) for k, v in METADATA.items()}}
 
 
@@ -187,6 +191,8 @@ def plot(figdata: FigureData, *, ax=None):
             wrapped = ax.get_title().count("\n")
             if wrapped:  # room for the title's extra lines
                 fig.subplots_adjust(top=MARGINS["top"] - 0.045 * wrapped)
+            if len(ax.get_legend_handles_labels()[1]) > LEGEND_INSIDE:
+                _legend_beside(fig, ax)
             return fig, ax
     return _draw(figdata, ax.figure, ax)
 
@@ -273,6 +279,17 @@ def _draw(figdata, fig, ax):
     if figdata.curves:
         ax.legend(fontsize=8)
     return fig, ax
+
+
+def _legend_beside(fig, ax):
+    """Widen ``fig`` by :data:`LEGEND_WIDTH` inches, the axes unchanged in inches, and draw the legend in the
+    new space to the right of the axes."""
+    w, h = FIGSIZE
+    wide = w + LEGEND_WIDTH
+    fig.set_size_inches(wide, h)
+    fig.subplots_adjust(left=MARGINS["left"] * w / wide, right=MARGINS["right"] * w / wide)
+    ax.get_legend().remove()
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
 
 
 def render(fig, fmt: str, dpi: int | None = None) -> bytes:
