@@ -288,14 +288,15 @@ class ToleranceSearch:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # the reducer records its warnings in info["warnings"]
-                res = self.red.reduce(int(r))
+                try:
+                    res = self.red.reduce(int(r))
+                finally:
+                    self.red.deadline = None  # this reduction's alone, whatever ends it
         except _CAUGHT as exc:
-            self.red.deadline = None
             cand.error = f"{type(exc).__name__}: {exc}"
             cand.time_s = time.perf_counter() - t0
             self._failures += 1
         else:
-            self.red.deadline = None
             self._failures = 0
             info = res.info
             cand.rom, cand.info = res.rom, info

@@ -20,7 +20,7 @@ at the estimate's largest peaks, each one LU, inside the timed run), peak reside
 fem_block(8000).
 
 Each row: the reducer's status, order, LUs, wall time and its LU and solve seconds (``history``), the estimate,
-the validated samples, the band error (``adaptive``), the load average before and after (``/proc/loadavg``: the
+the validated samples, the band error (``adaptive``), the load average before and after (:func:`morsuite.utils.load_average`: the
 machine is shared). Ratios: LUs and seconds against the targets, band error against the tolerance.
 """
 
@@ -31,6 +31,7 @@ import warnings
 
 import numpy as np
 
+from ..utils import load_average
 from . import benchmark
 
 __all__ = ["bench_adaptive", "bench_adaptive_1e5", "bench_adaptive_h2", "PLANS"]
@@ -53,14 +54,6 @@ PLANS = {
 H2_FACTOR, LU_FRACTION = 2.0, 0.25
 
 
-def _load() -> list:
-    try:
-        with open("/proc/loadavg") as fh:
-            return [float(x) for x in fh.read().split()[:3]]
-    except OSError:  # not Linux
-        return []
-
-
 def _run(plan: dict, echo=None) -> dict:
     from .. import models, reducers
     from ..analysis.response import band_response, freq_grid
@@ -74,7 +67,7 @@ def _run(plan: dict, echo=None) -> dict:
     setup = time.perf_counter() - t0
     rows, ratios = [], {}
     for tol in plan["tols"]:
-        load0 = _load()
+        load0 = load_average()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             probe = MemoryProbe(trace=False)  # tracemalloc would slow every allocation down
@@ -95,7 +88,7 @@ def _run(plan: dict, echo=None) -> dict:
                "points": [complex(p) for p in as_complex(info["points"])],
                "validated": info["validated"],
                "validated_max": max((v["true_rel_error"] for v in info["validated"]), default=None),
-               "stable": info["stable"], "memory": probe.as_dict(), "load_before": load0, "load_after": _load(),
+               "stable": info["stable"], "memory": probe.as_dict(), "load_before": load0, "load_after": load_average(),
                "setup_s": setup, "lu_backend": info.get("lu_backend", {}).get("backend")}
         if plan["band_error"]:
             grid = freq_grid(fom.band, 200)
@@ -156,7 +149,7 @@ def _h2_row(spec, states, fresh_irka_fo, adaptive):
             "irka_fo_status": ref.info["status"], "irka_fo_time_s": t_ref, "adaptive_h2": float(h_ad),
             "adaptive_lus": lus_ad, "adaptive_status": info["status"], "adaptive_time_s": t_ad,
             "surrogate_order": int(info["compress"]["surrogate_order"]), "h2_ratio": float(h_ad / h_ref),
-            "lu_ratio": lus_ad / max(1, int(ref.info["lu_count"])), "load": _load()}
+            "lu_ratio": lus_ad / max(1, int(ref.info["lu_count"])), "load": load_average()}
 
 
 @benchmark("adaptive-h2")

@@ -181,7 +181,7 @@ def plot(figdata: FigureData, *, ax=None):
             # fixed margins: a layout engine would double the drawing time of these simple plots
             fig = Figure(figsize=FIGSIZE)
             fig.subplots_adjust(**MARGINS)
-            fig, ax = _draw(figdata, fig, fig.subplots())
+            fig, ax = _draw(figdata, fig, fig.subplots(), legend=False)
             _plain_log_ticks(ax)
             if figdata.xplain and figdata.xscale == "log":
                 from matplotlib.ticker import FuncFormatter, LogLocator
@@ -191,8 +191,8 @@ def plot(figdata: FigureData, *, ax=None):
             wrapped = ax.get_title().count("\n")
             if wrapped:  # room for the title's extra lines
                 fig.subplots_adjust(top=MARGINS["top"] - 0.045 * wrapped)
-            if len(ax.get_legend_handles_labels()[1]) > LEGEND_INSIDE:
-                _legend_beside(fig, ax)
+            if figdata.curves:
+                _place_legend(fig, ax)
             return fig, ax
     return _draw(figdata, ax.figure, ax)
 
@@ -226,7 +226,7 @@ def _plain_log_ticks(ax):
             axis.set_minor_formatter(Plain(base=10.0, labelOnlyBase=False))
 
 
-def _draw(figdata, fig, ax):
+def _draw(figdata, fig, ax, legend=True):
     colors = {}
     for c in figdata.curves:
         x = np.asarray(c.data[c.x], dtype=float)
@@ -276,19 +276,21 @@ def _draw(figdata, fig, ax):
         import textwrap
         ax.set_title("\n".join(textwrap.wrap(figdata.title, TITLE_WIDTH)), fontsize=10)
     ax.grid(True, which="major", alpha=0.3)
-    if figdata.curves:
+    if figdata.curves and legend:  # a figure of its own places its legend itself (_place_legend)
         ax.legend(fontsize=8)
     return fig, ax
 
 
-def _legend_beside(fig, ax):
-    """Widen ``fig`` by :data:`LEGEND_WIDTH` inches, the axes unchanged in inches, and draw the legend in the
-    new space to the right of the axes."""
+def _place_legend(fig, ax):
+    """The legend inside the axes (matplotlib's best place), or for more than :data:`LEGEND_INSIDE` entries
+    beside them: ``fig`` widened by :data:`LEGEND_WIDTH` inches, the axes unchanged in inches."""
+    if len(ax.get_legend_handles_labels()[1]) <= LEGEND_INSIDE:
+        ax.legend(fontsize=8)
+        return
     w, h = FIGSIZE
     wide = w + LEGEND_WIDTH
     fig.set_size_inches(wide, h)
     fig.subplots_adjust(left=MARGINS["left"] * w / wide, right=MARGINS["right"] * w / wide)
-    ax.get_legend().remove()
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
 
 
